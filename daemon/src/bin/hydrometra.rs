@@ -1,0 +1,35 @@
+//! `hydrometra`: the engineer's CLI (anatomy, precompute, rig tools, fluid cases, benchmarks).
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+/// The engineer's CLI for hydrometra.
+#[derive(Parser, Debug)]
+#[command(name = "hydrometra", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Print the versions of the wire protocol and IPC schema this build speaks.
+    Version,
+}
+
+fn main() -> Result<()> {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Version => {
+            println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
+            Ok(())
+        }
+    }
+}

@@ -1,0 +1,1 @@
+//! Subcommands of the `hydrometra` CLI, one module each.

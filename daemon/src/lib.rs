@@ -1,0 +1,3 @@
+//! Internals shared by the `hydrometrad` service and the `hydrometra` CLI.
+
+pub mod cli;

@@ -1,0 +1,8 @@
+//! `hydrometra-sim`: the physics of the hydrometra simulation.
+//!
+//! Pure computation, no I/O beyond reading and writing its own files. SI units everywhere
+//! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
+#![warn(missing_docs)]
+
+pub mod mesh;
+pub mod units;
