@@ -14,8 +14,8 @@ pub const CRC_LEN: usize = 4;
 pub const MAX_PAYLOAD_LEN: usize = 52;
 /// Largest unencoded frame: header + payload + CRC.
 pub const MAX_FRAME_LEN: usize = HEADER_LEN + MAX_PAYLOAD_LEN + CRC_LEN;
-/// Largest frame on the wire: COBS overhead (1 byte per 254, at least 1) plus the 0x00 delimiter.
-pub const MAX_ENCODED_LEN: usize = MAX_FRAME_LEN + MAX_FRAME_LEN / 254 + 1 + 1;
+/// Largest frame on the wire: leading 0x00, COBS overhead (1 byte per 254, at least 1), trailing 0x00.
+pub const MAX_ENCODED_LEN: usize = 1 + MAX_FRAME_LEN + MAX_FRAME_LEN / 254 + 1 + 1;
 /// Longest serial number a device hello can carry, bytes of ASCII.
 pub const MAX_SERIAL_LEN: usize = 32;
 /// Full scale of the 12-bit raw channels (valve potentiometers, pump setting).
@@ -433,11 +433,15 @@ pub fn write_raw_frame(
     write_raw_frame_with_version(PROTOCOL_VERSION, sequence, message, out)
 }
 
-/// COBS-encodes an unencoded frame into `out` and appends the 0x00 delimiter; returns the length.
+/// COBS-encodes an unencoded frame into `out` between two 0x00 delimiters; returns the length.
+///
+/// The leading delimiter costs one byte per frame and guarantees that whatever garbage preceded
+/// the frame is terminated, so the frame itself is never lost to a resynchronisation.
 pub fn encode_raw_frame(raw: &[u8], out: &mut [u8]) -> Result<usize, BufferTooSmall> {
-    let n = cobs::try_encode(raw, out).map_err(|_| BufferTooSmall)?;
-    *out.get_mut(n).ok_or(BufferTooSmall)? = 0;
-    Ok(n + 1)
+    *out.first_mut().ok_or(BufferTooSmall)? = 0;
+    let n = cobs::try_encode(raw, &mut out[1..]).map_err(|_| BufferTooSmall)?;
+    *out.get_mut(n + 1).ok_or(BufferTooSmall)? = 0;
+    Ok(n + 2)
 }
 
 /// Encodes a v1 frame ready for the wire (COBS plus delimiter); returns the length written.
