@@ -15,6 +15,9 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
+    #[command(subcommand)]
+    Rig(hydrometra_daemon::cli::rig::RigCommand),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +34,6 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
     }
 }
