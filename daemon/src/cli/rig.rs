@@ -226,6 +226,14 @@ fn snapshot_json(target: &DeviceTarget, s: &LinkSnapshot) -> serde_json::Value {
             "device_faults": c.device_faults,
         },
         "last_sample_age_s": s.last_sample_age.map(|d| d.as_secs_f64()),
+        "latest_raw": s.latest_raw.map(|r| serde_json::json!({
+            "valve_in_raw": r.valve_in_raw,
+            "valve_out_raw": r.valve_out_raw,
+            "pump_raw": r.pump_raw,
+            "pose_valid": r.pose_valid,
+            "position_mm": r.position_mm,
+            "orientation_wxyz": r.orientation_wxyz,
+        })),
         "latest": s.latest.map(|r| serde_json::json!({
             "device_time_us": r.device_time_us,
             "sequence": r.sequence,
@@ -295,6 +303,16 @@ fn print_text(target: &DeviceTarget, s: &LinkSnapshot) {
                 p[0], p[1], p[2], v[0], v[1], v[2], r.scope.valid
             );
             println!("buttons       {:#010b}", r.buttons);
+            if let Some(raw) = &s.latest_raw {
+                println!(
+                    "raw           valve_in {} valve_out {} pump {} counts; marker {:?} mm {:?} (tracker frame)",
+                    raw.valve_in_raw,
+                    raw.valve_out_raw,
+                    raw.pump_raw,
+                    raw.position_mm,
+                    raw.orientation_wxyz
+                );
+            }
         }
         _ => println!("latest        no sample"),
     }
