@@ -293,8 +293,19 @@ impl Scenario {
 
     /// The interpolated state at `t_s` seconds after the start (wrapped when looping).
     pub fn sample_at(&self, t_s: f64) -> ScenarioSample {
-        let first = self.keyframes[0]; // ok: validated non-empty
-        let last = self.keyframes[self.keyframes.len() - 1];
+        // Parsed scenarios are never empty; a hand-built empty one yields a closed, idle rig.
+        let (Some(&first), Some(&last)) = (self.keyframes.first(), self.keyframes.last()) else {
+            return ScenarioSample {
+                t_s,
+                valve_in: 0.0,
+                valve_out: 0.0,
+                pump_mmhg: 0.0,
+                tip_mm: [0.0; 3],
+                view_dir: [0.0, 0.0, 1.0],
+                buttons: 0,
+                pose_valid: false,
+            };
+        };
         let duration = last.t_s;
         let t = if !t_s.is_finite() {
             first.t_s
