@@ -480,4 +480,23 @@ view_dir = [1.0, 0.0, 0.0]
         }
         assert!(Scenario::builtin("nope").is_none());
     }
+
+    #[test]
+    fn documented_example_parses_as_described() {
+        let doc = include_str!("../../../docs/rig-emulator.md");
+        let start = doc.find("```toml").unwrap() + "```toml".len();
+        let len = doc[start..].find("```").unwrap();
+        let s = Scenario::from_toml_str(&doc[start..start + len], "docs/rig-emulator.md").unwrap();
+        assert_eq!(s.name, "example");
+        assert_eq!(s.keyframes.len(), 2);
+        let m = s.sample_at(15.0); // loops: 15 s -> 5 s, half-way
+        assert!((m.valve_in - 0.5).abs() < 1e-12 && (m.pump_mmhg - 95.0).abs() < 1e-12);
+        assert_eq!(
+            s.faults.events,
+            vec![super::super::FaultEvent {
+                at_s: 5.0,
+                fault: super::super::Fault::GarbageBurst { bytes: 64 }
+            }]
+        );
+    }
 }
