@@ -199,9 +199,13 @@ fn probe(a: ProbeArgs) -> Result<()> {
     }
     if snap.latest.is_none() {
         bail!(
-            "no sample from {target} within {} s (link state {:?})",
+            "no sample from {target} within {} s (link state {:?}{})",
             a.seconds,
-            snap.link_state
+            snap.link_state,
+            snap.last_error
+                .as_deref()
+                .map(|e| format!("; last error: {e}"))
+                .unwrap_or_default()
         );
     }
     Ok(())
@@ -231,6 +235,7 @@ fn snapshot_json(target: &DeviceTarget, s: &LinkSnapshot) -> serde_json::Value {
             "device_faults": c.device_faults,
         },
         "last_sample_age_s": s.last_sample_age.map(|d| d.as_secs_f64()),
+        "last_error": s.last_error,
         "latest_raw": s.latest_raw.map(|r| serde_json::json!({
             "valve_in_raw": r.valve_in_raw,
             "valve_out_raw": r.valve_out_raw,
@@ -259,6 +264,9 @@ fn snapshot_json(target: &DeviceTarget, s: &LinkSnapshot) -> serde_json::Value {
 fn print_text(target: &DeviceTarget, s: &LinkSnapshot) {
     println!("device        {target}");
     println!("link state    {:?}", s.link_state);
+    if let Some(e) = &s.last_error {
+        println!("last error    {e}");
+    }
     if let Some(d) = &s.device {
         println!(
             "rig           serial {} firmware {} protocol v{} calibration id {} caps {:#x} {} Hz",
