@@ -36,8 +36,9 @@ pub trait CavityCompliance: Send + Sync + std::fmt::Debug {
             |p| (self.volume_m3(p) - volume_m3, self.compliance_m3_per_pa(p)),
             lo,
             hi,
+            1e-15 * volume_m3.abs(),
             1e-9,
-            1e-13,
+            1e-14,
         );
         Some(root.x)
     }
@@ -212,7 +213,9 @@ mod tests {
     use crate::units::{ml_to_m3, mmhg_to_pa};
 
     fn default_curve() -> AnalyticCompliance {
-        crate::hydraulics::HydraulicParams::default().cavity.compliance()
+        crate::hydraulics::HydraulicParams::default()
+            .cavity
+            .compliance()
     }
 
     #[test]
@@ -230,7 +233,10 @@ mod tests {
                     .total_cmp(&c.compliance_m3_per_pa(mmhg_to_pa(*b)))
             })
             .unwrap();
-        assert!((35.0..=45.0).contains(&peak), "peak compliance at {peak} mmHg");
+        assert!(
+            (35.0..=45.0).contains(&peak),
+            "peak compliance at {peak} mmHg"
+        );
     }
 
     #[test]

@@ -211,10 +211,16 @@ mod tests {
         let dt = 0.01;
         let (stages, rate_at, terminated_at) = run(60.0, dt, 1100.0);
         for (got, want) in stages.iter().zip([500.0, 750.0, 900.0]) {
-            assert!((got - want).abs() <= 2.0 * dt, "stage at {got}, want {want}");
+            assert!(
+                (got - want).abs() <= 2.0 * dt,
+                "stage at {got}, want {want}"
+            );
         }
         assert_eq!(stages.len(), 3);
-        assert_eq!(rate_at, None, "60 ml/min is below the 100 ml/min rate alarm");
+        assert_eq!(
+            rate_at, None,
+            "60 ml/min is below the 100 ml/min rate alarm"
+        );
         let t = terminated_at.expect("terminated");
         assert!((t - 1000.0).abs() <= 2.0 * dt, "terminated at {t}");
     }
@@ -227,10 +233,16 @@ mod tests {
         let (_, rate_at, _) = run(150.0, dt, 10.0);
         let t = rate_at.expect("rate alarm");
         let want = 4.0 * 3f64.ln();
-        assert!((t - want).abs() <= 2.0 * dt, "rate alarm at {t}, want {want}");
+        assert!(
+            (t - want).abs() <= 2.0 * dt,
+            "rate alarm at {t}, want {want}"
+        );
         // The filter is exact for piecewise-constant rates, so a coarse step agrees too.
         let (_, rate_at, _) = run(150.0, 0.25, 10.0);
-        assert!((rate_at.unwrap() - 4.5).abs() < 1e-9, "first step after {want}");
+        assert!(
+            (rate_at.unwrap() - 4.5).abs() < 1e-9,
+            "first step after {want}"
+        );
     }
 
     #[test]

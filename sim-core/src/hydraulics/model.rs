@@ -321,6 +321,18 @@ impl HydraulicModel {
             let (q, _) = circuit.net_inflow_and_conductance(p);
             compliance.volume_m3(p) - v_n - dt_s * q
         };
+        let g_sum = circuit.inflow_conductance
+            + circuit.outflow_conductance
+            + circuit.leak_conductance
+            + circuit.absorption_conductance
+            + circuit.perforation_conductance;
+        let slope_estimate = compliance.compliance_m3_per_pa(p_n) + dt_s * g_sum;
+        let x_tol_pa = 1e-14 * v_n.abs() / slope_estimate;
+        let x_tol_pa = if x_tol_pa.is_nan() {
+            1e-9
+        } else {
+            x_tol_pa.clamp(1e-200, 1e-9)
+        };
         let lo = p_n.min(circuit.suction_pressure_pa).min(0.0);
         let hi = p_n.max(circuit.pump_pressure_pa);
         let root = expand_bracket(residual, lo, hi).map(|(lo, hi)| {
@@ -334,8 +346,11 @@ impl HydraulicModel {
                 },
                 lo,
                 hi,
-                1e-7,
-                1e-12,
+                // |F| is the volume booked off the curve: keep it at rounding level, also through
+                // the pressure tolerance, which dt G magnifies on huge steps.
+                1e-14 * v_n.abs(),
+                x_tol_pa,
+                1e-15,
             )
         });
         let p = match root {
@@ -377,8 +392,8 @@ impl HydraulicModel {
         s.totals.leak_collected_m3 += d_leak_collected;
         s.totals.absorbed_m3 += d_abs;
         s.totals.perforation_m3 += d_perf;
-        s.pump_flow_limited =
-            circuit.pump_max_flow_m3_per_s > 0.0 && flows.inflow_m3_per_s >= circuit.pump_max_flow_m3_per_s;
+        s.pump_flow_limited = circuit.pump_max_flow_m3_per_s > 0.0
+            && flows.inflow_m3_per_s >= circuit.pump_max_flow_m3_per_s;
         let inflow_line = self.params.inflow.line();
         let outflow_line = self.params.outflow.line();
         s.inflow_port_velocity_m_per_s = flows.inflow_m3_per_s / inflow_line.port_area_m2();
@@ -399,6 +414,7 @@ impl HydraulicModel {
             saved_unix_ms,
             time_s: self.state.time_s,
             cavity_volume_m3: self.state.cavity_volume_m3,
+            cavity_pressure_pa: self.state.cavity_pressure_pa,
             initial_cavity_volume_m3: self.state.initial_cavity_volume_m3,
             perforated: self.state.perforated,
             totals: self.state.totals,
@@ -417,9 +433,9 @@ impl HydraulicModel {
         s.initial_cavity_volume_m3 = record.initial_cavity_volume_m3;
         s.perforated = record.perforated;
         s.cavity_volume_m3 = record.cavity_volume_m3;
-        if let Some(p) = self.compliance.pressure_pa(record.cavity_volume_m3) {
-            s.cavity_pressure_pa = p;
-        }
+        // The recorded pressure solved the recorded volume balance; the next step re-solves it
+        // against the current compliance anyway.
+        s.cavity_pressure_pa = record.cavity_pressure_pa;
         s.flows = Flows::default();
         s.deficit = *self.monitor.status();
         s.pump_stopped = self.monitor.pump_stopped();

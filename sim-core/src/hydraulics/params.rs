@@ -485,7 +485,7 @@ impl HydraulicParams {
             positive(keys[3], line.port_area_mm2)?;
         }
         let suction = self.outflow.suction_pressure_mmhg;
-        if !(suction.is_finite() && suction <= 0.0 && suction >= -760.0) {
+        if !(-760.0..=0.0).contains(&suction) {
             return Err(err(
                 "outflow.suction_pressure_mmhg",
                 suction,
@@ -510,7 +510,10 @@ impl HydraulicParams {
             "cavity.tail_compliance_ml_per_mmhg",
             self.cavity.tail_compliance_ml_per_mmhg,
         )?;
-        finite("cavity.initial_pressure_mmhg", self.cavity.initial_pressure_mmhg)?;
+        finite(
+            "cavity.initial_pressure_mmhg",
+            self.cavity.initial_pressure_mmhg,
+        )?;
 
         non_negative(
             "cervix.leak_conductance_ml_per_min_per_mmhg",
@@ -619,11 +622,17 @@ mod tests {
         let e = HydraulicParams::from_toml_str("[pump]\nmax_flow_ml_per_min = -5\n", "cfg.toml")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("cfg.toml") && e.contains("pump.max_flow_ml_per_min") && e.contains("-5"), "{e}");
+        assert!(
+            e.contains("cfg.toml") && e.contains("pump.max_flow_ml_per_min") && e.contains("-5"),
+            "{e}"
+        );
         let e = HydraulicParams::from_toml_str("[deficit]\nwarning_fractions = [0.5, 0.4]\n", "c")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("deficit.warning_fractions") && e.contains("0.4"), "{e}");
+        assert!(
+            e.contains("deficit.warning_fractions") && e.contains("0.4"),
+            "{e}"
+        );
         let e = HydraulicParams::from_toml_str("[outflow]\nsuction_pressure_mmhg = 20\n", "c")
             .unwrap_err()
             .to_string();

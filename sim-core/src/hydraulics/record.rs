@@ -60,6 +60,8 @@ pub struct ProcedureRecord {
     pub time_s: f64,
     /// Cavity volume, m^3.
     pub cavity_volume_m3: f64,
+    /// Cavity pressure, Pa.
+    pub cavity_pressure_pa: f64,
     /// Cavity volume at the start of the procedure, m^3.
     pub initial_cavity_volume_m3: f64,
     /// A perforation is present.
@@ -135,7 +137,9 @@ impl ProcedureRecord {
         }
         let record: ProcedureRecord = serde_json::from_str(json)
             .map_err(|e| corrupt(format!("line 2: invalid record: {e}")))?;
-        record.check().map_err(|p| corrupt(format!("line 2: {p}")))?;
+        record
+            .check()
+            .map_err(|p| corrupt(format!("line 2: {p}")))?;
         Ok(record)
     }
 
@@ -160,6 +164,7 @@ impl ProcedureRecord {
         }
         for (key, v) in [
             ("cavity_volume_m3", self.cavity_volume_m3),
+            ("cavity_pressure_pa", self.cavity_pressure_pa),
             ("initial_cavity_volume_m3", self.initial_cavity_volume_m3),
         ] {
             if !v.is_finite() {
@@ -280,7 +285,9 @@ mod tests {
         for i in json_start..bytes.len() - 1 {
             let mut b = bytes.to_vec();
             b[i] ^= 0x01;
-            let Ok(s) = String::from_utf8(b) else { continue };
+            let Ok(s) = String::from_utf8(b) else {
+                continue;
+            };
             let e = ProcedureRecord::from_text(&s, p).unwrap_err().to_string();
             assert!(e.contains("procedure.rec"), "{e}");
         }
@@ -288,7 +295,9 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("version `2`"), "{e}");
-        let e = ProcedureRecord::from_text("garbage", p).unwrap_err().to_string();
+        let e = ProcedureRecord::from_text("garbage", p)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("line 2"), "{e}");
         let e = ProcedureRecord::from_text("", p).unwrap_err().to_string();
         assert!(e.contains("missing"), "{e}");

@@ -73,7 +73,9 @@ mod tests {
         assert!((ValveCurve::Quadratic.relative_conductance(0.3, 0.0) - 0.09).abs() < 1e-15);
         let r: f64 = 20.0;
         let expected = (r.powf(0.5) - 1.0) / (r - 1.0);
-        assert!((ValveCurve::EqualPercentage.relative_conductance(0.5, r) - expected).abs() < 1e-14);
+        assert!(
+            (ValveCurve::EqualPercentage.relative_conductance(0.5, r) - expected).abs() < 1e-14
+        );
     }
 
     #[test]
