@@ -22,6 +22,7 @@
 //! # Ok::<(), hydrometra_sim::hydraulics::ParamsError>(())
 //! ```
 
+mod case;
 mod circuit;
 mod compliance;
 mod deficit;
@@ -31,6 +32,7 @@ mod record;
 mod solve;
 mod valve;
 
+pub use case::CaseScript;
 pub use circuit::{Circuit, Flows};
 pub use compliance::{
     AnalyticCompliance, CavityCompliance, ComplianceError, LinearCompliance, TabulatedCompliance,
