@@ -15,6 +15,9 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Hydraulic model tools (offline simulation of a scenario).
+    #[command(subcommand)]
+    Hydraulics(hydrometra_daemon::cli::hydraulics::HydraulicsCommand),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +34,6 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
     }
 }
