@@ -53,7 +53,7 @@ pub trait CavityCompliance: Send + Sync + std::fmt::Debug {
 /// Below `p_sep` the walls touch and the cavity holds only `V_res`; around `p_sep` (~40 mmHg) the
 /// walls separate and the volume rises by `dV_sep` over a few `w_sep`; above, the wall is stretched
 /// and the compliance tends to `C_tail`. For `p -> -inf` the volume tends to `V_res` (collapsed),
-/// for `p -> +inf` it grows linearly. With the defaults the cavity holds 0.3 ml at 0 mmHg, 2.2 ml at
+/// for `p -> +inf` it grows linearly. With the defaults the cavity holds 0.39 ml at 0 mmHg, 2.2 ml at
 /// 40 mmHg and 4.8 ml at 150 mmHg, inside the CT range of 0.6-11.4 ml at 150 mmHg (references.md 3).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct AnalyticCompliance {
