@@ -6,7 +6,7 @@ pub mod latency;
 pub mod notify;
 pub mod publisher;
 pub mod rig_input;
-// pub mod rig_link; (after the rig merge)
+pub mod rig_link;
 pub mod sim;
 
 use std::sync::atomic::{AtomicBool, Ordering};

@@ -1,0 +1,259 @@
+//! The emulated rig: behaves like the firmware on a pseudo-terminal, playing a [`Scenario`] and
+//! injecting [`Fault`]s, so the whole stack runs without hardware.
+//!
+//! ```no_run
+//! use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
+//! use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink};
+//! use hydrometra_drivers::calibration::Calibration;
+//! let rig = EmulatedRig::start(Scenario::builtin("default").unwrap(), EmulatorOptions::default())?;
+//! let link = RigLink::spawn(LinkConfig::new(
+//!     DeviceTarget::Path(rig.device_path().to_path_buf()),
+//!     Calibration::default(),
+//! ))?;
+//! let state = link.wait_for_sample(None, std::time::Duration::from_secs(2));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+mod device;
+pub mod faults;
+pub mod scenario;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc;
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+
+use tracing::warn;
+
+use crate::calibration::Calibration;
+pub use faults::{Fault, FaultEvent, FaultPlan};
+pub use scenario::{Keyframe, Scenario, ScenarioError, ScenarioSample};
+
+/// Emulator settings. `Default`: 250 Hz samples, 10 Hz heartbeats, default calibration, no faults.
+#[derive(Debug, Clone)]
+pub struct EmulatorOptions {
+    /// Sample rate, Hz (1..=2000).
+    pub sample_rate_hz: f64,
+    /// Device heartbeat rate, Hz (0.5..=100).
+    pub heartbeat_hz: f64,
+    /// Where to put a symlink to the pseudo-terminal; a private temporary path if `None`.
+    pub link_path: Option<PathBuf>,
+    /// Faults to inject (merged with the scenario's own `[faults]`).
+    pub faults: FaultPlan,
+    /// Calibration used backwards: scenario values are turned into the raw counts and tracker
+    /// pose that this calibration maps back to them.
+    pub calibration: Calibration,
+    /// Serial number reported in the device hello.
+    pub serial_number: String,
+    /// Firmware version reported in the device hello.
+    pub firmware_version: (u8, u8, u16),
+    /// Host silence after which the device stops streaming and waits for a new hello, s.
+    pub host_timeout_s: f64,
+    /// Seed of the fault-injection random numbers.
+    pub seed: u64,
+}
+
+impl Default for EmulatorOptions {
+    fn default() -> Self {
+        Self {
+            sample_rate_hz: 250.0,
+            heartbeat_hz: 10.0,
+            link_path: None,
+            faults: FaultPlan::default(),
+            calibration: Calibration::default(),
+            serial_number: "EMU-0001".into(),
+            firmware_version: (1, 0, 0),
+            host_timeout_s: 1.0,
+            seed: 0x5EED,
+        }
+    }
+}
+
+/// The emulator could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum EmulatorError {
+    /// No pseudo-terminal could be created.
+    #[error("cannot create a pseudo-terminal: {0}")]
+    Pty(#[from] serialport::Error),
+    /// The symlink could not be created.
+    #[error("cannot create link {path}: {message}")]
+    Link {
+        /// The link path.
+        path: String,
+        /// What went wrong.
+        message: String,
+    },
+    /// An option is out of range.
+    #[error("invalid emulator option {field} = {value}: expected {expected}")]
+    InvalidOption {
+        /// Option name.
+        field: &'static str,
+        /// The value.
+        value: String,
+        /// What is allowed.
+        expected: &'static str,
+    },
+    /// The emulator thread could not be spawned.
+    #[error("cannot spawn the emulator thread: {0}")]
+    Spawn(std::io::Error),
+}
+
+/// What the emulator has done so far (lets tests compare the host's counters exactly).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct EmulatorStats {
+    /// Frames written completely (all types).
+    pub frames_sent: u64,
+    /// Sample frames written.
+    pub samples_sent: u64,
+    /// Sample frames dropped on purpose.
+    pub frames_dropped: u64,
+    /// Frames sent with one bit flipped.
+    pub frames_corrupted: u64,
+    /// Garbage bytes written.
+    pub garbage_bytes: u64,
+    /// Host hellos answered with a valid v1 device hello.
+    pub handshakes: u64,
+    /// Host hellos answered with a wrong protocol version.
+    pub wrong_version_hellos: u64,
+    /// Unplug events.
+    pub unplugs: u64,
+    /// Replug events.
+    pub replugs: u64,
+    /// Heartbeat-stop (hang) events.
+    pub hangs: u64,
+    /// Fault reports sent.
+    pub fault_reports: u64,
+    /// Whether a host session is active (host hello seen, host not timed out).
+    pub session_active: bool,
+    /// Whether the device is plugged in.
+    pub plugged: bool,
+}
+
+pub(crate) struct EmuShared {
+    stop: AtomicBool,
+    stats: Mutex<EmulatorStats>,
+}
+
+/// A running emulated rig.
+pub struct EmulatedRig {
+    device_path: PathBuf,
+    owns_link_dir: Option<PathBuf>,
+    shared: Arc<EmuShared>,
+    faults: mpsc::Sender<Fault>,
+    thread: Option<JoinHandle<()>>,
+}
+
+impl EmulatedRig {
+    /// Creates the pseudo-terminal and its symlink and starts the firmware thread.
+    pub fn start(
+        scenario: Scenario,
+        options: EmulatorOptions,
+    ) -> Result<EmulatedRig, EmulatorError> {
+        if !(options.sample_rate_hz.is_finite() && (1.0..=2000.0).contains(&options.sample_rate_hz))
+        {
+            return Err(EmulatorError::InvalidOption {
+                field: "sample_rate_hz",
+                value: options.sample_rate_hz.to_string(),
+                expected: "a rate in [1, 2000] Hz",
+            });
+        }
+        if !(options.heartbeat_hz.is_finite() && (0.5..=100.0).contains(&options.heartbeat_hz)) {
+            return Err(EmulatorError::InvalidOption {
+                field: "heartbeat_hz",
+                value: options.heartbeat_hz.to_string(),
+                expected: "a rate in [0.5, 100] Hz",
+            });
+        }
+        if !(options.host_timeout_s.is_finite() && options.host_timeout_s > 0.0) {
+            return Err(EmulatorError::InvalidOption {
+                field: "host_timeout_s",
+                value: options.host_timeout_s.to_string(),
+                expected: "a time > 0 s",
+            });
+        }
+        let (device_path, owns_link_dir) = match &options.link_path {
+            Some(p) => (p.clone(), None),
+            None => {
+                let dir = private_link_dir()?;
+                (dir.join("rig"), Some(dir))
+            }
+        };
+        let shared = Arc::new(EmuShared {
+            stop: AtomicBool::new(false),
+            stats: Mutex::new(EmulatorStats::default()),
+        });
+        let (tx, rx) = mpsc::channel();
+        let mut device = device::Device::new(
+            scenario,
+            options,
+            device_path.clone(),
+            Arc::clone(&shared),
+            rx,
+        );
+        // Plug in before returning, so the path exists as soon as `start` returns.
+        device.plug()?;
+        let thread = std::thread::Builder::new()
+            .name("rig-emulator".into())
+            .spawn(move || device.run())
+            .map_err(EmulatorError::Spawn)?;
+        Ok(EmulatedRig {
+            device_path,
+            owns_link_dir,
+            shared,
+            faults: tx,
+            thread: Some(thread),
+        })
+    }
+
+    /// The path the host opens: a symlink to the current pseudo-terminal (re-pointed on replug).
+    pub fn device_path(&self) -> &Path {
+        &self.device_path
+    }
+
+    /// Injects a fault now.
+    pub fn inject(&self, fault: Fault) {
+        // The receiver lives as long as the thread; after a stop there is nothing to inject into.
+        let _ = self.faults.send(fault);
+    }
+
+    /// What the emulator has done so far.
+    pub fn stats(&self) -> EmulatorStats {
+        *self.shared.stats.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Stops the firmware thread, closes the pseudo-terminal and removes the symlink.
+    pub fn stop(mut self) {
+        self.stop_inner();
+    }
+
+    fn stop_inner(&mut self) {
+        self.shared.stop.store(true, Ordering::SeqCst);
+        if let Some(t) = self.thread.take() {
+            if t.join().is_err() {
+                warn!("emulator thread panicked");
+            }
+        }
+        if let Some(dir) = self.owns_link_dir.take() {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
+}
+
+impl Drop for EmulatedRig {
+    fn drop(&mut self) {
+        self.stop_inner();
+    }
+}
+
+fn private_link_dir() -> Result<PathBuf, EmulatorError> {
+    use std::sync::atomic::AtomicU64;
+    static NEXT: AtomicU64 = AtomicU64::new(0);
+    let n = NEXT.fetch_add(1, Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("hydrometra-rig-{}-{n}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| EmulatorError::Link {
+        path: dir.display().to_string(),
+        message: e.to_string(),
+    })?;
+    Ok(dir)
+}
