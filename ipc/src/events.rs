@@ -45,6 +45,9 @@ pub fn create<S: Service>(
 }
 
 /// The event service as a renderer opens it.
-pub fn open<S: Service>(node: &Node<S>, names: &ServiceNames) -> Result<PortFactory<S>, EventOpenError> {
+pub fn open<S: Service>(
+    node: &Node<S>,
+    names: &ServiceNames,
+) -> Result<PortFactory<S>, EventOpenError> {
     node.service_builder(names.events()).event().open()
 }

@@ -38,7 +38,8 @@ pub struct ServiceNames {
 
 impl Default for ServiceNames {
     fn default() -> Self {
-        Self::new(DEFAULT_SERVICE_PREFIX).unwrap_or_else(|e| unreachable!("{e}")) // ok: constant, tested
+        Self::new(DEFAULT_SERVICE_PREFIX).unwrap_or_else(|e| unreachable!("{e}"))
+        // ok: constant, tested
     }
 }
 
@@ -61,7 +62,9 @@ impl ServiceNames {
             return Err(fail(&format!("it is longer than {MAX_PREFIX_LEN} bytes")));
         }
         if trimmed.split('/').any(str::is_empty) {
-            return Err(fail("it contains an empty path segment ('//' or a leading '/')"));
+            return Err(fail(
+                "it contains an empty path segment ('//' or a leading '/')",
+            ));
         }
         if trimmed.chars().any(|c| c.is_control() || c.is_whitespace()) {
             return Err(fail("it contains whitespace or control characters"));
@@ -121,7 +124,14 @@ pub mod names {
     /// Particles (blood, bubbles, fragments), publish-subscribe, slice of [`crate::particles::Particle`].
     pub const PARTICLES: &str = "particles";
     /// Every suffix.
-    pub const ALL: [&str; 6] = [STATUS, EVENTS, MESH_TOPOLOGY, MESH_POSITIONS, FLOW_FIELD, PARTICLES];
+    pub const ALL: [&str; 6] = [
+        STATUS,
+        EVENTS,
+        MESH_TOPOLOGY,
+        MESH_POSITIONS,
+        FLOW_FIELD,
+        PARTICLES,
+    ];
 }
 
 #[cfg(test)]
@@ -133,7 +143,10 @@ mod tests {
         let n = ServiceNames::default();
         assert_eq!(n.full(names::STATUS), "hydrometra/v1/status");
         assert_eq!(n.full(names::EVENTS), "hydrometra/v1/events");
-        assert_eq!(n.full(names::MESH_POSITIONS), "hydrometra/v1/cavity/positions");
+        assert_eq!(
+            n.full(names::MESH_POSITIONS),
+            "hydrometra/v1/cavity/positions"
+        );
     }
 
     #[test]

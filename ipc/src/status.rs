@@ -228,14 +228,20 @@ mod tests {
         assert_eq!(core::mem::size_of::<Status>(), fields);
         assert_eq!(core::mem::size_of::<Status>() % 8, 0);
         assert_eq!(core::mem::align_of::<Status>(), 8);
-        assert_eq!(Status::default().size_bytes as usize, core::mem::size_of::<Status>());
+        assert_eq!(
+            Status::default().size_bytes as usize,
+            core::mem::size_of::<Status>()
+        );
     }
 
     #[test]
     fn type_name_carries_the_schema_version() {
         use iceoryx2::prelude::ZeroCopySend;
         let name = unsafe { <Status as ZeroCopySend>::type_name() };
-        assert_eq!(name, format!("hydrometra.v{}.Status", crate::SCHEMA_VERSION));
+        assert_eq!(
+            name,
+            format!("hydrometra.v{}.Status", crate::SCHEMA_VERSION)
+        );
     }
 
     #[test]

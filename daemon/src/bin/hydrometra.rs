@@ -15,6 +15,8 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
+    Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +33,6 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
     }
 }

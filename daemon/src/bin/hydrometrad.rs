@@ -49,6 +49,9 @@ fn main() -> anyhow::Result<()> {
         )
         .with_writer(std::io::stderr)
         .init();
+    // iceoryx2 logs through tracing; its start-up notes ("no config file loaded") are noise for
+    // an operator. IOX2_LOG_LEVEL raises it for debugging.
+    iceoryx2::prelude::set_log_level_from_env_or(iceoryx2::prelude::LogLevel::Error);
     let args = Args::parse();
     if args.print_default_config {
         print!("{}", config::DEFAULT_CONFIG_TOML);

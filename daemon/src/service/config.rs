@@ -256,8 +256,22 @@ impl Config {
     /// Checks ranges and consistency.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
         let l = &self.sim_loop;
-        check_range(origin, "loop.tick_rate_hz", l.tick_rate_hz, 1.0, 10_000.0, "Hz")?;
-        check_range(origin, "loop.status_rate_hz", l.status_rate_hz, 1.0, l.tick_rate_hz, "Hz (at most loop.tick_rate_hz)")?;
+        check_range(
+            origin,
+            "loop.tick_rate_hz",
+            l.tick_rate_hz,
+            1.0,
+            10_000.0,
+            "Hz",
+        )?;
+        check_range(
+            origin,
+            "loop.status_rate_hz",
+            l.status_rate_hz,
+            1.0,
+            l.tick_rate_hz,
+            "Hz (at most loop.tick_rate_hz)",
+        )?;
         let ratio = l.tick_rate_hz / l.status_rate_hz;
         if (ratio - ratio.round()).abs() > 1e-9 {
             return Err(invalid(
@@ -270,7 +284,14 @@ impl Config {
                 ),
             ));
         }
-        check_range(origin, "loop.log_interval_s", l.log_interval_s, 0.1, 3600.0, "s")?;
+        check_range(
+            origin,
+            "loop.log_interval_s",
+            l.log_interval_s,
+            0.1,
+            3600.0,
+            "s",
+        )?;
         let timeout = self.rig.safe_state_timeout_ms;
         if !(10..=10_000).contains(&timeout) {
             return Err(invalid(
@@ -281,7 +302,14 @@ impl Config {
             ));
         }
         let e = &self.rig.emulated;
-        check_range(origin, "rig.emulated.sample_rate_hz", e.sample_rate_hz, 1.0, 5_000.0, "Hz")?;
+        check_range(
+            origin,
+            "rig.emulated.sample_rate_hz",
+            e.sample_rate_hz,
+            1.0,
+            5_000.0,
+            "Hz",
+        )?;
         if e.scenario.trim().is_empty() {
             return Err(invalid(
                 origin,
@@ -299,14 +327,22 @@ impl Config {
             ));
         }
         if self.rig.mode == RigMode::Device && self.rig.device.as_os_str().is_empty() {
-            return Err(invalid(origin, "rig.device", "\"\"", "a serial device path"));
+            return Err(invalid(
+                origin,
+                "rig.device",
+                "\"\"",
+                "a serial device path",
+            ));
         }
         hydrometra_ipc::ServiceNames::new(&self.ipc.service_prefix).map_err(|e| {
             invalid(
                 origin,
                 "ipc.service_prefix",
                 &format!("{:?}", self.ipc.service_prefix),
-                &format!("{} ({})", "a '/'-separated service name prefix such as \"hydrometra/v1\"", e.reason),
+                &format!(
+                    "{} ({})",
+                    "a '/'-separated service name prefix such as \"hydrometra/v1\"", e.reason
+                ),
             )
         })?;
         Ok(())
@@ -322,11 +358,23 @@ fn invalid(origin: &str, key: &str, value: &str, expected: &str) -> ConfigError 
     }
 }
 
-fn check_range(origin: &str, key: &str, v: f64, lo: f64, hi: f64, unit: &str) -> Result<(), ConfigError> {
+fn check_range(
+    origin: &str,
+    key: &str,
+    v: f64,
+    lo: f64,
+    hi: f64,
+    unit: &str,
+) -> Result<(), ConfigError> {
     if v.is_finite() && v >= lo && v <= hi {
         Ok(())
     } else {
-        Err(invalid(origin, key, &v.to_string(), &format!("a number in {lo}..={hi} {unit}")))
+        Err(invalid(
+            origin,
+            key,
+            &v.to_string(),
+            &format!("a number in {lo}..={hi} {unit}"),
+        ))
     }
 }
 
@@ -343,9 +391,12 @@ mod tests {
 
     #[test]
     fn unknown_key_error_names_the_key_and_line() {
-        let err = Config::from_toml_str("[loop]\ntick_rate_hz = 500.0\ntick_rte = 3\n", "/etc/h.toml")
-            .unwrap_err()
-            .to_string();
+        let err = Config::from_toml_str(
+            "[loop]\ntick_rate_hz = 500.0\ntick_rte = 3\n",
+            "/etc/h.toml",
+        )
+        .unwrap_err()
+        .to_string();
         assert!(err.contains("/etc/h.toml"), "{err}");
         assert!(err.contains("tick_rte"), "{err}");
         assert!(err.contains("line 3"), "{err}");
@@ -356,23 +407,50 @@ mod tests {
         let err = Config::from_toml_str("[loop]\ntick_rate_hz = \"fast\"\n", "c.toml")
             .unwrap_err()
             .to_string();
-        assert!(err.contains("tick_rate_hz") && err.contains("line 2"), "{err}");
+        assert!(
+            err.contains("tick_rate_hz") && err.contains("line 2"),
+            "{err}"
+        );
     }
 
     #[test]
     fn out_of_range_values_name_key_value_and_expectation() {
         let cases = [
             ("[loop]\ntick_rate_hz = 0.0\n", "loop.tick_rate_hz", "0"),
-            ("[loop]\nstatus_rate_hz = 300.0\n", "loop.status_rate_hz", "300"),
-            ("[loop]\nstatus_rate_hz = 2000.0\n", "loop.status_rate_hz", "2000"),
-            ("[rig]\nsafe_state_timeout_ms = 1\n", "rig.safe_state_timeout_ms", "1"),
-            ("[ipc]\nservice_prefix = \"a//b\"\n", "ipc.service_prefix", "\"a//b\""),
+            (
+                "[loop]\nstatus_rate_hz = 300.0\n",
+                "loop.status_rate_hz",
+                "300",
+            ),
+            (
+                "[loop]\nstatus_rate_hz = 2000.0\n",
+                "loop.status_rate_hz",
+                "2000",
+            ),
+            (
+                "[rig]\nsafe_state_timeout_ms = 1\n",
+                "rig.safe_state_timeout_ms",
+                "1",
+            ),
+            (
+                "[ipc]\nservice_prefix = \"a//b\"\n",
+                "ipc.service_prefix",
+                "\"a//b\"",
+            ),
             ("[rig]\nmode = \"usb\"\n", "rig.mode", "\"usb\""),
         ];
         for (text, key, value) in cases {
             match Config::from_toml_str(text, "c.toml") {
-                Err(ConfigError::Invalid { key: k, value: v, expected, origin }) => {
-                    assert_eq!((k.as_str(), v.as_str(), origin.as_str()), (key, value, "c.toml"));
+                Err(ConfigError::Invalid {
+                    key: k,
+                    value: v,
+                    expected,
+                    origin,
+                }) => {
+                    assert_eq!(
+                        (k.as_str(), v.as_str(), origin.as_str()),
+                        (key, value, "c.toml")
+                    );
                     assert!(!expected.is_empty());
                 }
                 other => panic!("{text}: expected an Invalid error, got {other:?}"),
@@ -382,7 +460,9 @@ mod tests {
 
     #[test]
     fn overrides_win_over_the_file_and_are_validated() {
-        let mut c = Config::from_toml_str("[rig]\nmode = \"device\"\ndevice = \"/dev/ttyACM0\"\n", "c").unwrap();
+        let mut c =
+            Config::from_toml_str("[rig]\nmode = \"device\"\ndevice = \"/dev/ttyACM0\"\n", "c")
+                .unwrap();
         c.apply(&Overrides {
             emulated: Some("default".into()),
             service_prefix: Some("test/1".into()),
@@ -400,7 +480,10 @@ mod tests {
             })
             .unwrap_err()
             .to_string();
-        assert!(err.contains("command line") && err.contains("loop.tick_rate_hz"), "{err}");
+        assert!(
+            err.contains("command line") && err.contains("loop.tick_rate_hz"),
+            "{err}"
+        );
         let both = Overrides {
             device: Some("/dev/x".into()),
             emulated: Some("default".into()),
@@ -411,7 +494,18 @@ mod tests {
 
     #[test]
     fn usb_table_parses_hex_ids() {
-        let c = Config::from_toml_str("[rig]\nmode = \"usb\"\n[rig.usb]\nvid = 0x1209\npid = 0x4853\n", "c").unwrap();
-        assert_eq!(c.rig.usb, Some(UsbConfig { vid: 0x1209, pid: 0x4853, serial_number: None }));
+        let c = Config::from_toml_str(
+            "[rig]\nmode = \"usb\"\n[rig.usb]\nvid = 0x1209\npid = 0x4853\n",
+            "c",
+        )
+        .unwrap();
+        assert_eq!(
+            c.rig.usb,
+            Some(UsbConfig {
+                vid: 0x1209,
+                pid: 0x4853,
+                serial_number: None
+            })
+        );
     }
 }

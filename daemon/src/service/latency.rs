@@ -147,7 +147,10 @@ mod tests {
             let exact = exact_quantile(&values, q);
             let got = h.quantile_s(q);
             assert!(got >= exact * (1.0 - 1e-9), "q={q}: {got} < exact {exact}");
-            assert!(got <= exact * (1.0 + RESOLUTION), "q={q}: {got} > exact {exact} + one bucket");
+            assert!(
+                got <= exact * (1.0 + RESOLUTION),
+                "q={q}: {got} > exact {exact} + one bucket"
+            );
         }
         let s = h.summary();
         assert_eq!(s.count, 10_000);

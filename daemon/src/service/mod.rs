@@ -170,7 +170,9 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
                     systemd.watchdog();
                     watchdog_marks = marks;
                 } else {
-                    tracing::warn!("no progress since the last watchdog ping; not feeding the watchdog");
+                    tracing::warn!(
+                        "no progress since the last watchdog ping; not feeding the watchdog"
+                    );
                 }
                 last_watchdog = Instant::now();
             }

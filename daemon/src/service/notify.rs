@@ -32,7 +32,10 @@ impl Systemd {
 
     /// Startup finished.
     pub fn ready(&self, status: &str) {
-        self.send(&[sd_notify::NotifyState::Ready, sd_notify::NotifyState::Status(status)]);
+        self.send(&[
+            sd_notify::NotifyState::Ready,
+            sd_notify::NotifyState::Status(status),
+        ]);
     }
 
     /// The service is alive and making progress.

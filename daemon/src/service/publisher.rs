@@ -158,7 +158,9 @@ fn run(
         match sent {
             Ok(_) => {
                 sequence += 1;
-                telemetry.statuses_published.store(sequence, Ordering::Relaxed);
+                telemetry
+                    .statuses_published
+                    .store(sequence, Ordering::Relaxed);
                 if let Some(received_at) = frame.new_sample_received_at {
                     let latency = received_at.elapsed();
                     if let Ok(mut h) = telemetry.latency.lock() {
@@ -167,7 +169,10 @@ fn run(
                     }
                 }
                 // A listener that stalls only loses wake-ups: notify never blocks.
-                if notifier.notify_with_custom_event_id(events::STATUS).is_err() {
+                if notifier
+                    .notify_with_custom_event_id(events::STATUS)
+                    .is_err()
+                {
                     telemetry.publish_errors.fetch_add(1, Ordering::Relaxed);
                 }
             }
@@ -182,13 +187,22 @@ fn run(
             last_cleanup = Instant::now();
             let cleaned = node.try_cleanup_dead_nodes();
             if cleaned.cleanups > 0 {
-                tracing::info!(removed = cleaned.cleanups, "removed resources of dead subscribers' nodes");
+                tracing::info!(
+                    removed = cleaned.cleanups,
+                    "removed resources of dead subscribers' nodes"
+                );
             }
         }
     }
-    if notifier.notify_with_custom_event_id(events::SHUTDOWN).is_err() {
+    if notifier
+        .notify_with_custom_event_id(events::SHUTDOWN)
+        .is_err()
+    {
         tracing::debug!("could not send the shutdown event");
     }
-    tracing::info!(published = sequence, "publisher stopped; releasing shared memory");
+    tracing::info!(
+        published = sequence,
+        "publisher stopped; releasing shared memory"
+    );
     // Ports, services and the node drop here, in reverse order, releasing their shared memory.
 }

@@ -84,7 +84,10 @@ impl RigInput {
                 let rig = EmulatedRig::start(scenario, options)
                     .context("cannot start the emulated rig")?;
                 tracing::info!(pty = %rig.device_path().display(), scenario = %config.emulated.scenario, "emulated rig started");
-                (DeviceTarget::Path(rig.device_path().to_path_buf()), Some(rig))
+                (
+                    DeviceTarget::Path(rig.device_path().to_path_buf()),
+                    Some(rig),
+                )
             }
         };
         let link = RigLink::spawn(LinkConfig::new(target, calibration))

@@ -166,8 +166,8 @@ impl SimLoop {
             let woke = Instant::now();
             // Whole periods that passed without a tick are skipped (not replayed in a burst) and
             // count as misses; the step covers them with a longer dt so sim time tracks real time.
-            let late_periods =
-                (woke.saturating_duration_since(scheduled).as_nanos() / u128::from(period_ns)) as u64;
+            let late_periods = (woke.saturating_duration_since(scheduled).as_nanos()
+                / u128::from(period_ns)) as u64;
             if late_periods > 0 {
                 telemetry
                     .deadline_misses
@@ -327,7 +327,10 @@ mod tests {
 
     #[test]
     fn fresh_connected_sample_is_used_as_is() {
-        let v = view(LinkState::Connected, Some(sample(0.6, Duration::from_millis(3))));
+        let v = view(
+            LinkState::Connected,
+            Some(sample(0.6, Duration::from_millis(3))),
+        );
         let i = inputs_from(&v, TIMEOUT);
         assert!(!i.safe_state && i.scope.valid);
         assert_eq!((i.valve_in_opening, i.valve_out_opening), (0.6, 0.25));
@@ -337,16 +340,32 @@ mod tests {
     #[test]
     fn stale_lost_or_incompatible_links_give_the_safe_inputs() {
         let cases = [
-            view(LinkState::Connected, Some(sample(0.6, Duration::from_millis(101)))),
-            view(LinkState::Disconnected, Some(sample(0.6, Duration::from_millis(1)))),
-            view(LinkState::Stale, Some(sample(0.6, Duration::from_millis(50)))),
+            view(
+                LinkState::Connected,
+                Some(sample(0.6, Duration::from_millis(101))),
+            ),
+            view(
+                LinkState::Disconnected,
+                Some(sample(0.6, Duration::from_millis(1))),
+            ),
+            view(
+                LinkState::Stale,
+                Some(sample(0.6, Duration::from_millis(50))),
+            ),
             view(LinkState::Incompatible, None),
             view(LinkState::Connected, None),
         ];
         for v in cases {
             let i = inputs_from(&v, TIMEOUT);
             assert!(i.safe_state, "{v:?}");
-            assert_eq!((i.valve_in_opening, i.valve_out_opening, i.pump_set_pressure_pa), (0.0, 0.0, 0.0));
+            assert_eq!(
+                (
+                    i.valve_in_opening,
+                    i.valve_out_opening,
+                    i.pump_set_pressure_pa
+                ),
+                (0.0, 0.0, 0.0)
+            );
             assert!(!i.scope.valid);
             // The last known pose is held (the renderer keeps its view), only flagged invalid.
             if let Some(s) = v.latest {
@@ -387,7 +406,10 @@ mod tests {
     #[test]
     fn loop_publishes_every_n_ticks_and_reflects_each_new_sample_once() {
         let (s, age) = sample(0.5, Duration::from_millis(1));
-        let rig = Arc::new(Scripted(Mutex::new(view(LinkState::Connected, Some((s, age))))));
+        let rig = Arc::new(Scripted(Mutex::new(view(
+            LinkState::Connected,
+            Some((s, age)),
+        ))));
         let (tx, rx) = sync_channel(1024);
         let stop = Arc::new(AtomicBool::new(false));
         let telemetry = Arc::new(Telemetry::default());
@@ -401,7 +423,10 @@ mod tests {
             let (rig, stop, telemetry) = (rig.clone(), stop.clone(), telemetry.clone());
             std::thread::spawn(move || {
                 SimLoop::new(settings)
-                    .with_stage(Box::new(CountingStage { steps: 0, dt_total_s: 0.0 }))
+                    .with_stage(Box::new(CountingStage {
+                        steps: 0,
+                        dt_total_s: 0.0,
+                    }))
                     .run(&*rig, &tx, &stop, &telemetry)
             })
         };
@@ -414,7 +439,10 @@ mod tests {
         while !frames.iter().any(|f| f.status.valve_in_opening == 0.7) {
             frames.push(rx.recv().unwrap());
         }
-        *rig.0.lock().unwrap() = view(LinkState::Disconnected, Some((s2, Duration::from_millis(5))));
+        *rig.0.lock().unwrap() = view(
+            LinkState::Disconnected,
+            Some((s2, Duration::from_millis(5))),
+        );
         while frames.last().unwrap().status.safe_state == 0 {
             frames.push(rx.recv().unwrap());
         }
@@ -423,7 +451,10 @@ mod tests {
 
         // The first sample is reported as new exactly once, the second exactly once.
         let all: Vec<&StatusFrame> = first.iter().chain(frames.iter()).collect();
-        let new: Vec<Instant> = all.iter().filter_map(|f| f.new_sample_received_at).collect();
+        let new: Vec<Instant> = all
+            .iter()
+            .filter_map(|f| f.new_sample_received_at)
+            .collect();
         assert_eq!(new, vec![s.received_at, s2.received_at]);
         // Every status is 4 ticks after the previous one (the stage counts steps).
         for w in all.windows(2) {
@@ -435,7 +466,10 @@ mod tests {
         let lost = frames.last().unwrap().status;
         assert_eq!(lost.safe_state, 1);
         assert_ne!(lost.alarm_bits & alarms::RIG_LINK_LOST, 0);
-        assert_eq!((lost.valve_in_opening, lost.rig_valve_in_opening), (0.0, 0.7));
+        assert_eq!(
+            (lost.valve_in_opening, lost.rig_valve_in_opening),
+            (0.0, 0.7)
+        );
         assert_eq!(lost.link_state, LinkState::Disconnected as u32);
     }
 
@@ -461,7 +495,11 @@ mod tests {
         });
         let ticks = telemetry.ticks.load(Ordering::Relaxed);
         let dropped = telemetry.statuses_dropped.load(Ordering::Relaxed);
-        assert_eq!(dropped + 2, ticks, "every status after the first two is dropped");
+        assert_eq!(
+            dropped + 2,
+            ticks,
+            "every status after the first two is dropped"
+        );
         assert_eq!(rx.try_iter().count(), 2);
     }
 }
