@@ -159,6 +159,8 @@ pub fn test_node() -> Node<ipc::Service> {
 pub struct StatusReader {
     // Field order matters: ports drop before the node.
     subscriber: Subscriber<ipc::Service, Status, ()>,
+    /// Received but not yet handed out (after `until` matched mid-batch).
+    pending: std::cell::RefCell<std::collections::VecDeque<Status>>,
     /// The node, for tests that open more services.
     pub node: Node<ipc::Service>,
 }
@@ -179,12 +181,16 @@ impl StatusReader {
             }
         };
         let subscriber = service.subscriber_builder().create().expect("subscriber");
-        StatusReader { subscriber, node }
+        StatusReader {
+            subscriber,
+            pending: Default::default(),
+            node,
+        }
     }
 
     /// Every status received so far (non-blocking).
     pub fn drain(&self) -> Vec<Status> {
-        let mut out = Vec::new();
+        let mut out: Vec<Status> = self.pending.borrow_mut().drain(..).collect();
         while let Some(s) = self.subscriber.receive().expect("receive") {
             out.push(*s);
         }
@@ -209,9 +215,11 @@ impl StatusReader {
         let deadline = Instant::now() + timeout;
         let mut out = Vec::new();
         loop {
-            for s in self.drain() {
+            let mut batch = self.drain().into_iter();
+            while let Some(s) = batch.next() {
                 out.push(s);
                 if pred(&s) {
+                    self.pending.borrow_mut().extend(batch);
                     return out;
                 }
             }
