@@ -294,3 +294,45 @@ pub fn assert_matches_scenario(s: &Status, scenario: &hydrometra_drivers::emulat
     assert_eq!(s.scope_pose_valid, u32::from(e.pose_valid), "{}", ctx());
     assert_eq!(s.buttons, e.buttons, "{}", ctx());
 }
+
+/// How a node of a given process appears in iceoryx2's node list.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NodePresence {
+    /// Not listed.
+    Absent,
+    /// Listed, process alive.
+    Alive,
+    /// Listed, process dead, resources not yet cleaned.
+    Dead,
+}
+
+/// Whether process `pid` holds an iceoryx2 node, and in which state.
+pub fn node_of_process(pid: u32) -> NodePresence {
+    use iceoryx2::node::{NodeState, NodeView};
+    let mut presence = NodePresence::Absent;
+    Node::<ipc::Service>::list(Config::global_config(), |state| {
+        let (details, found) = match &state {
+            NodeState::Alive(v) => (v.details().clone(), NodePresence::Alive),
+            NodeState::Dead(v) => (v.details().clone(), NodePresence::Dead),
+            _ => (None, NodePresence::Absent),
+        };
+        if details.is_some_and(|d| d.process_id().value() as u32 == pid) {
+            presence = found;
+            return CallbackProgression::Stop;
+        }
+        CallbackProgression::Continue
+    })
+    .expect("list iceoryx2 nodes");
+    presence
+}
+
+/// Whether the daemon's status and event services exist under `prefix`.
+pub fn services_exist(prefix: &str) -> (bool, bool) {
+    let names = ServiceNames::new(prefix).expect("prefix");
+    let config = Config::global_config();
+    let status = ipc::Service::does_exist(names.status(), config, MessagingPattern::PublishSubscribe)
+        .expect("status service lookup");
+    let events = ipc::Service::does_exist(names.events(), config, MessagingPattern::Event)
+        .expect("event service lookup");
+    (status, events)
+}
