@@ -9,13 +9,22 @@ pub struct Systemd {
 }
 
 impl Systemd {
-    /// Reads `NOTIFY_SOCKET` and `WATCHDOG_USEC` from the environment.
+    /// Reads `WATCHDOG_USEC` (and `WATCHDOG_PID`, which must be this process when set, as in
+    /// libsystemd's `sd_watchdog_enabled`) from the environment.
     pub fn from_env() -> Self {
-        let mut usec = 0u64;
-        let enabled = sd_notify::watchdog_enabled(false, &mut usec);
+        let usec = std::env::var("WATCHDOG_USEC")
+            .ok()
+            .and_then(|v| v.parse::<u64>().ok())
+            .filter(|&u| u > 0);
+        let pid_matches = match std::env::var("WATCHDOG_PID") {
+            Ok(pid) => pid.parse::<u32>().ok() == Some(std::process::id()),
+            Err(_) => true,
+        };
         Self {
             // Ping at half the watchdog timeout, as systemd recommends.
-            watchdog_interval: enabled.then(|| Duration::from_micros(usec / 2)),
+            watchdog_interval: usec
+                .filter(|_| pid_matches)
+                .map(|u| Duration::from_micros(u / 2)),
         }
     }
 
