@@ -47,3 +47,13 @@ pub struct FlowFieldHeader {
     /// Payload length, bytes.
     pub total_bytes: u64,
 }
+
+/// Quality of service of the flow service (see `docs/ipc.md`).
+pub mod qos {
+    /// History.
+    pub const HISTORY_SIZE: usize = 1;
+    /// Subscriber buffer.
+    pub const SUBSCRIBER_MAX_BUFFER_SIZE: usize = 2;
+    /// Subscribers (the field is large: each adds buffer samples to the pre-allocation).
+    pub const MAX_SUBSCRIBERS: usize = 4;
+}

@@ -42,3 +42,16 @@ pub struct MeshPositionsHeader {
     /// Cavity pressure the positions were replayed at, Pa.
     pub cavity_pressure_pa: f64,
 }
+
+/// Quality of service of the cavity services (see `docs/ipc.md`): history 1 (a late renderer gets
+/// the current topology), safe overflow, one publisher.
+pub mod qos {
+    /// History of both services.
+    pub const HISTORY_SIZE: usize = 1;
+    /// Subscriber buffer of both services.
+    pub const SUBSCRIBER_MAX_BUFFER_SIZE: usize = 2;
+    /// Subscribers of `cavity/topology`.
+    pub const TOPOLOGY_MAX_SUBSCRIBERS: usize = 16;
+    /// Subscribers of `cavity/positions`.
+    pub const POSITIONS_MAX_SUBSCRIBERS: usize = 8;
+}

@@ -43,3 +43,13 @@ pub struct ParticlesHeader {
     /// View clarity in [0, 1] (1 clear) from the particle density in front of the scope.
     pub view_clarity: f64,
 }
+
+/// Quality of service of the particle service (see `docs/ipc.md`).
+pub mod qos {
+    /// History.
+    pub const HISTORY_SIZE: usize = 1;
+    /// Subscriber buffer.
+    pub const SUBSCRIBER_MAX_BUFFER_SIZE: usize = 2;
+    /// Subscribers.
+    pub const MAX_SUBSCRIBERS: usize = 8;
+}
