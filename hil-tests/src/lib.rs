@@ -211,7 +211,12 @@ impl StatusReader {
 
     /// Collects statuses until one satisfies `pred`; returns all collected, the match last.
     /// Panics with `what` after `timeout`.
-    pub fn until(&self, what: &str, timeout: Duration, pred: impl Fn(&Status) -> bool) -> Vec<Status> {
+    pub fn until(
+        &self,
+        what: &str,
+        timeout: Duration,
+        pred: impl Fn(&Status) -> bool,
+    ) -> Vec<Status> {
         let deadline = Instant::now() + timeout;
         let mut out = Vec::new();
         loop {
@@ -255,11 +260,18 @@ pub fn assert_safe_state_rule(s: &Status, timeout_s: f64, slack_s: f64) {
     let stale = !s.last_sample_age_s.is_finite() || s.last_sample_age_s > timeout_s + slack_s;
     let lost = s.link_state != status::link_state::CONNECTED;
     if stale || lost {
-        assert_eq!(s.safe_state, 1, "stale/lost link but not in the safe state: {s:?}");
+        assert_eq!(
+            s.safe_state, 1,
+            "stale/lost link but not in the safe state: {s:?}"
+        );
     }
     if s.safe_state == 1 {
         assert_eq!(
-            (s.valve_in_opening, s.valve_out_opening, s.pump_set_pressure_pa),
+            (
+                s.valve_in_opening,
+                s.valve_out_opening,
+                s.pump_set_pressure_pa
+            ),
             (0.0, 0.0, 0.0),
             "safe state with non-safe inputs: {s:?}"
         );
@@ -279,17 +291,37 @@ pub fn assert_matches_scenario(s: &Status, scenario: &hydrometra_drivers::emulat
     let valve_step = 1.0 / 3000.0;
     let pump_step_pa = 200.0 * PA_PER_MMHG / 3000.0;
     let ctx = || format!("status {s:?}\nscenario {e:?}");
-    assert!((s.rig_valve_in_opening - e.valve_in).abs() <= valve_step, "{}", ctx());
-    assert!((s.rig_valve_out_opening - e.valve_out).abs() <= valve_step, "{}", ctx());
-    assert!((s.rig_pump_set_pressure_pa - e.pump_mmhg * PA_PER_MMHG).abs() <= pump_step_pa, "{}", ctx());
+    assert!(
+        (s.rig_valve_in_opening - e.valve_in).abs() <= valve_step,
+        "{}",
+        ctx()
+    );
+    assert!(
+        (s.rig_valve_out_opening - e.valve_out).abs() <= valve_step,
+        "{}",
+        ctx()
+    );
+    assert!(
+        (s.rig_pump_set_pressure_pa - e.pump_mmhg * PA_PER_MMHG).abs() <= pump_step_pa,
+        "{}",
+        ctx()
+    );
     // Live: the simulation uses exactly what the rig reported.
     assert_eq!(s.valve_in_opening, s.rig_valve_in_opening);
     assert_eq!(s.valve_out_opening, s.rig_valve_out_opening);
     assert_eq!(s.pump_set_pressure_pa, s.rig_pump_set_pressure_pa);
     for i in 0..3 {
         // f32 on the wire: well below a micrometre at cavity distances.
-        assert!((s.scope_tip_position_m[i] - e.tip_mm[i] * 1e-3).abs() < 1e-6, "{}", ctx());
-        assert!((s.scope_view_direction[i] - e.view_dir[i]).abs() < 1e-5, "{}", ctx());
+        assert!(
+            (s.scope_tip_position_m[i] - e.tip_mm[i] * 1e-3).abs() < 1e-6,
+            "{}",
+            ctx()
+        );
+        assert!(
+            (s.scope_view_direction[i] - e.view_dir[i]).abs() < 1e-5,
+            "{}",
+            ctx()
+        );
     }
     assert_eq!(s.scope_pose_valid, u32::from(e.pose_valid), "{}", ctx());
     assert_eq!(s.buttons, e.buttons, "{}", ctx());
@@ -330,8 +362,9 @@ pub fn node_of_process(pid: u32) -> NodePresence {
 pub fn services_exist(prefix: &str) -> (bool, bool) {
     let names = ServiceNames::new(prefix).expect("prefix");
     let config = Config::global_config();
-    let status = ipc::Service::does_exist(names.status(), config, MessagingPattern::PublishSubscribe)
-        .expect("status service lookup");
+    let status =
+        ipc::Service::does_exist(names.status(), config, MessagingPattern::PublishSubscribe)
+            .expect("status service lookup");
     let events = ipc::Service::does_exist(names.events(), config, MessagingPattern::Event)
         .expect("event service lookup");
     (status, events)

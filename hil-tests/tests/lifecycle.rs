@@ -12,7 +12,9 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 
 fn wait_live(reader: &StatusReader) -> Status {
     *reader
-        .until("a live status", Duration::from_secs(10), |s| s.safe_state == 0)
+        .until("a live status", Duration::from_secs(10), |s| {
+            s.safe_state == 0
+        })
         .last()
         .unwrap()
 }
@@ -26,14 +28,23 @@ fn clean_shutdown_on(signal: i32, tag: &str) {
         assert_eq!(node_of_process(daemon.pid()), NodePresence::Alive);
         // The reader stays subscribed while the daemon stops: it must not hold the daemon up.
         daemon.signal(signal);
-        let exit = daemon.wait_exit(Duration::from_secs(5)).expect("exits within 5 s");
+        let exit = daemon
+            .wait_exit(Duration::from_secs(5))
+            .expect("exits within 5 s");
         assert!(exit.success(), "exit status {exit:?}\n{}", daemon.log());
     }
     // Everything the daemon owned is gone: its node and both services.
     assert_eq!(node_of_process(daemon.pid()), NodePresence::Absent);
-    assert_eq!(services_exist(&prefix), (false, false), "services left behind");
+    assert_eq!(
+        services_exist(&prefix),
+        (false, false),
+        "services left behind"
+    );
     let log = daemon.log();
-    assert!(log.contains("shutting down") && log.contains("releasing shared memory"), "{log}");
+    assert!(
+        log.contains("shutting down") && log.contains("releasing shared memory"),
+        "{log}"
+    );
 }
 
 #[test]
@@ -66,27 +77,46 @@ fn after_kill_9_a_restarted_daemon_cleans_up_and_serves_a_new_subscriber() {
     });
     let new = *statuses.last().unwrap();
     let more = reader.collect_for(Duration::from_millis(300));
-    assert!(more.len() > 100, "the new daemon serves: {} statuses in 0.3 s", more.len());
+    assert!(
+        more.len() > 100,
+        "the new daemon serves: {} statuses in 0.3 s",
+        more.len()
+    );
     assert!(more.iter().all(|s| s.run_id == new.run_id));
     assert_contiguous(&more);
     // Cleaned up: by the new daemon's start-up cleanup (any iceoryx2 process may do it first,
     // e.g. another test's daemon; what matters is that it is gone and the service works).
-    assert_eq!(node_of_process(first.pid()), NodePresence::Absent, "dead node not cleaned");
-    assert!(second.log().contains("hydrometrad running"), "{}", second.log());
+    assert_eq!(
+        node_of_process(first.pid()),
+        NodePresence::Absent,
+        "dead node not cleaned"
+    );
+    assert!(
+        second.log().contains("hydrometrad running"),
+        "{}",
+        second.log()
+    );
 }
 
 #[test]
 fn stalled_and_killed_renderers_never_block_the_daemon() {
     let prefix = unique_prefix("stall");
     let names = ServiceNames::new(&prefix).unwrap();
-    let _daemon = Daemon::start(&prefix, &["--emulated", "default", "--status-rate-hz", "500"]);
+    let _daemon = Daemon::start(
+        &prefix,
+        &["--emulated", "default", "--status-rate-hz", "500"],
+    );
     let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
     wait_live(&reader);
 
     // A renderer that subscribes and listens for events but never reads or waits.
     let stalled_node = test_node();
     let stalled_service = status::open(&stalled_node, &names).unwrap();
-    let _stalled_sub = stalled_service.subscriber_builder().buffer_size(1).create().unwrap();
+    let _stalled_sub = stalled_service
+        .subscriber_builder()
+        .buffer_size(1)
+        .create()
+        .unwrap();
     let event_service = events::open(&stalled_node, &names).unwrap();
     let _stalled_listener = event_service.listener_builder().create().unwrap();
     // Renderers that die without cleaning up: monitors killed with SIGKILL.
@@ -107,7 +137,10 @@ fn stalled_and_killed_renderers_never_block_the_daemon() {
     let statuses = reader.collect_for(window);
     assert_contiguous(&statuses);
     let rate = statuses.len() as f64 / window.as_secs_f64();
-    assert!((rate - 500.0).abs() <= 50.0, "{rate:.1} statuses/s with stalled and dead renderers");
+    assert!(
+        (rate - 500.0).abs() <= 50.0,
+        "{rate:.1} statuses/s with stalled and dead renderers"
+    );
     let last = statuses.last().unwrap();
     assert_eq!(last.statuses_dropped, 0, "the publisher kept up");
 }
@@ -119,10 +152,15 @@ fn a_second_daemon_on_the_same_prefix_is_refused_with_a_clear_error() {
     let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
     wait_live(&reader);
     let mut second = Daemon::start(&prefix, &["--emulated", "default"]);
-    let exit = second.wait_exit(Duration::from_secs(10)).expect("second daemon exits");
+    let exit = second
+        .wait_exit(Duration::from_secs(10))
+        .expect("second daemon exits");
     assert!(!exit.success());
     let log = second.log();
-    assert!(log.contains("another hydrometrad") && log.contains(&prefix), "{log}");
+    assert!(
+        log.contains("another hydrometrad") && log.contains(&prefix),
+        "{log}"
+    );
     // The first one still serves.
     assert!(reader.collect_for(Duration::from_millis(200)).len() > 50);
 }
@@ -163,5 +201,8 @@ fn a_subscriber_of_another_schema_version_is_refused() {
         .service_builder(names.status())
         .publish_subscribe::<Renamed>()
         .open();
-    assert!(matches!(renamed, Err(PublishSubscribeOpenError::IncompatibleTypes)));
+    assert!(matches!(
+        renamed,
+        Err(PublishSubscribeOpenError::IncompatibleTypes)
+    ));
 }

@@ -43,7 +43,9 @@ fn same(json: &Value, field: &str, rust: f64) {
     if rust.is_nan() {
         assert!(v.is_null(), "{field}: Rust NaN, Python {v}");
     } else {
-        let p = v.as_f64().unwrap_or_else(|| panic!("{field} missing or not a number: {json}"));
+        let p = v
+            .as_f64()
+            .unwrap_or_else(|| panic!("{field} missing or not a number: {json}"));
         assert!(close(p, rust), "{field}: Python {v} vs Rust {rust}");
     }
 }
@@ -100,7 +102,10 @@ fn compare(j: &Value, s: &Status) {
     }
     // u64 fields beyond f64's exact range are compared as integers.
     assert_eq!(j["run_id"].as_u64(), Some(s.run_id));
-    assert_eq!(j["publish_monotonic_ns"].as_u64(), Some(s.publish_monotonic_ns));
+    assert_eq!(
+        j["publish_monotonic_ns"].as_u64(),
+        Some(s.publish_monotonic_ns)
+    );
     same_array(j, "scope_tip_position_m", &s.scope_tip_position_m);
     same_array(j, "scope_view_direction", &s.scope_view_direction);
     same_array(j, "scope_orientation_wxyz", &s.scope_orientation_wxyz);
@@ -110,14 +115,27 @@ fn compare(j: &Value, s: &Status) {
 fn python_example_reads_every_status_field_like_the_rust_subscriber() {
     let python = python();
     let prefix = unique_prefix("python");
-    let _daemon = Daemon::start(&prefix, &["--emulated", "default", "--status-rate-hz", "100"]);
+    let _daemon = Daemon::start(
+        &prefix,
+        &["--emulated", "default", "--status-rate-hz", "100"],
+    );
     let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
-    reader.until("a live status", Duration::from_secs(10), |s| s.safe_state == 0);
+    reader.until("a live status", Duration::from_secs(10), |s| {
+        s.safe_state == 0
+    });
 
     let script = workspace_root().join("ipc/examples/python/status_subscriber.py");
     let child = Command::new(&python)
         .arg(&script)
-        .args(["--prefix", &prefix, "--count", "30", "--json", "--timeout", "10"])
+        .args([
+            "--prefix",
+            &prefix,
+            "--count",
+            "30",
+            "--json",
+            "--timeout",
+            "10",
+        ])
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -165,6 +183,9 @@ fn python_example_reads_every_status_field_like_the_rust_subscriber() {
         }
     }
     // The first Python sample may be the history one, older than the Rust subscription.
-    assert!(compared >= 29, "only {compared} of 30 Python statuses seen by Rust too");
+    assert!(
+        compared >= 29,
+        "only {compared} of 30 Python statuses seen by Rust too"
+    );
     assert_eq!(lines[5]["link_state_name"], "connected");
 }

@@ -13,7 +13,14 @@ fn status_arrives_at_the_configured_rate_with_contiguous_sequence_and_scenario_v
     let status_rate_hz = 200.0;
     let _daemon = Daemon::start(
         &prefix,
-        &["--emulated", "default", "--tick-rate-hz", "1000", "--status-rate-hz", "200"],
+        &[
+            "--emulated",
+            "default",
+            "--tick-rate-hz",
+            "1000",
+            "--status-rate-hz",
+            "200",
+        ],
     );
     let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
     reader.until("a connected rig", Duration::from_secs(10), |s| {
@@ -40,7 +47,10 @@ fn status_arrives_at_the_configured_rate_with_contiguous_sequence_and_scenario_v
     let mut checked = 0;
     for s in &statuses {
         assert_eq!(s.schema_version, hydrometra_ipc::SCHEMA_VERSION);
-        assert_eq!(s.size_bytes as usize, std::mem::size_of::<hydrometra_ipc::Status>());
+        assert_eq!(
+            s.size_bytes as usize,
+            std::mem::size_of::<hydrometra_ipc::Status>()
+        );
         assert_eq!(s.run_id, first.run_id);
         assert_eq!(s.tick_rate_hz, 1000.0);
         assert_safe_state_rule(s, 0.1, 0.01);
@@ -51,8 +61,19 @@ fn status_arrives_at_the_configured_rate_with_contiguous_sequence_and_scenario_v
         }
     }
     // The emulated rig is healthy: (nearly) every status is live.
-    assert!(checked as f64 >= 0.95 * statuses.len() as f64, "{checked} of {}", statuses.len());
-    assert_eq!((last.link_crc_errors, last.link_sequence_gaps, last.link_reconnects), (0, 0, 0));
+    assert!(
+        checked as f64 >= 0.95 * statuses.len() as f64,
+        "{checked} of {}",
+        statuses.len()
+    );
+    assert_eq!(
+        (
+            last.link_crc_errors,
+            last.link_sequence_gaps,
+            last.link_reconnects
+        ),
+        (0, 0, 0)
+    );
     // ~250 frames/s over the window.
     let frames = (last.link_frames - first.link_frames) as f64 / publish_span_s;
     assert!((frames - 250.0).abs() < 25.0 + 5.0, "{frames} frames/s");
@@ -68,12 +89,26 @@ fn monitor_once_json_prints_the_live_status() {
     let prefix = unique_prefix("monitor");
     let _daemon = Daemon::start(&prefix, &["--emulated", "default"]);
     let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
-    reader.until("a connected rig", Duration::from_secs(10), |s| s.safe_state == 0);
+    reader.until("a connected rig", Duration::from_secs(10), |s| {
+        s.safe_state == 0
+    });
     let out = std::process::Command::new(binary("hydrometra"))
-        .args(["monitor", "--once", "--json", "--timeout", "10", "--service-prefix", &prefix])
+        .args([
+            "monitor",
+            "--once",
+            "--json",
+            "--timeout",
+            "10",
+            "--service-prefix",
+            &prefix,
+        ])
         .output()
         .expect("run hydrometra monitor");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
     assert_eq!(j["schema_version"], 1);
     assert_eq!(j["link_state_name"], "connected");
@@ -89,10 +124,20 @@ fn monitor_once_json_prints_the_live_status() {
 fn monitor_without_a_daemon_fails_with_a_clear_message() {
     let prefix = unique_prefix("nodaemon");
     let out = std::process::Command::new(binary("hydrometra"))
-        .args(["monitor", "--once", "--timeout", "0.5", "--service-prefix", &prefix])
+        .args([
+            "monitor",
+            "--once",
+            "--timeout",
+            "0.5",
+            "--service-prefix",
+            &prefix,
+        ])
         .output()
         .expect("run hydrometra monitor");
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
-    assert!(err.contains("no status from hydrometrad") && err.contains(&prefix), "{err}");
+    assert!(
+        err.contains("no status from hydrometrad") && err.contains(&prefix),
+        "{err}"
+    );
 }

@@ -21,7 +21,9 @@ fn unit_file() -> (String, HashMap<String, String>) {
             section = line.trim_matches(['[', ']']).to_string();
             continue;
         }
-        let (k, v) = line.split_once('=').unwrap_or_else(|| panic!("not key=value: {line}"));
+        let (k, v) = line
+            .split_once('=')
+            .unwrap_or_else(|| panic!("not key=value: {line}"));
         keys.insert(format!("{section}.{k}"), v.to_string());
     }
     (text, keys)
@@ -30,12 +32,19 @@ fn unit_file() -> (String, HashMap<String, String>) {
 #[test]
 fn unit_is_notify_with_watchdog_restart_unprivileged_and_keeps_ipc() {
     let (_, k) = unit_file();
-    let get = |key: &str| k.get(key).map(String::as_str).unwrap_or_else(|| panic!("{key} missing"));
+    let get = |key: &str| {
+        k.get(key)
+            .map(String::as_str)
+            .unwrap_or_else(|| panic!("{key} missing"))
+    };
     assert_eq!(get("Service.Type"), "notify");
     assert_eq!(get("Service.Restart"), "on-failure");
     assert_eq!(get("Service.RemoveIPC"), "no");
     assert_eq!(get("Service.NotifyAccess"), "main");
-    let watchdog_s: f64 = get("Service.WatchdogSec").trim_end_matches('s').parse().unwrap();
+    let watchdog_s: f64 = get("Service.WatchdogSec")
+        .trim_end_matches('s')
+        .parse()
+        .unwrap();
     assert!((0.5..=30.0).contains(&watchdog_s));
     let user = get("Service.User");
     assert!(!user.is_empty() && user != "root" && user != "0");
@@ -53,7 +62,10 @@ fn unit_passes_systemd_analyze_verify_where_available() {
     assert!(probe.status.success());
     // Point ExecStart at the built binary: verify checks that the command is executable.
     let (text, _) = unit_file();
-    let text = text.replace("/usr/local/bin/hydrometrad", binary("hydrometrad").to_str().unwrap());
+    let text = text.replace(
+        "/usr/local/bin/hydrometrad",
+        binary("hydrometrad").to_str().unwrap(),
+    );
     let dir = temp_dir("unit");
     let path = dir.join("hydrometrad.service");
     std::fs::write(&path, text).unwrap();
@@ -63,8 +75,14 @@ fn unit_passes_systemd_analyze_verify_where_available() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    let ours: Vec<&str> = stderr.lines().filter(|l| l.contains("hydrometrad.service")).collect();
-    assert!(out.status.success() && ours.is_empty(), "systemd-analyze verify:\n{stderr}");
+    let ours: Vec<&str> = stderr
+        .lines()
+        .filter(|l| l.contains("hydrometrad.service"))
+        .collect();
+    assert!(
+        out.status.success() && ours.is_empty(),
+        "systemd-analyze verify:\n{stderr}"
+    );
 }
 
 #[test]
@@ -72,7 +90,9 @@ fn daemon_notifies_ready_feeds_the_watchdog_and_announces_stopping() {
     let dir = temp_dir("notify");
     let socket_path = dir.join("notify.sock");
     let socket = UnixDatagram::bind(&socket_path).unwrap();
-    socket.set_read_timeout(Some(Duration::from_millis(100))).unwrap();
+    socket
+        .set_read_timeout(Some(Duration::from_millis(100)))
+        .unwrap();
     let prefix = unique_prefix("notify");
     let mut child = Command::new(binary("hydrometrad"))
         .args(["--emulated", "default", "--service-prefix", &prefix])
@@ -87,7 +107,10 @@ fn daemon_notifies_ready_feeds_the_watchdog_and_announces_stopping() {
     let started = Instant::now();
     while started.elapsed() < Duration::from_millis(1500) {
         if let Ok(n) = socket.recv(&mut buf) {
-            messages.push((Instant::now(), String::from_utf8_lossy(&buf[..n]).into_owned()));
+            messages.push((
+                Instant::now(),
+                String::from_utf8_lossy(&buf[..n]).into_owned(),
+            ));
         }
     }
     // SAFETY: kill(2) on our child.
@@ -95,7 +118,10 @@ fn daemon_notifies_ready_feeds_the_watchdog_and_announces_stopping() {
     let deadline = Instant::now() + Duration::from_secs(5);
     while Instant::now() < deadline {
         if let Ok(n) = socket.recv(&mut buf) {
-            messages.push((Instant::now(), String::from_utf8_lossy(&buf[..n]).into_owned()));
+            messages.push((
+                Instant::now(),
+                String::from_utf8_lossy(&buf[..n]).into_owned(),
+            ));
         }
         if child.try_wait().unwrap().is_some() {
             break;
@@ -114,8 +140,15 @@ fn daemon_notifies_ready_feeds_the_watchdog_and_announces_stopping() {
         .collect();
     // ~1.5 s at one ping per 200 ms: at least 4 even with start-up time and a loaded machine,
     // and never more than one per 150 ms on average (not a busy loop).
-    assert!(pings.len() >= 4 && pings.len() <= 11, "{} watchdog pings", pings.len());
+    assert!(
+        pings.len() >= 4 && pings.len() <= 11,
+        "{} watchdog pings",
+        pings.len()
+    );
     for w in pings.windows(2) {
-        assert!(w[1] - w[0] < Duration::from_millis(400), "a gap that would trip the watchdog");
+        assert!(
+            w[1] - w[0] < Duration::from_millis(400),
+            "a gap that would trip the watchdog"
+        );
     }
 }

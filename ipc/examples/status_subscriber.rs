@@ -11,10 +11,19 @@ use iceoryx2::prelude::*;
 fn main() -> Result<(), Box<dyn core::error::Error>> {
     set_log_level_from_env_or(LogLevel::Error);
     let prefix = std::env::args().nth(1);
-    let names = ServiceNames::new(prefix.as_deref().unwrap_or(hydrometra_ipc::DEFAULT_SERVICE_PREFIX))?;
+    let names = ServiceNames::new(
+        prefix
+            .as_deref()
+            .unwrap_or(hydrometra_ipc::DEFAULT_SERVICE_PREFIX),
+    )?;
     let node = NodeBuilder::new().create::<ipc::Service>()?;
     let subscriber = status::open(&node, &names)
-        .map_err(|e| format!("cannot open {} ({e:?}): is hydrometrad running?", names.full("status")))?
+        .map_err(|e| {
+            format!(
+                "cannot open {} ({e:?}): is hydrometrad running?",
+                names.full("status")
+            )
+        })?
         .subscriber_builder()
         .create()?;
     let listener = events::open(&node, &names)?.listener_builder().create()?;

@@ -73,13 +73,13 @@ impl ServiceNames {
             ServiceName::new(&format!("{trimmed}/{suffix}"))
                 .map_err(|e| fail(&format!("iceoryx2 rejects it: {e:?}")))
         };
-        for suffix in names::ALL {
+        for suffix in suffix::ALL {
             make(suffix)?;
         }
         Ok(Self {
             prefix: trimmed.to_string(),
-            status: make(names::STATUS)?,
-            events: make(names::EVENTS)?,
+            status: make(suffix::STATUS)?,
+            events: make(suffix::EVENTS)?,
         })
     }
 
@@ -98,19 +98,19 @@ impl ServiceNames {
         &self.prefix
     }
 
-    /// Full name string of a service suffix (one of [`names`]).
+    /// Full name string of a service suffix (one of [`suffix`]).
     pub fn full(&self, suffix: &str) -> String {
         format!("{}/{}", self.prefix, suffix)
     }
 
-    /// The iceoryx2 service name for a suffix (one of [`names`]).
+    /// The iceoryx2 service name for a suffix (one of [`suffix`]).
     pub fn service(&self, suffix: &str) -> Result<ServiceName, ServiceNameError> {
         ServiceName::new(&self.full(suffix))
     }
 }
 
 /// Service name suffixes, appended to the prefix with a `/`.
-pub mod names {
+pub mod suffix {
     /// Status record, publish-subscribe, [`crate::Status`].
     pub const STATUS: &str = "status";
     /// Wake-up events for renderers, event service, ids in [`crate::events`].
@@ -141,10 +141,10 @@ mod tests {
     #[test]
     fn default_names_are_under_hydrometra_v1() {
         let n = ServiceNames::default();
-        assert_eq!(n.full(names::STATUS), "hydrometra/v1/status");
-        assert_eq!(n.full(names::EVENTS), "hydrometra/v1/events");
+        assert_eq!(n.full(suffix::STATUS), "hydrometra/v1/status");
+        assert_eq!(n.full(suffix::EVENTS), "hydrometra/v1/events");
         assert_eq!(
-            n.full(names::MESH_POSITIONS),
+            n.full(suffix::MESH_POSITIONS),
             "hydrometra/v1/cavity/positions"
         );
     }

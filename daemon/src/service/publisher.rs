@@ -95,7 +95,7 @@ fn run(
             format!(
                 "cannot create or open service {}: {e:?} (a service of another schema version or \
                  with other settings exists under this prefix?)",
-                names.full(hydrometra_ipc::names::names::STATUS)
+                names.full(hydrometra_ipc::names::suffix::STATUS)
             )
         })?;
         let publisher = status_service
@@ -107,13 +107,13 @@ fn run(
                 format!(
                     "cannot publish on {}: {e:?} (is another hydrometrad running with service \
                      prefix {prefix:?}?)",
-                    names.full(hydrometra_ipc::names::names::STATUS)
+                    names.full(hydrometra_ipc::names::suffix::STATUS)
                 )
             })?;
         let event_service = events::create(&node, &names).map_err(|e| {
             format!(
                 "cannot create or open service {}: {e:?}",
-                names.full(hydrometra_ipc::names::names::EVENTS)
+                names.full(hydrometra_ipc::names::suffix::EVENTS)
             )
         })?;
         let notifier = event_service
@@ -178,7 +178,7 @@ fn run(
             }
             Err(e) => {
                 let n = telemetry.publish_errors.fetch_add(1, Ordering::Relaxed);
-                if n < 10 || n % 1000 == 0 {
+                if n < 10 || n.is_multiple_of(1000) {
                     tracing::warn!(error = %e, "could not publish status");
                 }
             }
