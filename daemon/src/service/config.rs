@@ -126,6 +126,9 @@ pub struct LoopConfig {
     pub status_rate_hz: f64,
     /// Periodic log interval, s.
     pub log_interval_s: f64,
+    /// SCHED_FIFO priority of the simulation and publisher threads (1..=99); 0: normal
+    /// scheduling. Falls back to normal scheduling, with a warning, when not permitted.
+    pub realtime_priority: u8,
 }
 
 impl Default for LoopConfig {
@@ -134,6 +137,7 @@ impl Default for LoopConfig {
             tick_rate_hz: 1000.0,
             status_rate_hz: 1000.0,
             log_interval_s: 10.0,
+            realtime_priority: 10,
         }
     }
 }

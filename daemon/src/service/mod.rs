@@ -5,6 +5,7 @@ pub mod config;
 pub mod latency;
 pub mod notify;
 pub mod publisher;
+pub mod realtime;
 pub mod rig_input;
 pub mod rig_link;
 pub mod sim;
@@ -111,7 +112,8 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let rig = rig_link::RigInput::start(&config.rig)?;
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let publisher = match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone()) {
+    let priority = config.sim_loop.realtime_priority;
+    let publisher = match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
         Ok(p) => p,
         Err(e) => {
             rig.shutdown();
@@ -132,6 +134,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         std::thread::Builder::new()
             .name("hm-sim".into())
             .spawn(move || {
+                realtime::apply("hm-sim", priority);
                 SimLoop::new(settings).run(&*source, &frames_tx, &sim_stop, &telemetry);
                 // `frames_tx` drops here: the publisher drains and stops.
             })

@@ -40,11 +40,15 @@ impl PublisherThread {
         names: ServiceNames,
         frames: Receiver<StatusFrame>,
         telemetry: Arc<Telemetry>,
+        realtime_priority: u8,
     ) -> anyhow::Result<Self> {
         let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
         let handle = std::thread::Builder::new()
             .name("hm-publisher".into())
-            .spawn(move || run(names, frames, telemetry, ready_tx))?;
+            .spawn(move || {
+                super::realtime::apply("hm-publisher", realtime_priority);
+                run(names, frames, telemetry, ready_tx)
+            })?;
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(Self { handle }),
             Ok(Err(message)) => {
