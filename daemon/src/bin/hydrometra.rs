@@ -15,6 +15,8 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
+    Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
     /// Hydraulic model tools (offline simulation of a scenario).
     #[command(subcommand)]
     Hydraulics(hydrometra_daemon::cli::hydraulics::HydraulicsCommand),
@@ -34,6 +36,7 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
     }
 }

@@ -1,3 +1,3 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
-
 pub mod hydraulics;
+pub mod monitor;
