@@ -97,6 +97,30 @@ fn compare(j: &Value, s: &Status) {
         ("scope_pose_valid", u(s.scope_pose_valid.into())),
         ("safe_state", u(s.safe_state.into())),
         ("reserved0", u(s.reserved0.into())),
+        ("cavity_pressure_pa", s.cavity_pressure_pa),
+        ("cavity_volume_m3", s.cavity_volume_m3),
+        ("inflow_m3_per_s", s.inflow_m3_per_s),
+        ("outflow_m3_per_s", s.outflow_m3_per_s),
+        ("leak_m3_per_s", s.leak_m3_per_s),
+        ("absorption_m3_per_s", s.absorption_m3_per_s),
+        ("perforation_m3_per_s", s.perforation_m3_per_s),
+        (
+            "inflow_port_velocity_m_per_s",
+            s.inflow_port_velocity_m_per_s,
+        ),
+        (
+            "outflow_port_velocity_m_per_s",
+            s.outflow_port_velocity_m_per_s,
+        ),
+        ("fluid_in_m3", s.fluid_in_m3),
+        ("fluid_collected_m3", s.fluid_collected_m3),
+        ("deficit_m3", s.deficit_m3),
+        ("deficit_rate_m3_per_s", s.deficit_rate_m3_per_s),
+        ("deficit_limit_m3", s.deficit_limit_m3),
+        ("procedure_id", u(s.procedure_id)),
+        ("procedure_time_s", s.procedure_time_s),
+        ("deficit_warning_stage", u(s.deficit_warning_stage)),
+        ("hydraulic_flags", u(s.hydraulic_flags)),
     ] {
         same(j, field, value);
     }

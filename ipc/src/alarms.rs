@@ -1,5 +1,5 @@
 //! Alarm bits of [`crate::Status::alarm_bits`]. Bits 0-7: daemon and rig; 8-15: hydraulics
-//! (reserved until the hydraulics stage publishes them); 16-63: reserved, always 0.
+//! (docs/hydraulics.md); 16-63: reserved, always 0.
 
 /// The rig link is not `connected` (disconnected, handshaking, stale or incompatible).
 pub const RIG_LINK_LOST: u64 = 1 << 0;
@@ -12,17 +12,17 @@ pub const SCOPE_POSE_INVALID: u64 = 1 << 3;
 /// A simulation tick missed its deadline within the last second.
 pub const DEADLINE_MISSED: u64 = 1 << 4;
 
-/// Hydraulics (reserved): fluid deficit reached 50 % of the configured limit.
+/// Hydraulics: fluid deficit reached 50 % of the configured limit.
 pub const DEFICIT_WARNING_50: u64 = 1 << 8;
-/// Hydraulics (reserved): fluid deficit reached 75 % of the configured limit.
+/// Hydraulics: fluid deficit reached 75 % of the configured limit.
 pub const DEFICIT_WARNING_75: u64 = 1 << 9;
-/// Hydraulics (reserved): fluid deficit reached the configured limit.
+/// Hydraulics: fluid deficit reached the configured limit.
 pub const DEFICIT_LIMIT: u64 = 1 << 10;
-/// Hydraulics (reserved): the deficit rises faster than the configured rate limit.
+/// Hydraulics: the deficit rises faster than the configured rate limit.
 pub const DEFICIT_RATE: u64 = 1 << 11;
-/// Hydraulics (reserved): the procedure is terminated (limit reached).
+/// Hydraulics: the procedure is terminated (limit reached).
 pub const PROCEDURE_TERMINATED: u64 = 1 << 12;
-/// Hydraulics (reserved): cavity pressure above the configured maximum.
+/// Hydraulics: cavity pressure above the configured maximum.
 pub const OVERPRESSURE: u64 = 1 << 13;
 
 /// Every defined bit with its name, lowest bit first (for monitors and logs).

@@ -101,6 +101,42 @@ pub struct Status {
     pub safe_state: u32,
     /// Reserved, 0.
     pub reserved0: u32,
+    /// Hydraulics: cavity gauge pressure.
+    pub cavity_pressure_pa: f64,
+    /// Hydraulics: cavity volume.
+    pub cavity_volume_m3: f64,
+    /// Hydraulics: pump -> cavity flow during the last tick.
+    pub inflow_m3_per_s: f64,
+    /// Hydraulics: cavity -> suction canister flow.
+    pub outflow_m3_per_s: f64,
+    /// Hydraulics: leak through the cervix.
+    pub leak_m3_per_s: f64,
+    /// Hydraulics: absorption into the circulation (above the mean arterial pressure).
+    pub absorption_m3_per_s: f64,
+    /// Hydraulics: loss through a perforation (0 while intact).
+    pub perforation_m3_per_s: f64,
+    /// Hydraulics: mean jet velocity out of the scope's inflow port.
+    pub inflow_port_velocity_m_per_s: f64,
+    /// Hydraulics: mean velocity into the scope's outflow port.
+    pub outflow_port_velocity_m_per_s: f64,
+    /// Hydraulics: fluid delivered by the pump since the procedure started.
+    pub fluid_in_m3: f64,
+    /// Hydraulics: fluid collected (canister plus the drape's share of the leak) since the procedure started.
+    pub fluid_collected_m3: f64,
+    /// Hydraulics: fluid deficit = in - collected - change of cavity volume; never decreases within a procedure.
+    pub deficit_m3: f64,
+    /// Hydraulics: deficit rate, exponentially averaged (docs/hydraulics.md).
+    pub deficit_rate_m3_per_s: f64,
+    /// Hydraulics: the configured deficit limit.
+    pub deficit_limit_m3: f64,
+    /// Hydraulics: id of the current procedure (its start, ms since the Unix epoch); survives restarts.
+    pub procedure_id: u64,
+    /// Hydraulics: time since the procedure started (accumulated across restarts).
+    pub procedure_time_s: f64,
+    /// Hydraulics: number of configured warning fractions the deficit has reached.
+    pub deficit_warning_stage: u64,
+    /// Hydraulics: bit 0 stage active (hydraulic fields valid), 1 perforated, 2 pump stopped (terminated), 3 pump at its flow limit, 4 procedure restored from the record at start.
+    pub hydraulic_flags: u64,
 }
 
 /// Rig link states as carried in [`Status::link_state`].
@@ -173,6 +209,24 @@ impl Default for Status {
             scope_pose_valid: 0,
             safe_state: 1,
             reserved0: 0,
+            cavity_pressure_pa: 0.0,
+            cavity_volume_m3: 0.0,
+            inflow_m3_per_s: 0.0,
+            outflow_m3_per_s: 0.0,
+            leak_m3_per_s: 0.0,
+            absorption_m3_per_s: 0.0,
+            perforation_m3_per_s: 0.0,
+            inflow_port_velocity_m_per_s: 0.0,
+            outflow_port_velocity_m_per_s: 0.0,
+            fluid_in_m3: 0.0,
+            fluid_collected_m3: 0.0,
+            deficit_m3: 0.0,
+            deficit_rate_m3_per_s: 0.0,
+            deficit_limit_m3: 0.0,
+            procedure_id: 0,
+            procedure_time_s: 0.0,
+            deficit_warning_stage: 0,
+            hydraulic_flags: 0,
         }
     }
 }

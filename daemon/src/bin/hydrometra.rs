@@ -20,6 +20,9 @@ enum Command {
     /// Hydraulic model tools (offline simulation of a scenario).
     #[command(subcommand)]
     Hydraulics(hydrometra_daemon::cli::hydraulics::HydraulicsCommand),
+    /// The procedure's fluid deficit record: show it, or start a new procedure.
+    #[command(subcommand)]
+    Procedure(hydrometra_daemon::cli::procedure::ProcedureCommand),
 }
 
 fn main() -> Result<()> {
@@ -38,5 +41,6 @@ fn main() -> Result<()> {
         }
         Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
+        Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
     }
 }

@@ -36,6 +36,12 @@ struct Args {
     /// Stop cleanly after this many seconds (for tests and benchmarks).
     #[arg(long, value_name = "SECS")]
     duration: Option<f64>,
+    /// The procedure record (fluid deficit that survives restarts); overrides `[hydraulics] record`.
+    #[arg(long, value_name = "PATH")]
+    procedure_record: Option<std::path::PathBuf>,
+    /// Start a new procedure (deficit 0) instead of restoring the saved one.
+    #[arg(long)]
+    new_procedure: bool,
     /// Print the default configuration (commented TOML) and exit.
     #[arg(long)]
     print_default_config: bool,
@@ -67,6 +73,8 @@ fn main() -> anyhow::Result<()> {
         service_prefix: args.service_prefix,
         tick_rate_hz: args.tick_rate_hz,
         status_rate_hz: args.status_rate_hz,
+        procedure_record: args.procedure_record,
+        new_procedure: args.new_procedure,
     })?;
     let duration = match args.duration {
         Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),

@@ -1,13 +1,13 @@
 //! `hydrometra hydraulics ...`: run the hydraulic model offline on a scenario and tabulate it.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
+use crate::service::hydraulics::load_scenario;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_drivers::emulator::Scenario;
 use hydrometra_sim::hydraulics::{
-    CaseScript, HydraulicInputs, HydraulicModel, HydraulicParams, HydraulicState,
+    HydraulicInputs, HydraulicModel, HydraulicParams, HydraulicState,
 };
 use hydrometra_sim::units::{m3_per_s_to_ml_per_min, m3_to_ml, mmhg_to_pa, pa_to_mmhg};
 
@@ -56,29 +56,6 @@ pub fn run(command: HydraulicsCommand) -> Result<()> {
             Ok(())
         }
     }
-}
-
-/// A scenario with its hydraulic case script, from a built-in name or a file.
-pub fn load_scenario(name_or_path: &str) -> Result<(Scenario, CaseScript)> {
-    let path = Path::new(name_or_path);
-    if path.exists() {
-        let scenario = Scenario::load(path)?;
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading scenario {}", path.display()))?;
-        let case = CaseScript::from_scenario_toml(&text, &path.display().to_string())?;
-        return Ok((scenario, case));
-    }
-    let Some(scenario) = Scenario::builtin(name_or_path) else {
-        bail!(
-            "--scenario `{name_or_path}` is neither a file nor a built-in scenario (built-ins: {})",
-            Scenario::builtin_names().join(", ")
-        );
-    };
-    let case = match &scenario.hydraulics {
-        Some(table) => CaseScript::from_table(table, &format!("builtin:{name_or_path}"))?,
-        None => CaseScript::default(),
-    };
-    Ok((scenario, case))
 }
 
 fn check_positive(flag: &str, value: f64) -> Result<()> {

@@ -1,3 +1,4 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
 pub mod hydraulics;
 pub mod monitor;
+pub mod procedure;

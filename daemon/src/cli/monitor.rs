@@ -80,7 +80,39 @@ pub fn status_json(s: &Status) -> serde_json::Value {
         "latency_max_s": finite(s.latency_max_s),
         "latency_samples": s.latency_samples,
         "statuses_dropped": s.statuses_dropped,
+        "hydraulics": hydraulics_json(s),
     })
+}
+
+fn hydraulics_json(s: &Status) -> serde_json::Value {
+    serde_json::json!({
+            "active": s.hydraulic_flags & 1 != 0,
+            "flags": s.hydraulic_flags,
+            "perforated": s.hydraulic_flags & (1 << 1) != 0,
+            "pump_stopped": s.hydraulic_flags & (1 << 2) != 0,
+            "cavity_pressure_pa": s.cavity_pressure_pa,
+            "cavity_pressure_mmhg": pa_to_mmhg(s.cavity_pressure_pa),
+            "cavity_volume_ml": s.cavity_volume_m3 * 1e6,
+            "inflow_ml_per_min": ml_min(s.inflow_m3_per_s),
+            "outflow_ml_per_min": ml_min(s.outflow_m3_per_s),
+            "leak_ml_per_min": ml_min(s.leak_m3_per_s),
+            "absorption_ml_per_min": ml_min(s.absorption_m3_per_s),
+            "perforation_ml_per_min": ml_min(s.perforation_m3_per_s),
+            "inflow_port_velocity_m_per_s": s.inflow_port_velocity_m_per_s,
+            "outflow_port_velocity_m_per_s": s.outflow_port_velocity_m_per_s,
+            "fluid_in_ml": s.fluid_in_m3 * 1e6,
+            "fluid_collected_ml": s.fluid_collected_m3 * 1e6,
+            "deficit_ml": s.deficit_m3 * 1e6,
+            "deficit_rate_ml_per_min": ml_min(s.deficit_rate_m3_per_s),
+            "deficit_limit_ml": s.deficit_limit_m3 * 1e6,
+            "deficit_warning_stage": s.deficit_warning_stage,
+            "procedure_id": s.procedure_id,
+            "procedure_time_s": s.procedure_time_s,
+    })
+}
+
+fn ml_min(flow_m3_per_s: f64) -> f64 {
+    flow_m3_per_s * 6e7
 }
 
 fn finite(v: f64) -> serde_json::Value {
@@ -177,6 +209,52 @@ pub fn render(s: &Status, rate_hz: f64, note: &str) -> String {
     );
     let _ = writeln!(w, "  buttons          {:#06x}", s.buttons);
     let _ = writeln!(w);
+    if s.hydraulic_flags & 1 != 0 {
+        let flag = |bit: u32, text: &'static str| {
+            if s.hydraulic_flags & (1 << bit) != 0 {
+                text
+            } else {
+                ""
+            }
+        };
+        let _ = writeln!(
+            w,
+            "HYDRAULICS    cavity {:6.1} mmHg  {:5.2} ml   procedure {} ({:.0} s){}{}{}",
+            pa_to_mmhg(s.cavity_pressure_pa),
+            s.cavity_volume_m3 * 1e6,
+            s.procedure_id,
+            s.procedure_time_s,
+            flag(1, "  PERFORATED"),
+            flag(2, "  PUMP STOPPED"),
+            flag(4, "  (restored)")
+        );
+        let _ = writeln!(
+            w,
+            "  flows ml/min     in {:6.1}  out {:6.1}  leak {:5.1}  absorbed {:5.1}  perforation {:6.1}",
+            ml_min(s.inflow_m3_per_s),
+            ml_min(s.outflow_m3_per_s),
+            ml_min(s.leak_m3_per_s),
+            ml_min(s.absorption_m3_per_s),
+            ml_min(s.perforation_m3_per_s)
+        );
+        let _ = writeln!(
+            w,
+            "  port jets        in {:4.2} m/s  out {:4.2} m/s",
+            s.inflow_port_velocity_m_per_s, s.outflow_port_velocity_m_per_s
+        );
+        let _ = writeln!(
+            w,
+            "  FLUID DEFICIT {:7.1} ml of {:.0} ml ({:.0} %)  rate {:6.1} ml/min  warning stage {}   in {:.1} ml, collected {:.1} ml",
+            s.deficit_m3 * 1e6,
+            s.deficit_limit_m3 * 1e6,
+            if s.deficit_limit_m3 > 0.0 { 100.0 * s.deficit_m3 / s.deficit_limit_m3 } else { 0.0 },
+            ml_min(s.deficit_rate_m3_per_s),
+            s.deficit_warning_stage,
+            s.fluid_in_m3 * 1e6,
+            s.fluid_collected_m3 * 1e6
+        );
+        let _ = writeln!(w);
+    }
     let names = alarms::names(s.alarm_bits);
     let _ = writeln!(
         w,

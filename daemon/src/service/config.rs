@@ -177,6 +177,43 @@ pub struct PathsConfig {
     pub state_dir: Option<PathBuf>,
 }
 
+/// `[hydraulics]`: the hydraulic model and the procedure record (docs/hydraulics.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct HydraulicsConfig {
+    /// The procedure record (survives restarts); default `<paths.state_dir>/procedure.rec`, and
+    /// not persisted when neither is set.
+    pub record: Option<PathBuf>,
+    /// How often the record is written while the procedure runs, ms (also on every alarm change).
+    pub save_interval_ms: u64,
+    /// `[hydraulics.params]`: the model's parameters; a scenario's `[hydraulics.params]`
+    /// replaces them for that case.
+    pub params: hydrometra_sim::hydraulics::HydraulicParams,
+    /// `--new-procedure`: start a new procedure instead of restoring the record (not a file key).
+    #[serde(skip)]
+    pub new_procedure: bool,
+}
+
+impl Default for HydraulicsConfig {
+    fn default() -> Self {
+        Self {
+            record: None,
+            save_interval_ms: 200,
+            params: hydrometra_sim::hydraulics::HydraulicParams::default(),
+            new_procedure: false,
+        }
+    }
+}
+
+impl HydraulicsConfig {
+    /// The record path: `record`, else `<state_dir>/procedure.rec`, else none.
+    pub fn record_path(&self, paths: &PathsConfig) -> Option<PathBuf> {
+        self.record
+            .clone()
+            .or_else(|| paths.state_dir.as_ref().map(|d| d.join("procedure.rec")))
+    }
+}
+
 /// The whole configuration.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -190,6 +227,8 @@ pub struct Config {
     pub ipc: IpcConfig,
     /// `[paths]`.
     pub paths: PathsConfig,
+    /// `[hydraulics]`.
+    pub hydraulics: HydraulicsConfig,
 }
 
 /// Command-line overrides, applied after the file.
@@ -205,6 +244,10 @@ pub struct Overrides {
     pub tick_rate_hz: Option<f64>,
     /// `--status-rate-hz`.
     pub status_rate_hz: Option<f64>,
+    /// `--procedure-record PATH`.
+    pub procedure_record: Option<PathBuf>,
+    /// `--new-procedure`.
+    pub new_procedure: bool,
 }
 
 impl Config {
@@ -254,6 +297,10 @@ impl Config {
         if let Some(rate) = o.status_rate_hz {
             self.sim_loop.status_rate_hz = rate;
         }
+        if let Some(record) = &o.procedure_record {
+            self.hydraulics.record = Some(record.clone());
+        }
+        self.hydraulics.new_procedure |= o.new_procedure;
         self.validate("command line")
     }
 
@@ -304,6 +351,36 @@ impl Config {
                 &timeout.to_string(),
                 "a timeout in 10..=10000 ms",
             ));
+        }
+        let h = &self.hydraulics;
+        if !(10..=60_000).contains(&h.save_interval_ms) {
+            return Err(invalid(
+                origin,
+                "hydraulics.save_interval_ms",
+                &h.save_interval_ms.to_string(),
+                "an interval in 10..=60000 ms",
+            ));
+        }
+        if let Err(e) = h.params.validate(origin) {
+            return Err(match e {
+                hydrometra_sim::hydraulics::ParamsError::Invalid {
+                    key,
+                    value,
+                    expected,
+                    ..
+                } => invalid(
+                    origin,
+                    &format!("hydraulics.params.{key}"),
+                    &value,
+                    expected,
+                ),
+                other => invalid(
+                    origin,
+                    "hydraulics.params",
+                    &other.to_string(),
+                    "valid parameters",
+                ),
+            });
         }
         let e = &self.rig.emulated;
         check_range(

@@ -2,6 +2,7 @@
 //! thread and the supervisor that ties them together (signals, systemd, periodic logs).
 
 pub mod config;
+pub mod hydraulics;
 pub mod latency;
 pub mod notify;
 pub mod publisher;
@@ -110,16 +111,43 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let started = Instant::now();
 
     let rig = rig_link::RigInput::start(&config.rig)?;
-    let telemetry = Arc::new(Telemetry::default());
-    let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let priority = config.sim_loop.realtime_priority;
-    let publisher = match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
-        Ok(p) => p,
+    let hydraulics_stage = {
+        let h = &config.hydraulics;
+        let (case, case_period_s) = if config.rig.mode == config::RigMode::Emulated {
+            let (scenario, case) = hydraulics::load_scenario(&config.rig.emulated.scenario)?;
+            let period = scenario.looping.then(|| scenario.duration_s());
+            (case, period)
+        } else {
+            Default::default()
+        };
+        let params = case.params.clone().unwrap_or_else(|| h.params.clone());
+        hydraulics::HydraulicsStage::start(hydraulics::HydraulicsSetup {
+            params,
+            case,
+            case_period_s,
+            record: h.record_path(&config.paths),
+            save_interval: Duration::from_millis(h.save_interval_ms),
+            new_procedure: h.new_procedure,
+        })
+    };
+    let hydraulics_stage = match hydraulics_stage {
+        Ok(stage) => stage,
         Err(e) => {
             rig.shutdown();
             return Err(e);
         }
     };
+    let telemetry = Arc::new(Telemetry::default());
+    let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
+    let priority = config.sim_loop.realtime_priority;
+    let publisher =
+        match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
+            Ok(p) => p,
+            Err(e) => {
+                rig.shutdown();
+                return Err(e);
+            }
+        };
 
     let settings = LoopSettings {
         tick: Duration::from_secs_f64(1.0 / config.sim_loop.tick_rate_hz),
@@ -135,7 +163,9 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
             .name("hm-sim".into())
             .spawn(move || {
                 realtime::apply("hm-sim", priority);
-                SimLoop::new(settings).run(&*source, &frames_tx, &sim_stop, &telemetry);
+                SimLoop::new(settings)
+                    .with_stage(Box::new(hydraulics_stage))
+                    .run(&*source, &frames_tx, &sim_stop, &telemetry);
                 // `frames_tx` drops here: the publisher drains and stops.
             })
             .context("cannot start the simulation thread")?

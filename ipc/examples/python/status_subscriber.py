@@ -70,6 +70,24 @@ class Status(ctypes.Structure):
         ("scope_pose_valid", ctypes.c_uint32),
         ("safe_state", ctypes.c_uint32),
         ("reserved0", ctypes.c_uint32),
+        ("cavity_pressure_pa", ctypes.c_double),
+        ("cavity_volume_m3", ctypes.c_double),
+        ("inflow_m3_per_s", ctypes.c_double),
+        ("outflow_m3_per_s", ctypes.c_double),
+        ("leak_m3_per_s", ctypes.c_double),
+        ("absorption_m3_per_s", ctypes.c_double),
+        ("perforation_m3_per_s", ctypes.c_double),
+        ("inflow_port_velocity_m_per_s", ctypes.c_double),
+        ("outflow_port_velocity_m_per_s", ctypes.c_double),
+        ("fluid_in_m3", ctypes.c_double),
+        ("fluid_collected_m3", ctypes.c_double),
+        ("deficit_m3", ctypes.c_double),
+        ("deficit_rate_m3_per_s", ctypes.c_double),
+        ("deficit_limit_m3", ctypes.c_double),
+        ("procedure_id", ctypes.c_uint64),
+        ("procedure_time_s", ctypes.c_double),
+        ("deficit_warning_stage", ctypes.c_uint64),
+        ("hydraulic_flags", ctypes.c_uint64),
     ]
 
     @staticmethod
@@ -78,7 +96,7 @@ class Status(ctypes.Structure):
         return "hydrometra.v1.Status"
 
 
-assert ctypes.sizeof(Status) == 352, ctypes.sizeof(Status)
+assert ctypes.sizeof(Status) == 496, ctypes.sizeof(Status)
 
 
 def as_dict(s: Status) -> dict:
@@ -103,6 +121,7 @@ def describe(s: Status) -> str:
         f"#{s.sequence} t={s.sim_time_s:.3f} s link={state} safe={s.safe_state} "
         f"in={s.valve_in_opening:.3f} out={s.valve_out_opening:.3f} "
         f"pump={s.pump_set_pressure_pa / PA_PER_MMHG:.1f} mmHg tip={tip} mm "
+        f"cavity={s.cavity_pressure_pa / PA_PER_MMHG:.1f} mmHg deficit={s.deficit_m3 * 1e6:.1f} ml "
         f"alarms={s.alarm_bits:#x} latency p99={s.latency_p99_s * 1e3:.3f} ms"
     )
 
