@@ -32,9 +32,17 @@ fn bench(c: &mut Criterion) {
             pa_to_mmhg((s.cavity_pressure_pa - exact).abs()),
             (s.deficit_by_balance_m3() - s.deficit.deficit_m3).abs() / s.totals.inflow_m3
         );
+        let before = *model.counters();
         group.bench_function(name, |b| {
             b.iter(|| black_box(model.step(black_box(&u), 1e-3).cavity_pressure_pa))
         });
+        let c = model.counters();
+        eprintln!(
+            "{name}: mean {:.2} solver iterations per step, {:.2} bisections",
+            (c.solver_iterations - before.solver_iterations) as f64
+                / (c.steps - before.steps).max(1) as f64,
+            (c.bisections - before.bisections) as f64 / (c.steps - before.steps).max(1) as f64
+        );
     }
     // Valves and pump changing every tick: the worst case for the Newton start.
     let mut model = HydraulicModel::new(HydraulicParams::default()).expect("defaults");

@@ -34,6 +34,7 @@ pub trait CavityCompliance: Send + Sync + std::fmt::Debug {
         let (lo, hi) = expand_bracket(f, -1000.0, 1000.0)?;
         let root = solve_bracketed(
             |p| (self.volume_m3(p) - volume_m3, self.compliance_m3_per_pa(p)),
+            f64::NAN,
             lo,
             hi,
             1e-15 * volume_m3.abs(),

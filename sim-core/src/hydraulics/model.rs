@@ -344,6 +344,7 @@ impl HydraulicModel {
                         compliance.compliance_m3_per_pa(p) + dt_s * g,
                     )
                 },
+                p_n,
                 lo,
                 hi,
                 // |F| is the volume booked off the curve: keep it at rounding level, also through

@@ -23,18 +23,24 @@ const MAX_ITERATIONS: u32 = 200;
 
 /// Finds `x` in `[lo, hi]` with `f(x) = 0` for a non-decreasing `f` with `f(lo) <= 0 <= f(hi)`.
 ///
-/// `f_df` returns the value and the derivative. Stops when `|f(x)| <= f_tol`, or when the bracket
+/// `x0` is the first guess (clamped into the bracket; the midpoint if NaN). `f_df` returns the
+/// value and the derivative. Stops when `|f(x)| <= f_tol`, or when the bracket
 /// is narrower than `x_tol_abs + x_tol_rel * |x|` (the fallback when rounding keeps `|f|` above
 /// `f_tol`).
 pub fn solve_bracketed(
     mut f_df: impl FnMut(f64) -> (f64, f64),
+    x0: f64,
     mut lo: f64,
     mut hi: f64,
     f_tol: f64,
     x_tol_abs: f64,
     x_tol_rel: f64,
 ) -> Root {
-    let mut x = 0.5 * (lo + hi);
+    let mut x = if x0.is_nan() {
+        0.5 * (lo + hi)
+    } else {
+        x0.clamp(lo, hi)
+    };
     let mut iterations = 0;
     let mut bisections = 0;
     // Previous step length: a Newton step must at least halve it, or bisection takes over.
@@ -129,6 +135,7 @@ mod tests {
     fn finds_cube_root_quadratically() {
         let root = solve_bracketed(
             |x| (x * x * x - 2.0, 3.0 * x * x),
+            f64::NAN,
             0.0,
             10.0,
             0.0,
@@ -150,7 +157,7 @@ mod tests {
                 (1000.0 * (x - 1.0) - 0.5, 1000.0)
             }
         };
-        let root = solve_bracketed(f, -1e6, 1e6, 0.0, 1e-12, 1e-15);
+        let root = solve_bracketed(f, f64::NAN, -1e6, 1e6, 0.0, 1e-12, 1e-15);
         assert!(root.converged);
         assert!((root.x - 1.0005).abs() < 1e-10, "{root:?}");
     }
