@@ -2,9 +2,10 @@
 //!
 //! `cargo bench -p hydrometra-sim --bench hydraulics`
 
-use criterion::{black_box, criterion_group, criterion_main, Criterion};
+use criterion::{criterion_group, criterion_main, Criterion};
 use hydrometra_sim::hydraulics::{HydraulicInputs, HydraulicModel, HydraulicParams};
 use hydrometra_sim::units::{mmhg_to_pa, pa_to_mmhg};
+use std::hint::black_box;
 
 fn inputs(valve_in: f64, valve_out: f64, pump_mmhg: f64, perforation: bool) -> HydraulicInputs {
     HydraulicInputs {
