@@ -277,8 +277,9 @@ mod tests {
     #[test]
     fn status_has_no_implicit_padding() {
         // The sum of the field sizes equals the struct size: nothing hidden between fields.
-        // 30 scalar 8-byte fields, 10 f64 in arrays, 8 u32 (2 at the start, 6 at the end).
-        let fields = 8 * 30 + 8 * 10 + 4 * 8;
+        // 30 scalar 8-byte fields, 10 f64 in arrays, 8 u32 (2 at the start, 6 at the end), then
+        // the 18 appended 8-byte hydraulic fields.
+        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18;
         assert_eq!(core::mem::size_of::<Status>(), fields);
         assert_eq!(core::mem::size_of::<Status>() % 8, 0);
         assert_eq!(core::mem::align_of::<Status>(), 8);
