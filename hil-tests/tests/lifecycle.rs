@@ -99,6 +99,25 @@ fn after_kill_9_a_restarted_daemon_cleans_up_and_serves_a_new_subscriber() {
 }
 
 #[test]
+fn a_renderer_subscribed_across_a_kill_9_and_restart_keeps_receiving() {
+    let prefix = unique_prefix("survivor");
+    let mut first = Daemon::start(&prefix, &["--emulated", "default"]);
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    let old_run = wait_live(&reader).run_id;
+    first.signal(libc::SIGKILL);
+    first.wait_exit(Duration::from_secs(5)).expect("killed");
+    // As systemd would: restart while the renderer stays subscribed.
+    let _second = Daemon::start(&prefix, &["--emulated", "default"]);
+    let statuses = reader.until("the restarted daemon's status", Duration::from_secs(10), |s| {
+        s.run_id != old_run && s.safe_state == 0
+    });
+    let new_run = statuses.last().unwrap().run_id;
+    let more = reader.collect_for(Duration::from_millis(300));
+    assert!(more.len() > 100 && more.iter().all(|s| s.run_id == new_run));
+    assert_contiguous(&more);
+}
+
+#[test]
 fn stalled_and_killed_renderers_never_block_the_daemon() {
     let prefix = unique_prefix("stall");
     let names = ServiceNames::new(&prefix).unwrap();

@@ -95,6 +95,13 @@ fn new_run_id() -> u64 {
     nanos ^ (u64::from(std::process::id()) << 32)
 }
 
+/// The simulation stages the loop steps every tick, in order. Each stage reads the inputs (the
+/// rig's or the safe ones) and writes its fields into the status; none yet: the hydraulics,
+/// deformation, fluid and particle stages are added here as they land.
+pub fn build_stages(_config: &Config) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
+    Ok(Vec::new())
+}
+
 /// Runs the daemon until SIGINT/SIGTERM or `duration` elapses; returns the run's figures.
 pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSummary> {
     let names = ServiceNames::new(&config.ipc.service_prefix)?;
@@ -109,10 +116,14 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let systemd = notify::Systemd::from_env();
     let started = Instant::now();
 
+    let stages = build_stages(config)?;
+    // Real-time scheduling is set on the main thread before any other thread starts, so the rig
+    // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
+    let priority = config.sim_loop.realtime_priority;
+    realtime::apply("main", priority);
     let rig = rig_link::RigInput::start(&config.rig)?;
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let priority = config.sim_loop.realtime_priority;
     let publisher = match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
         Ok(p) => p,
         Err(e) => {
@@ -135,7 +146,11 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
             .name("hm-sim".into())
             .spawn(move || {
                 realtime::apply("hm-sim", priority);
-                SimLoop::new(settings).run(&*source, &frames_tx, &sim_stop, &telemetry);
+                let mut sim_loop = SimLoop::new(settings);
+                for stage in stages {
+                    sim_loop = sim_loop.with_stage(stage);
+                }
+                sim_loop.run(&*source, &frames_tx, &sim_stop, &telemetry);
                 // `frames_tx` drops here: the publisher drains and stops.
             })
             .context("cannot start the simulation thread")?
