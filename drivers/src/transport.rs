@@ -19,8 +19,16 @@ use crate::calibration::Calibration;
 use crate::framing::FrameDecoder;
 use crate::state::{LinkCounters, LinkState, RigState};
 use crate::wire::{
-    encode_frame, FrameError, Heartbeat, HostHello, Message, MAX_ENCODED_LEN, PROTOCOL_VERSION,
+    encode_frame, FrameError, Heartbeat, HostHello, Message, SensorSample, MAX_ENCODED_LEN,
+    PROTOCOL_VERSION,
 };
+
+/// USB vendor id of the rig (pid.codes; matches `udev/70-hydrometra-rig.rules`).
+pub const RIG_USB_VID: u16 = 0x1209;
+/// USB product id of the rig (matches `udev/70-hydrometra-rig.rules`).
+pub const RIG_USB_PID: u16 = 0x0001;
+/// The stable device path the udev rule creates.
+pub const RIG_DEVICE_PATH: &str = "/dev/hydrometra-rig";
 
 /// Which device to open.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -136,6 +144,8 @@ pub struct LinkSnapshot {
     pub latest: Option<RigState>,
     /// Age of `latest`.
     pub last_sample_age: Option<Duration>,
+    /// The raw sample behind `latest`, as received (for calibrating and diagnosing the rig).
+    pub latest_raw: Option<SensorSample>,
 }
 
 /// The transport could not start.
@@ -161,6 +171,7 @@ struct Inner {
     counters: LinkCounters,
     device: Option<DeviceInfo>,
     latest: Option<RigState>,
+    latest_raw: Option<SensorSample>,
     stopping: bool,
 }
 
@@ -219,6 +230,7 @@ impl RigLink {
                 counters: LinkCounters::default(),
                 device: None,
                 latest: None,
+                latest_raw: None,
                 stopping: false,
             }),
             sample_cv: Condvar::new(),
@@ -256,6 +268,7 @@ impl RigLink {
             device: inner.device.clone(),
             latest: inner.latest,
             last_sample_age: age,
+            latest_raw: inner.latest_raw,
         }
     }
 
@@ -676,6 +689,7 @@ impl IoThread {
                 );
                 inner.counters.clamped_values += u64::from(outcome.clamped_values);
                 inner.latest = Some(outcome.state);
+                inner.latest_raw = Some(sample);
                 inner.link_state = LinkState::Connected;
                 drop(inner);
                 self.shared.sample_cv.notify_all();

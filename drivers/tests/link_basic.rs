@@ -54,3 +54,53 @@ fn link_handshakes_and_delivers_the_scenario_state() {
     link.shutdown();
     rig.stop();
 }
+
+#[test]
+fn scheduled_faults_from_the_plan_fire_and_are_counted() {
+    use hydrometra_drivers::emulator::{Fault, FaultEvent, FaultPlan};
+    let scenario = Scenario::builtin("default").unwrap();
+    let options = EmulatorOptions {
+        faults: FaultPlan {
+            chunk_max_bytes: 4,
+            events: vec![
+                FaultEvent {
+                    at_s: 0.4,
+                    fault: Fault::DropFrames { count: 3 },
+                },
+                FaultEvent {
+                    at_s: 0.3,
+                    fault: Fault::FaultReport {
+                        code: 2,
+                        severity: 1,
+                        detail: 5,
+                    },
+                },
+            ],
+        },
+        ..EmulatorOptions::default()
+    };
+    let rig = EmulatedRig::start(scenario, options).unwrap();
+    let link = RigLink::spawn(LinkConfig::new(
+        DeviceTarget::Path(rig.device_path().to_path_buf()),
+        Calibration::default(),
+    ))
+    .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    loop {
+        let s = link.snapshot();
+        if s.counters.sequence_gaps == 3 && s.counters.device_faults == 1 && s.counters.frames > 200
+        {
+            assert_eq!(s.counters.crc_errors + s.counters.malformed, 0, "{s:?}");
+            assert_eq!(s.link_state, LinkState::Connected);
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{s:?} {:?}",
+            rig.stats()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(rig.stats().frames_dropped, 3);
+    assert_eq!(rig.stats().fault_reports, 1);
+}

@@ -17,6 +17,9 @@ enum Command {
     Version,
     /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
     Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
+    /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
+    #[command(subcommand)]
+    Rig(hydrometra_daemon::cli::rig::RigCommand),
 }
 
 fn main() -> Result<()> {
@@ -34,5 +37,6 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
+        Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
     }
 }

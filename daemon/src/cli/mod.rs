@@ -1,2 +1,3 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
 pub mod monitor;
+pub mod rig;

@@ -157,6 +157,7 @@ pub(crate) fn line_of(text: &str, offset: usize) -> usize {
 }
 
 const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
+const FLAKY_SCENARIO: &str = include_str!("../../scenarios/flaky.toml");
 
 impl Scenario {
     /// Parses and validates a scenario; `origin` names the source in errors.
@@ -269,18 +270,20 @@ impl Scenario {
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
-    /// A scenario shipped with the crate: `"default"` (a looping ~2.5 min procedure).
+    /// A scenario shipped with the crate: `"default"` (a looping 150 s procedure) or `"flaky"`
+    /// (a slow sweep with every fault scheduled in its first 33 s).
     pub fn builtin(name: &str) -> Option<Scenario> {
+        // The embedded files are checked by unit tests, so these parses cannot fail at run time.
         match name {
-            // The embedded file is checked by a unit test, so this parse cannot fail at run time.
             "default" => Self::from_toml_str(DEFAULT_SCENARIO, "builtin:default").ok(),
+            "flaky" => Self::from_toml_str(FLAKY_SCENARIO, "builtin:flaky").ok(),
             _ => None,
         }
     }
 
     /// Names accepted by [`Scenario::builtin`].
     pub fn builtin_names() -> &'static [&'static str] {
-        &["default"]
+        &["default", "flaky"]
     }
 
     /// Time of the last keyframe, s.
@@ -447,5 +450,23 @@ view_dir = [1.0, 0.0, 0.0]
         let last = s.keyframes[s.keyframes.len() - 1];
         assert_eq!(first.valve_in, last.valve_in);
         assert_eq!(first.tip_mm, last.tip_mm);
+    }
+
+    #[test]
+    fn builtin_flaky_schedules_every_fault_kind() {
+        let s = Scenario::builtin("flaky").expect("flaky scenario parses");
+        assert!(s.faults.chunk_max_bytes > 0);
+        let kinds: std::collections::HashSet<std::mem::Discriminant<super::super::Fault>> = s
+            .faults
+            .events
+            .iter()
+            .map(|e| std::mem::discriminant(&e.fault))
+            .collect();
+        // Every kind except `chunking`, which the plan sets from the start instead.
+        assert_eq!(kinds.len(), 7);
+        for name in Scenario::builtin_names() {
+            assert!(Scenario::builtin(name).is_some(), "{name}");
+        }
+        assert!(Scenario::builtin("nope").is_none());
     }
 }
