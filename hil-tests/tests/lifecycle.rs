@@ -108,9 +108,11 @@ fn a_renderer_subscribed_across_a_kill_9_and_restart_keeps_receiving() {
     first.wait_exit(Duration::from_secs(5)).expect("killed");
     // As systemd would: restart while the renderer stays subscribed.
     let _second = Daemon::start(&prefix, &["--emulated", "default"]);
-    let statuses = reader.until("the restarted daemon's status", Duration::from_secs(10), |s| {
-        s.run_id != old_run && s.safe_state == 0
-    });
+    let statuses = reader.until(
+        "the restarted daemon's status",
+        Duration::from_secs(10),
+        |s| s.run_id != old_run && s.safe_state == 0,
+    );
     let new_run = statuses.last().unwrap().run_id;
     let more = reader.collect_for(Duration::from_millis(300));
     assert!(more.len() > 100 && more.iter().all(|s| s.run_id == new_run));

@@ -124,13 +124,14 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let rig = rig_link::RigInput::start(&config.rig)?;
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let publisher = match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
-        Ok(p) => p,
-        Err(e) => {
-            rig.shutdown();
-            return Err(e);
-        }
-    };
+    let publisher =
+        match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
+            Ok(p) => p,
+            Err(e) => {
+                rig.shutdown();
+                return Err(e);
+            }
+        };
 
     let settings = LoopSettings {
         tick: Duration::from_secs_f64(1.0 / config.sim_loop.tick_rate_hz),
