@@ -150,7 +150,7 @@ fn monitor_live_view_refreshes_in_place_with_new_statuses() {
     reader.until("a connected rig", Duration::from_secs(10), |s| {
         s.safe_state == 0
     });
-    let mut child = std::process::Command::new(binary("hydrometra"))
+    let child = std::process::Command::new(binary("hydrometra"))
         .args([
             "monitor",
             "--refresh-ms",

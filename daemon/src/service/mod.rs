@@ -28,6 +28,26 @@ use sim::{LoopSettings, SimLoop, Telemetry};
 const STATUS_CHANNEL_CAPACITY: usize = 64;
 /// How often the supervisor checks signals, the duration and the watchdog.
 const SUPERVISOR_PERIOD: Duration = Duration::from_millis(20);
+/// How often the supervisor removes resources of dead iceoryx2 nodes (crashed renderers). Done
+/// here, not in the publisher, because it walks the file system and would delay publication.
+const DEAD_NODE_CLEANUP_INTERVAL: Duration = Duration::from_secs(5);
+
+/// A node of its own for removing dead nodes' resources off the publisher's hot path.
+fn janitor_node() -> Option<iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>> {
+    use iceoryx2::prelude::*;
+    let name = NodeName::new("hydrometrad-janitor").ok()?;
+    match NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+    {
+        Ok(node) => Some(node),
+        Err(e) => {
+            tracing::warn!("cannot create the dead-node cleanup node ({e:?}); crashed renderers' resources stay until restart");
+            None
+        }
+    }
+}
 
 /// Figures of a finished run.
 #[derive(Debug, Clone, Copy)]
@@ -165,6 +185,8 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     );
     systemd.ready(&format!("publishing on {}", names.prefix()));
 
+    let janitor = janitor_node();
+    let mut last_cleanup = Instant::now();
     let log_interval = Duration::from_secs_f64(config.sim_loop.log_interval_s);
     let mut next_log = Instant::now() + log_interval;
     let mut last_watchdog = Instant::now();
@@ -196,6 +218,17 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
                 last_watchdog = Instant::now();
             }
         }
+        if last_cleanup.elapsed() >= DEAD_NODE_CLEANUP_INTERVAL {
+            last_cleanup = Instant::now();
+            if let Some(cleaned) = janitor.as_ref().map(|n| n.try_cleanup_dead_nodes()) {
+                if cleaned.cleanups > 0 {
+                    tracing::info!(
+                        removed = cleaned.cleanups,
+                        "removed resources of dead iceoryx2 nodes"
+                    );
+                }
+            }
+        }
         if Instant::now() >= next_log {
             next_log += log_interval;
             let s = summary(&telemetry, started.elapsed());
@@ -218,6 +251,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     }
 
     tracing::info!("shutting down");
+    drop(janitor);
     systemd.stopping();
     sim_stop.store(true, Ordering::Relaxed);
     if sim.join().is_err() {
