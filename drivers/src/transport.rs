@@ -146,6 +146,8 @@ pub struct LinkSnapshot {
     pub last_sample_age: Option<Duration>,
     /// The raw sample behind `latest`, as received (for calibrating and diagnosing the rig).
     pub latest_raw: Option<SensorSample>,
+    /// Why the last open or session failed (cleared by a successful handshake).
+    pub last_error: Option<String>,
 }
 
 /// The transport could not start.
@@ -172,6 +174,7 @@ struct Inner {
     device: Option<DeviceInfo>,
     latest: Option<RigState>,
     latest_raw: Option<SensorSample>,
+    last_error: Option<String>,
     stopping: bool,
 }
 
@@ -231,6 +234,7 @@ impl RigLink {
                 device: None,
                 latest: None,
                 latest_raw: None,
+                last_error: None,
                 stopping: false,
             }),
             sample_cv: Condvar::new(),
@@ -269,6 +273,7 @@ impl RigLink {
             latest: inner.latest,
             last_sample_age: age,
             latest_raw: inner.latest_raw,
+            last_error: inner.last_error.clone(),
         }
     }
 
@@ -427,6 +432,7 @@ impl IoThread {
                 Ok(p) => p,
                 Err(e) => {
                     debug!(target_device = %self.config.target, error = %e, ?backoff, "rig not available");
+                    self.shared.lock().last_error = Some(e);
                     if !self.sleep_backoff(backoff) {
                         break;
                     }
@@ -440,6 +446,7 @@ impl IoThread {
             match end {
                 SessionEnd::Shutdown => break,
                 SessionEnd::Lost(reason) => {
+                    self.shared.lock().last_error = Some(reason.clone());
                     if established {
                         warn!(target_device = %self.config.target, %reason, "rig link lost");
                         backoff = self.config.backoff_initial;
@@ -449,6 +456,9 @@ impl IoThread {
                     self.set_state(LinkState::Disconnected);
                 }
                 SessionEnd::Incompatible(version) => {
+                    self.shared.lock().last_error = Some(format!(
+                        "device speaks protocol version {version}, this host speaks {PROTOCOL_VERSION}"
+                    ));
                     warn!(target_device = %self.config.target, version, ours = PROTOCOL_VERSION,
                         "rig speaks an incompatible protocol version");
                     self.set_state(LinkState::Incompatible);
@@ -673,6 +683,7 @@ impl IoThread {
                     }
                     inner.device = Some(info);
                     inner.link_state = LinkState::Connected;
+                    inner.last_error = None;
                 }
                 *expected_seq = Some(frame.sequence.wrapping_add(1));
                 None

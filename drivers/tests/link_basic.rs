@@ -104,3 +104,28 @@ fn scheduled_faults_from_the_plan_fire_and_are_counted() {
     assert_eq!(rig.stats().frames_dropped, 3);
     assert_eq!(rig.stats().fault_reports, 1);
 }
+
+#[test]
+fn missing_usb_device_is_retried_quietly_and_reported() {
+    let link = RigLink::spawn(LinkConfig::new(
+        DeviceTarget::Usb {
+            vid: 0x1209,
+            pid: 0x0001,
+            serial_number: Some("NOT-PLUGGED".into()),
+        },
+        Calibration::default(),
+    ))
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    let s = link.snapshot();
+    assert_eq!(s.link_state, LinkState::Disconnected);
+    assert!(s.latest.is_none());
+    let err = s.last_error.expect("the open failure is reported");
+    assert!(
+        err.contains("1209:0001") && err.contains("NOT-PLUGGED"),
+        "{err}"
+    );
+    // Backoff 50 + 100 + 200 ms: three or four sysfs scans, not a loop.
+    assert!(link.io_thread_cpu_time() < Duration::from_millis(100));
+    link.shutdown();
+}

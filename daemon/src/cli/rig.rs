@@ -7,7 +7,9 @@ use anyhow::{anyhow, bail, Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_drivers::calibration::{Calibration, PA_PER_MMHG};
 use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
-use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, LinkSnapshot, RigLink};
+use hydrometra_drivers::transport::{
+    DeviceTarget, LinkConfig, LinkSnapshot, RigLink, RIG_DEVICE_PATH,
+};
 use hydrometra_drivers::wire::PROTOCOL_VERSION;
 
 /// Rig tools.
@@ -177,7 +179,10 @@ fn probe(a: ProbeArgs) -> Result<()> {
     let target = match (&a.device, &a.usb) {
         (Some(p), None) => DeviceTarget::Path(p.clone()),
         (None, Some(u)) => parse_usb(u)?,
-        _ => bail!("give exactly one of --device PATH or --usb VID:PID[:SERIAL]"),
+        (None, None) => DeviceTarget::Path(PathBuf::from(RIG_DEVICE_PATH)),
+        (Some(_), Some(_)) => {
+            bail!("give either --device PATH or --usb VID:PID[:SERIAL], not both")
+        }
     };
     let config = LinkConfig::new(target.clone(), load_calibration(&a.calibration)?);
     let link = RigLink::spawn(config)?;
@@ -194,9 +199,13 @@ fn probe(a: ProbeArgs) -> Result<()> {
     }
     if snap.latest.is_none() {
         bail!(
-            "no sample from {target} within {} s (link state {:?})",
+            "no sample from {target} within {} s (link state {:?}{})",
             a.seconds,
-            snap.link_state
+            snap.link_state,
+            snap.last_error
+                .as_deref()
+                .map(|e| format!("; last error: {e}"))
+                .unwrap_or_default()
         );
     }
     Ok(())
@@ -226,6 +235,7 @@ fn snapshot_json(target: &DeviceTarget, s: &LinkSnapshot) -> serde_json::Value {
             "device_faults": c.device_faults,
         },
         "last_sample_age_s": s.last_sample_age.map(|d| d.as_secs_f64()),
+        "last_error": s.last_error,
         "latest_raw": s.latest_raw.map(|r| serde_json::json!({
             "valve_in_raw": r.valve_in_raw,
             "valve_out_raw": r.valve_out_raw,
@@ -254,6 +264,9 @@ fn snapshot_json(target: &DeviceTarget, s: &LinkSnapshot) -> serde_json::Value {
 fn print_text(target: &DeviceTarget, s: &LinkSnapshot) {
     println!("device        {target}");
     println!("link state    {:?}", s.link_state);
+    if let Some(e) = &s.last_error {
+        println!("last error    {e}");
+    }
     if let Some(d) = &s.device {
         println!(
             "rig           serial {} firmware {} protocol v{} calibration id {} caps {:#x} {} Hz",
@@ -315,5 +328,48 @@ fn print_text(target: &DeviceTarget, s: &LinkSnapshot) {
             }
         }
         _ => println!("latest        no sample"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn usb_targets_parse_and_bad_ones_say_what_is_wrong() {
+        assert_eq!(
+            parse_usb("1209:0001").unwrap(),
+            DeviceTarget::Usb {
+                vid: 0x1209,
+                pid: 0x0001,
+                serial_number: None
+            }
+        );
+        assert_eq!(
+            parse_usb("0x1209:BEEF:RIG:7").unwrap(),
+            DeviceTarget::Usb {
+                vid: 0x1209,
+                pid: 0xBEEF,
+                serial_number: Some("RIG:7".into())
+            }
+        );
+        let e = parse_usb("1209").unwrap_err().to_string();
+        assert!(e.contains("missing product id"), "{e}");
+        let e = parse_usb("12g9:0001").unwrap_err().to_string();
+        assert!(e.contains("vendor id") && e.contains("12g9"), "{e}");
+        let e = parse_usb("1209:10000").unwrap_err().to_string();
+        assert!(e.contains("product id"), "{e}");
+    }
+
+    #[test]
+    fn scenario_argument_accepts_builtins_and_names_unknown_ones() {
+        assert_eq!(load_scenario("default").unwrap().name, "default");
+        let e = load_scenario("no-such-scenario.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("no-such-scenario.toml") && e.contains("default, flaky"),
+            "{e}"
+        );
     }
 }

@@ -34,7 +34,7 @@ pub use scenario::{Keyframe, Scenario, ScenarioError, ScenarioSample};
 /// Emulator settings. `Default`: 250 Hz samples, 10 Hz heartbeats, default calibration, no faults.
 #[derive(Debug, Clone)]
 pub struct EmulatorOptions {
-    /// Sample rate, Hz (1..=2000).
+    /// Sample rate, Hz (1..=1000).
     pub sample_rate_hz: f64,
     /// Device heartbeat rate, Hz (0.5..=100).
     pub heartbeat_hz: f64,
@@ -152,12 +152,12 @@ impl EmulatedRig {
         scenario: Scenario,
         options: EmulatorOptions,
     ) -> Result<EmulatedRig, EmulatorError> {
-        if !(options.sample_rate_hz.is_finite() && (1.0..=2000.0).contains(&options.sample_rate_hz))
+        if !(options.sample_rate_hz.is_finite() && (1.0..=1000.0).contains(&options.sample_rate_hz))
         {
             return Err(EmulatorError::InvalidOption {
                 field: "sample_rate_hz",
                 value: options.sample_rate_hz.to_string(),
-                expected: "a rate in [1, 2000] Hz",
+                expected: "a rate in [1, 1000] Hz (docs/rig-protocol.md)",
             });
         }
         if !(options.heartbeat_hz.is_finite() && (0.5..=100.0).contains(&options.heartbeat_hz)) {

@@ -293,8 +293,19 @@ impl Scenario {
 
     /// The interpolated state at `t_s` seconds after the start (wrapped when looping).
     pub fn sample_at(&self, t_s: f64) -> ScenarioSample {
-        let first = self.keyframes[0]; // ok: validated non-empty
-        let last = self.keyframes[self.keyframes.len() - 1];
+        // Parsed scenarios are never empty; a hand-built empty one yields a closed, idle rig.
+        let (Some(&first), Some(&last)) = (self.keyframes.first(), self.keyframes.last()) else {
+            return ScenarioSample {
+                t_s,
+                valve_in: 0.0,
+                valve_out: 0.0,
+                pump_mmhg: 0.0,
+                tip_mm: [0.0; 3],
+                view_dir: [0.0, 0.0, 1.0],
+                buttons: 0,
+                pose_valid: false,
+            };
+        };
         let duration = last.t_s;
         let t = if !t_s.is_finite() {
             first.t_s
@@ -468,5 +479,24 @@ view_dir = [1.0, 0.0, 0.0]
             assert!(Scenario::builtin(name).is_some(), "{name}");
         }
         assert!(Scenario::builtin("nope").is_none());
+    }
+
+    #[test]
+    fn documented_example_parses_as_described() {
+        let doc = include_str!("../../../docs/rig-emulator.md");
+        let start = doc.find("```toml").unwrap() + "```toml".len();
+        let len = doc[start..].find("```").unwrap();
+        let s = Scenario::from_toml_str(&doc[start..start + len], "docs/rig-emulator.md").unwrap();
+        assert_eq!(s.name, "example");
+        assert_eq!(s.keyframes.len(), 2);
+        let m = s.sample_at(15.0); // loops: 15 s -> 5 s, half-way
+        assert!((m.valve_in - 0.5).abs() < 1e-12 && (m.pump_mmhg - 95.0).abs() < 1e-12);
+        assert_eq!(
+            s.faults.events,
+            vec![super::super::FaultEvent {
+                at_s: 5.0,
+                fault: super::super::Fault::GarbageBurst { bytes: 64 }
+            }]
+        );
     }
 }
