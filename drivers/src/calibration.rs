@@ -606,4 +606,36 @@ mod tests {
             .to_string();
         assert!(e.contains("line 3") && e.contains("full_scale"), "{e}");
     }
+
+    #[test]
+    fn documented_defaults_are_the_defaults() {
+        let doc = include_str!("../../docs/calibration.md");
+        let start = doc.find("```toml").unwrap() + "```toml".len();
+        let len = doc[start..].find("```").unwrap();
+        let documented = Calibration::from_toml_str(&doc[start..start + len], "docs").unwrap();
+        assert_eq!(documented, Calibration::default());
+        assert_eq!(
+            Calibration::from_toml_str("", "empty").unwrap(),
+            Calibration::default()
+        );
+    }
+
+    #[test]
+    fn protocol_document_sample_example_calibrates_as_stated() {
+        let s = SensorSample {
+            device_time_us: 1_234_567,
+            valve_in_raw: 2050,
+            valve_out_raw: 200,
+            pump_raw: 1843,
+            pose_valid: true,
+            position_mm: [10.0, -2.5, 45.0],
+            orientation_wxyz: [1.0, 0.0, 0.0, 0.0],
+            buttons: 1,
+        };
+        let o = Calibration::default().apply(&s, 7, Instant::now(), None);
+        assert!((o.state.valve_in_opening - 0.5).abs() < 1e-12);
+        assert!((o.state.pump_set_pressure_pa - 12_000.6).abs() < 0.05);
+        assert!((o.state.pump_set_pressure_pa / PA_PER_MMHG - 90.01).abs() < 0.005);
+        assert_eq!(o.state.scope.tip_position_m, [0.010, -0.0025, 0.045]);
+    }
 }

@@ -19,8 +19,16 @@ use crate::calibration::Calibration;
 use crate::framing::FrameDecoder;
 use crate::state::{LinkCounters, LinkState, RigState};
 use crate::wire::{
-    encode_frame, FrameError, Heartbeat, HostHello, Message, MAX_ENCODED_LEN, PROTOCOL_VERSION,
+    encode_frame, FrameError, Heartbeat, HostHello, Message, SensorSample, MAX_ENCODED_LEN,
+    PROTOCOL_VERSION,
 };
+
+/// USB vendor id of the rig (pid.codes; matches `udev/70-hydrometra-rig.rules`).
+pub const RIG_USB_VID: u16 = 0x1209;
+/// USB product id of the rig (matches `udev/70-hydrometra-rig.rules`).
+pub const RIG_USB_PID: u16 = 0x0001;
+/// The stable device path the udev rule creates.
+pub const RIG_DEVICE_PATH: &str = "/dev/hydrometra-rig";
 
 /// Which device to open.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -136,6 +144,10 @@ pub struct LinkSnapshot {
     pub latest: Option<RigState>,
     /// Age of `latest`.
     pub last_sample_age: Option<Duration>,
+    /// The raw sample behind `latest`, as received (for calibrating and diagnosing the rig).
+    pub latest_raw: Option<SensorSample>,
+    /// Why the last open or session failed (cleared by a successful handshake).
+    pub last_error: Option<String>,
 }
 
 /// The transport could not start.
@@ -161,6 +173,8 @@ struct Inner {
     counters: LinkCounters,
     device: Option<DeviceInfo>,
     latest: Option<RigState>,
+    latest_raw: Option<SensorSample>,
+    last_error: Option<String>,
     stopping: bool,
 }
 
@@ -219,6 +233,8 @@ impl RigLink {
                 counters: LinkCounters::default(),
                 device: None,
                 latest: None,
+                latest_raw: None,
+                last_error: None,
                 stopping: false,
             }),
             sample_cv: Condvar::new(),
@@ -256,6 +272,8 @@ impl RigLink {
             device: inner.device.clone(),
             latest: inner.latest,
             last_sample_age: age,
+            latest_raw: inner.latest_raw,
+            last_error: inner.last_error.clone(),
         }
     }
 
@@ -414,6 +432,7 @@ impl IoThread {
                 Ok(p) => p,
                 Err(e) => {
                     debug!(target_device = %self.config.target, error = %e, ?backoff, "rig not available");
+                    self.shared.lock().last_error = Some(e);
                     if !self.sleep_backoff(backoff) {
                         break;
                     }
@@ -427,6 +446,7 @@ impl IoThread {
             match end {
                 SessionEnd::Shutdown => break,
                 SessionEnd::Lost(reason) => {
+                    self.shared.lock().last_error = Some(reason.clone());
                     if established {
                         warn!(target_device = %self.config.target, %reason, "rig link lost");
                         backoff = self.config.backoff_initial;
@@ -436,6 +456,9 @@ impl IoThread {
                     self.set_state(LinkState::Disconnected);
                 }
                 SessionEnd::Incompatible(version) => {
+                    self.shared.lock().last_error = Some(format!(
+                        "device speaks protocol version {version}, this host speaks {PROTOCOL_VERSION}"
+                    ));
                     warn!(target_device = %self.config.target, version, ours = PROTOCOL_VERSION,
                         "rig speaks an incompatible protocol version");
                     self.set_state(LinkState::Incompatible);
@@ -660,6 +683,7 @@ impl IoThread {
                     }
                     inner.device = Some(info);
                     inner.link_state = LinkState::Connected;
+                    inner.last_error = None;
                 }
                 *expected_seq = Some(frame.sequence.wrapping_add(1));
                 None
@@ -676,6 +700,7 @@ impl IoThread {
                 );
                 inner.counters.clamped_values += u64::from(outcome.clamped_values);
                 inner.latest = Some(outcome.state);
+                inner.latest_raw = Some(sample);
                 inner.link_state = LinkState::Connected;
                 drop(inner);
                 self.shared.sample_cv.notify_all();

@@ -129,6 +129,27 @@ proptest! {
     }
 
     #[test]
+    fn garbage_between_frames_loses_no_frame(
+        frames in prop::collection::vec(
+            (any::<u32>(), any_message(), prop::collection::vec(any::<u8>(), 0..100)),
+            1..12,
+        ),
+    ) {
+        // Garbage before each frame; the frame's leading delimiter ends the garbage.
+        let mut stream = Vec::new();
+        for (s, m, g) in &frames {
+            stream.extend_from_slice(g);
+            stream.extend(encode(*s, m));
+        }
+        let mut dec = FrameDecoder::new();
+        let got: Vec<Frame> = decode_all(&mut dec, &stream).into_iter().filter_map(Result::ok).collect();
+        prop_assert_eq!(got.len(), frames.len());
+        for (f, (s, m, _)) in got.iter().zip(&frames) {
+            prop_assert!(same(f, *s, m));
+        }
+    }
+
+    #[test]
     fn every_single_bit_flip_is_detected(seq in any::<u32>(), m in any_message()) {
         let good = encode(seq, &m);
         let next = encode(seq.wrapping_add(1), &Message::Heartbeat(Heartbeat { uptime_ms: 7 }));

@@ -54,3 +54,78 @@ fn link_handshakes_and_delivers_the_scenario_state() {
     link.shutdown();
     rig.stop();
 }
+
+#[test]
+fn scheduled_faults_from_the_plan_fire_and_are_counted() {
+    use hydrometra_drivers::emulator::{Fault, FaultEvent, FaultPlan};
+    let scenario = Scenario::builtin("default").unwrap();
+    let options = EmulatorOptions {
+        faults: FaultPlan {
+            chunk_max_bytes: 4,
+            events: vec![
+                FaultEvent {
+                    at_s: 0.4,
+                    fault: Fault::DropFrames { count: 3 },
+                },
+                FaultEvent {
+                    at_s: 0.3,
+                    fault: Fault::FaultReport {
+                        code: 2,
+                        severity: 1,
+                        detail: 5,
+                    },
+                },
+            ],
+        },
+        ..EmulatorOptions::default()
+    };
+    let rig = EmulatedRig::start(scenario, options).unwrap();
+    let link = RigLink::spawn(LinkConfig::new(
+        DeviceTarget::Path(rig.device_path().to_path_buf()),
+        Calibration::default(),
+    ))
+    .unwrap();
+    let deadline = std::time::Instant::now() + Duration::from_secs(5);
+    loop {
+        let s = link.snapshot();
+        if s.counters.sequence_gaps == 3 && s.counters.device_faults == 1 && s.counters.frames > 200
+        {
+            assert_eq!(s.counters.crc_errors + s.counters.malformed, 0, "{s:?}");
+            assert_eq!(s.link_state, LinkState::Connected);
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "{s:?} {:?}",
+            rig.stats()
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_eq!(rig.stats().frames_dropped, 3);
+    assert_eq!(rig.stats().fault_reports, 1);
+}
+
+#[test]
+fn missing_usb_device_is_retried_quietly_and_reported() {
+    let link = RigLink::spawn(LinkConfig::new(
+        DeviceTarget::Usb {
+            vid: 0x1209,
+            pid: 0x0001,
+            serial_number: Some("NOT-PLUGGED".into()),
+        },
+        Calibration::default(),
+    ))
+    .unwrap();
+    std::thread::sleep(Duration::from_millis(400));
+    let s = link.snapshot();
+    assert_eq!(s.link_state, LinkState::Disconnected);
+    assert!(s.latest.is_none());
+    let err = s.last_error.expect("the open failure is reported");
+    assert!(
+        err.contains("1209:0001") && err.contains("NOT-PLUGGED"),
+        "{err}"
+    );
+    // Backoff 50 + 100 + 200 ms: three or four sysfs scans, not a loop.
+    assert!(link.io_thread_cpu_time() < Duration::from_millis(100));
+    link.shutdown();
+}

@@ -230,9 +230,14 @@ fn transport_recovers_from_every_injected_fault() {
     let (snap, states2) = h.wait_for("reconnect after hang", Duration::from_secs(6), |s| {
         s.counters.reconnects == before.reconnects + 1 && s.link_state == LinkState::Connected
     });
+    // Stale -> (port dropped after 1 s) Disconnected/Handshaking ... -> Connected, in that order.
+    assert_eq!(states, vec![LinkState::Connected, LinkState::Stale]);
+    assert_eq!(states2.first(), Some(&LinkState::Stale), "{states2:?}");
+    assert_eq!(states2.last(), Some(&LinkState::Connected), "{states2:?}");
+    assert!(states2.contains(&LinkState::Handshaking), "{states2:?}");
     assert!(
-        states2.contains(&LinkState::Disconnected) || states2.contains(&LinkState::Handshaking),
-        "{states2:?}"
+        !states2[..states2.len() - 1].contains(&LinkState::Connected),
+        "no early reconnect while the firmware hangs: {states2:?}"
     );
     assert!(h.rig.stats().handshakes > handshakes);
     h.assert_matches_scenario(&snap);

@@ -76,6 +76,7 @@ fn after_kill_9_a_restarted_daemon_cleans_up_and_serves_a_new_subscriber() {
         s.run_id != old_run && s.safe_state == 0
     });
     let new = *statuses.last().unwrap();
+    reader.collect_for(Duration::from_millis(100)); // past a possible history-sample gap
     let more = reader.collect_for(Duration::from_millis(300));
     assert!(
         more.len() > 100,
@@ -96,6 +97,30 @@ fn after_kill_9_a_restarted_daemon_cleans_up_and_serves_a_new_subscriber() {
         "{}",
         second.log()
     );
+}
+
+#[test]
+fn a_renderer_subscribed_across_a_kill_9_and_restart_keeps_receiving() {
+    let prefix = unique_prefix("survivor");
+    let mut first = Daemon::start(&prefix, &["--emulated", "default"]);
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    let old_run = wait_live(&reader).run_id;
+    first.signal(libc::SIGKILL);
+    first.wait_exit(Duration::from_secs(5)).expect("killed");
+    // As systemd would: restart while the renderer stays subscribed.
+    let _second = Daemon::start(&prefix, &["--emulated", "default"]);
+    let statuses = reader.until(
+        "the restarted daemon's status",
+        Duration::from_secs(10),
+        |s| s.run_id != old_run && s.safe_state == 0,
+    );
+    let new_run = statuses.last().unwrap().run_id;
+    // The first status of the new run may be the history sample, delivered before the new
+    // publisher saw this subscriber: settle, then expect a contiguous stream.
+    reader.collect_for(Duration::from_millis(100));
+    let more = reader.collect_for(Duration::from_millis(300));
+    assert!(more.len() > 100 && more.iter().all(|s| s.run_id == new_run));
+    assert_contiguous(&more);
 }
 
 #[test]

@@ -141,3 +141,59 @@ fn monitor_without_a_daemon_fails_with_a_clear_message() {
         "{err}"
     );
 }
+
+#[test]
+fn monitor_live_view_refreshes_in_place_with_new_statuses() {
+    let prefix = unique_prefix("live");
+    let _daemon = Daemon::start(&prefix, &["--emulated", "default"]);
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    reader.until("a connected rig", Duration::from_secs(10), |s| {
+        s.safe_state == 0
+    });
+    let child = std::process::Command::new(binary("hydrometra"))
+        .args([
+            "monitor",
+            "--refresh-ms",
+            "100",
+            "--service-prefix",
+            &prefix,
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("run hydrometra monitor");
+    std::thread::sleep(Duration::from_millis(1200));
+    // SAFETY: kill(2) on our child; SIGINT ends the monitor like Ctrl-C.
+    unsafe { libc::kill(child.id() as i32, libc::SIGINT) };
+    let out = child.wait_with_output().unwrap();
+    assert!(out.status.success(), "monitor exits cleanly on Ctrl-C");
+    let text = String::from_utf8_lossy(&out.stdout);
+    // Each refresh homes the cursor and clears: several frames, with growing status numbers.
+    let frames: Vec<&str> = text
+        .split("\x1b[H\x1b[2J")
+        .filter(|f| !f.is_empty())
+        .collect();
+    assert!(frames.len() >= 5, "{} frames", frames.len());
+    let numbers: Vec<u64> = frames
+        .iter()
+        .filter_map(|f| {
+            f.split("status #")
+                .nth(1)?
+                .split_whitespace()
+                .next()?
+                .parse()
+                .ok()
+        })
+        .collect();
+    assert!(numbers.windows(2).all(|w| w[1] > w[0]), "{numbers:?}");
+    let last = frames.last().unwrap();
+    for needle in [
+        "RIG LINK      CONNECTED",
+        "pump set",
+        "mmHg",
+        "LATENCY",
+        "ALARMS",
+    ] {
+        assert!(last.contains(needle), "{needle} missing in\n{last}");
+    }
+}

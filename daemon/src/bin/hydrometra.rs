@@ -23,6 +23,9 @@ enum Command {
     /// The procedure's fluid deficit record: show it, or start a new procedure.
     #[command(subcommand)]
     Procedure(hydrometra_daemon::cli::procedure::ProcedureCommand),
+    /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
+    #[command(subcommand)]
+    Rig(hydrometra_daemon::cli::rig::RigCommand),
 }
 
 fn main() -> Result<()> {
@@ -42,5 +45,6 @@ fn main() -> Result<()> {
         Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
         Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
+        Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
     }
 }

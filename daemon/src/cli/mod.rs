@@ -2,3 +2,4 @@
 pub mod hydraulics;
 pub mod monitor;
 pub mod procedure;
+pub mod rig;

@@ -29,6 +29,26 @@ use sim::{LoopSettings, SimLoop, Telemetry};
 const STATUS_CHANNEL_CAPACITY: usize = 64;
 /// How often the supervisor checks signals, the duration and the watchdog.
 const SUPERVISOR_PERIOD: Duration = Duration::from_millis(20);
+/// How often the supervisor removes resources of dead iceoryx2 nodes (crashed renderers). Done
+/// here, not in the publisher, because it walks the file system and would delay publication.
+const DEAD_NODE_CLEANUP_INTERVAL: Duration = Duration::from_secs(5);
+
+/// A node of its own for removing dead nodes' resources off the publisher's hot path.
+fn janitor_node() -> Option<iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>> {
+    use iceoryx2::prelude::*;
+    let name = NodeName::new("hydrometrad-janitor").ok()?;
+    match NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+    {
+        Ok(node) => Some(node),
+        Err(e) => {
+            tracing::warn!("cannot create the dead-node cleanup node ({e:?}); crashed renderers' resources stay until restart");
+            None
+        }
+    }
+}
 
 /// Figures of a finished run.
 #[derive(Debug, Clone, Copy)]
@@ -96,6 +116,30 @@ fn new_run_id() -> u64 {
     nanos ^ (u64::from(std::process::id()) << 32)
 }
 
+/// The simulation stages the loop steps every tick, in order. Each stage reads the inputs (the
+/// rig's or the safe ones) and writes its fields into the status: hydraulics now; deformation,
+/// fluid and particle stages are added here as they land.
+pub fn build_stages(config: &Config) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
+    let h = &config.hydraulics;
+    let (case, case_period_s) = if config.rig.mode == config::RigMode::Emulated {
+        let (scenario, case) = hydraulics::load_scenario(&config.rig.emulated.scenario)?;
+        let period = scenario.looping.then(|| scenario.duration_s());
+        (case, period)
+    } else {
+        Default::default()
+    };
+    let params = case.params.clone().unwrap_or_else(|| h.params.clone());
+    let stage = hydraulics::HydraulicsStage::start(hydraulics::HydraulicsSetup {
+        params,
+        case,
+        case_period_s,
+        record: h.record_path(&config.paths),
+        save_interval: Duration::from_millis(h.save_interval_ms),
+        new_procedure: h.new_procedure,
+    })?;
+    Ok(vec![Box::new(stage)])
+}
+
 /// Runs the daemon until SIGINT/SIGTERM or `duration` elapses; returns the run's figures.
 pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSummary> {
     let names = ServiceNames::new(&config.ipc.service_prefix)?;
@@ -110,36 +154,14 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let systemd = notify::Systemd::from_env();
     let started = Instant::now();
 
+    let stages = build_stages(config)?;
+    // Real-time scheduling is set on the main thread before any other thread starts, so the rig
+    // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
+    let priority = config.sim_loop.realtime_priority;
+    realtime::apply("main", priority);
     let rig = rig_link::RigInput::start(&config.rig)?;
-    let hydraulics_stage = {
-        let h = &config.hydraulics;
-        let (case, case_period_s) = if config.rig.mode == config::RigMode::Emulated {
-            let (scenario, case) = hydraulics::load_scenario(&config.rig.emulated.scenario)?;
-            let period = scenario.looping.then(|| scenario.duration_s());
-            (case, period)
-        } else {
-            Default::default()
-        };
-        let params = case.params.clone().unwrap_or_else(|| h.params.clone());
-        hydraulics::HydraulicsStage::start(hydraulics::HydraulicsSetup {
-            params,
-            case,
-            case_period_s,
-            record: h.record_path(&config.paths),
-            save_interval: Duration::from_millis(h.save_interval_ms),
-            new_procedure: h.new_procedure,
-        })
-    };
-    let hydraulics_stage = match hydraulics_stage {
-        Ok(stage) => stage,
-        Err(e) => {
-            rig.shutdown();
-            return Err(e);
-        }
-    };
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let priority = config.sim_loop.realtime_priority;
     let publisher =
         match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
             Ok(p) => p,
@@ -163,9 +185,11 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
             .name("hm-sim".into())
             .spawn(move || {
                 realtime::apply("hm-sim", priority);
-                SimLoop::new(settings)
-                    .with_stage(Box::new(hydraulics_stage))
-                    .run(&*source, &frames_tx, &sim_stop, &telemetry);
+                let mut sim_loop = SimLoop::new(settings);
+                for stage in stages {
+                    sim_loop = sim_loop.with_stage(stage);
+                }
+                sim_loop.run(&*source, &frames_tx, &sim_stop, &telemetry);
                 // `frames_tx` drops here: the publisher drains and stops.
             })
             .context("cannot start the simulation thread")?
@@ -179,6 +203,8 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     );
     systemd.ready(&format!("publishing on {}", names.prefix()));
 
+    let janitor = janitor_node();
+    let mut last_cleanup = Instant::now();
     let log_interval = Duration::from_secs_f64(config.sim_loop.log_interval_s);
     let mut next_log = Instant::now() + log_interval;
     let mut last_watchdog = Instant::now();
@@ -210,6 +236,17 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
                 last_watchdog = Instant::now();
             }
         }
+        if last_cleanup.elapsed() >= DEAD_NODE_CLEANUP_INTERVAL {
+            last_cleanup = Instant::now();
+            if let Some(cleaned) = janitor.as_ref().map(|n| n.try_cleanup_dead_nodes()) {
+                if cleaned.cleanups > 0 {
+                    tracing::info!(
+                        removed = cleaned.cleanups,
+                        "removed resources of dead iceoryx2 nodes"
+                    );
+                }
+            }
+        }
         if Instant::now() >= next_log {
             next_log += log_interval;
             let s = summary(&telemetry, started.elapsed());
@@ -232,6 +269,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     }
 
     tracing::info!("shutting down");
+    drop(janitor);
     systemd.stopping();
     sim_stop.store(true, Ordering::Relaxed);
     if sim.join().is_err() {

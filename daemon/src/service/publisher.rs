@@ -5,7 +5,7 @@ use std::sync::atomic::Ordering;
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use hydrometra_ipc::{events, status, ServiceNames};
 use iceoryx2::node::NodeBuilder;
@@ -13,9 +13,6 @@ use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::prelude::{ipc, NodeName, SignalHandlingMode};
 
 use super::sim::{StatusFrame, Telemetry};
-
-/// How often the publisher removes resources of dead iceoryx2 nodes (crashed renderers).
-const DEAD_NODE_CLEANUP_INTERVAL: Duration = Duration::from_secs(5);
 
 /// Host `CLOCK_MONOTONIC`, ns (the clock `Instant` uses on Linux), comparable across processes.
 pub fn monotonic_ns() -> u64 {
@@ -126,7 +123,7 @@ fn run(
             .map_err(|e| format!("cannot create the event notifier: {e:?}"))?;
         Ok((node, status_service, publisher, event_service, notifier))
     };
-    let (node, _status_service, publisher, _event_service, notifier) = match setup() {
+    let (_node, _status_service, publisher, _event_service, notifier) = match setup() {
         Ok(parts) => {
             let _ = ready.send(Ok(()));
             parts
@@ -139,7 +136,6 @@ fn run(
     tracing::info!(prefix = %prefix, "publishing status on {}", names.full("status"));
 
     let mut sequence: u64 = 0;
-    let mut last_cleanup = Instant::now();
     let mut summary = super::latency::LatencySummary::EMPTY;
     loop {
         let frame = match frames.recv_timeout(Duration::from_millis(100)) {
@@ -185,16 +181,6 @@ fn run(
                 if n < 10 || n.is_multiple_of(1000) {
                     tracing::warn!(error = %e, "could not publish status");
                 }
-            }
-        }
-        if last_cleanup.elapsed() >= DEAD_NODE_CLEANUP_INTERVAL {
-            last_cleanup = Instant::now();
-            let cleaned = node.try_cleanup_dead_nodes();
-            if cleaned.cleanups > 0 {
-                tracing::info!(
-                    removed = cleaned.cleanups,
-                    "removed resources of dead subscribers' nodes"
-                );
             }
         }
     }

@@ -153,7 +153,9 @@ impl SimLoop {
         let start = Instant::now();
         let mut tick_index: u64 = 0; // index of the next scheduled tick
         let mut ticks_since_status: u64 = 0;
-        let mut last_reported_sample: Option<Instant> = None;
+        // A sample that arrived before the loop started is not a latency sample: it waited for
+        // start-up, not for a tick.
+        let mut last_reported_sample: Option<Instant> = rig.view().latest.map(|s| s.received_at);
         let mut last_miss: Option<Instant> = None;
         let mut sim_time_s = 0.0;
         let mut ticks_run: u64 = 0;
@@ -449,13 +451,14 @@ mod tests {
         stop.store(true, Ordering::Relaxed);
         handle.join().unwrap();
 
-        // The first sample is reported as new exactly once, the second exactly once.
+        // The sample present before the loop started is not a latency sample; the second one is
+        // reported as new exactly once.
         let all: Vec<&StatusFrame> = first.iter().chain(frames.iter()).collect();
         let new: Vec<Instant> = all
             .iter()
             .filter_map(|f| f.new_sample_received_at)
             .collect();
-        assert_eq!(new, vec![s.received_at, s2.received_at]);
+        assert_eq!(new, vec![s2.received_at]);
         // Every status is 4 ticks after the previous one (the stage counts steps).
         for w in all.windows(2) {
             let (a, b) = (w[0].status, w[1].status);
@@ -501,5 +504,69 @@ mod tests {
             "every status after the first two is dropped"
         );
         assert_eq!(rx.try_iter().count(), 2);
+    }
+
+    /// Stalls once for `stall` on its `at`-th step.
+    struct StallingStage {
+        steps: u32,
+        at: u32,
+        stall: Duration,
+        max_dt_s: f64,
+    }
+    impl Stage for StallingStage {
+        fn name(&self) -> &'static str {
+            "stalling"
+        }
+        fn step(&mut self, _inputs: &SimInputs, dt_s: f64) {
+            self.steps += 1;
+            self.max_dt_s = self.max_dt_s.max(dt_s);
+            if self.steps == self.at {
+                std::thread::sleep(self.stall);
+            }
+        }
+        fn write_status(&self, status: &mut Status) {
+            status.reserved0 = (self.max_dt_s * 1e6) as u32;
+        }
+    }
+
+    #[test]
+    fn a_stalled_tick_counts_misses_and_the_next_step_covers_the_skipped_time() {
+        let rig = Scripted(Mutex::new(RigView::disconnected()));
+        let (tx, rx) = sync_channel(4096);
+        let stop = AtomicBool::new(false);
+        let telemetry = Telemetry::default();
+        let settings = LoopSettings {
+            tick: Duration::from_millis(1),
+            ticks_per_status: 1,
+            safe_state_timeout: TIMEOUT,
+            run_id: 1,
+        };
+        let stage = StallingStage {
+            steps: 0,
+            at: 10,
+            stall: Duration::from_millis(6),
+            max_dt_s: 0.0,
+        };
+        std::thread::scope(|scope| {
+            scope.spawn(|| {
+                SimLoop::new(settings)
+                    .with_stage(Box::new(stage))
+                    .run(&rig, &tx, &stop, &telemetry)
+            });
+            while telemetry.ticks.load(Ordering::Relaxed) < 30 {
+                std::thread::sleep(Duration::from_millis(1));
+            }
+            stop.store(true, Ordering::Relaxed);
+        });
+        // The 6 ms stall: its own tick overran (1) and at least 4 whole periods were skipped.
+        assert!(telemetry.deadline_misses.load(Ordering::Relaxed) >= 5);
+        let statuses: Vec<Status> = rx.try_iter().map(|f| f.status).collect();
+        // The step after the stall covered the skipped periods in one longer dt (>= 5 ms), and
+        // sim time still equals the sum of the steps' dt (checked per tick: ticks * 1 ms plus
+        // the skipped periods, so it is ahead of the tick count).
+        let last = statuses.last().unwrap();
+        assert!(last.reserved0 >= 5_000, "max dt {} us", last.reserved0);
+        assert!(last.sim_time_s >= (last.ticks + 4) as f64 * 1e-3 - 1e-9);
+        assert_ne!(last.alarm_bits & alarms::DEADLINE_MISSED, 0);
     }
 }

@@ -97,6 +97,10 @@ impl Device {
         }
     }
 
+    pub(super) fn origin(&self) -> Instant {
+        self.started
+    }
+
     fn stats(&self, f: impl FnOnce(&mut EmulatorStats)) {
         let mut s = self.shared.stats.lock().unwrap_or_else(|e| e.into_inner());
         f(&mut s);

@@ -23,6 +23,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
+use std::time::Instant;
 
 use tracing::warn;
 
@@ -33,7 +34,7 @@ pub use scenario::{Keyframe, Scenario, ScenarioError, ScenarioSample};
 /// Emulator settings. `Default`: 250 Hz samples, 10 Hz heartbeats, default calibration, no faults.
 #[derive(Debug, Clone)]
 pub struct EmulatorOptions {
-    /// Sample rate, Hz (1..=2000).
+    /// Sample rate, Hz (1..=1000).
     pub sample_rate_hz: f64,
     /// Device heartbeat rate, Hz (0.5..=100).
     pub heartbeat_hz: f64,
@@ -138,6 +139,7 @@ pub(crate) struct EmuShared {
 /// A running emulated rig.
 pub struct EmulatedRig {
     device_path: PathBuf,
+    origin: Instant,
     owns_link_dir: Option<PathBuf>,
     shared: Arc<EmuShared>,
     faults: mpsc::Sender<Fault>,
@@ -150,12 +152,12 @@ impl EmulatedRig {
         scenario: Scenario,
         options: EmulatorOptions,
     ) -> Result<EmulatedRig, EmulatorError> {
-        if !(options.sample_rate_hz.is_finite() && (1.0..=2000.0).contains(&options.sample_rate_hz))
+        if !(options.sample_rate_hz.is_finite() && (1.0..=1000.0).contains(&options.sample_rate_hz))
         {
             return Err(EmulatorError::InvalidOption {
                 field: "sample_rate_hz",
                 value: options.sample_rate_hz.to_string(),
-                expected: "a rate in [1, 2000] Hz",
+                expected: "a rate in [1, 1000] Hz (docs/rig-protocol.md)",
             });
         }
         if !(options.heartbeat_hz.is_finite() && (0.5..=100.0).contains(&options.heartbeat_hz)) {
@@ -191,6 +193,7 @@ impl EmulatedRig {
             Arc::clone(&shared),
             rx,
         );
+        let origin = device.origin();
         // Plug in before returning, so the path exists as soon as `start` returns.
         device.plug()?;
         let thread = std::thread::Builder::new()
@@ -199,6 +202,7 @@ impl EmulatedRig {
             .map_err(EmulatorError::Spawn)?;
         Ok(EmulatedRig {
             device_path,
+            origin,
             owns_link_dir,
             shared,
             faults: tx,
@@ -209,6 +213,12 @@ impl EmulatedRig {
     /// The path the host opens: a symlink to the current pseudo-terminal (re-pointed on replug).
     pub fn device_path(&self) -> &Path {
         &self.device_path
+    }
+
+    /// The host instant at which the emulated device time was 0: a sample's `device_time_us`
+    /// after this instant is when the emulator took it (for latency measurements).
+    pub fn device_time_origin(&self) -> Instant {
+        self.origin
     }
 
     /// Injects a fault now.

@@ -157,6 +157,7 @@ pub(crate) fn line_of(text: &str, offset: usize) -> usize {
 }
 
 const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
+const FLAKY_SCENARIO: &str = include_str!("../../scenarios/flaky.toml");
 
 impl Scenario {
     /// Parses and validates a scenario; `origin` names the source in errors.
@@ -269,18 +270,20 @@ impl Scenario {
         Self::from_toml_str(&text, &path.display().to_string())
     }
 
-    /// A scenario shipped with the crate: `"default"` (a looping ~2.5 min procedure).
+    /// A scenario shipped with the crate: `"default"` (a looping 150 s procedure) or `"flaky"`
+    /// (a slow sweep with every fault scheduled in its first 33 s).
     pub fn builtin(name: &str) -> Option<Scenario> {
+        // The embedded files are checked by unit tests, so these parses cannot fail at run time.
         match name {
-            // The embedded file is checked by a unit test, so this parse cannot fail at run time.
             "default" => Self::from_toml_str(DEFAULT_SCENARIO, "builtin:default").ok(),
+            "flaky" => Self::from_toml_str(FLAKY_SCENARIO, "builtin:flaky").ok(),
             _ => None,
         }
     }
 
     /// Names accepted by [`Scenario::builtin`].
     pub fn builtin_names() -> &'static [&'static str] {
-        &["default"]
+        &["default", "flaky"]
     }
 
     /// Time of the last keyframe, s.
@@ -290,8 +293,19 @@ impl Scenario {
 
     /// The interpolated state at `t_s` seconds after the start (wrapped when looping).
     pub fn sample_at(&self, t_s: f64) -> ScenarioSample {
-        let first = self.keyframes[0]; // ok: validated non-empty
-        let last = self.keyframes[self.keyframes.len() - 1];
+        // Parsed scenarios are never empty; a hand-built empty one yields a closed, idle rig.
+        let (Some(&first), Some(&last)) = (self.keyframes.first(), self.keyframes.last()) else {
+            return ScenarioSample {
+                t_s,
+                valve_in: 0.0,
+                valve_out: 0.0,
+                pump_mmhg: 0.0,
+                tip_mm: [0.0; 3],
+                view_dir: [0.0, 0.0, 1.0],
+                buttons: 0,
+                pose_valid: false,
+            };
+        };
         let duration = last.t_s;
         let t = if !t_s.is_finite() {
             first.t_s
@@ -447,5 +461,42 @@ view_dir = [1.0, 0.0, 0.0]
         let last = s.keyframes[s.keyframes.len() - 1];
         assert_eq!(first.valve_in, last.valve_in);
         assert_eq!(first.tip_mm, last.tip_mm);
+    }
+
+    #[test]
+    fn builtin_flaky_schedules_every_fault_kind() {
+        let s = Scenario::builtin("flaky").expect("flaky scenario parses");
+        assert!(s.faults.chunk_max_bytes > 0);
+        let kinds: std::collections::HashSet<std::mem::Discriminant<super::super::Fault>> = s
+            .faults
+            .events
+            .iter()
+            .map(|e| std::mem::discriminant(&e.fault))
+            .collect();
+        // Every kind except `chunking`, which the plan sets from the start instead.
+        assert_eq!(kinds.len(), 7);
+        for name in Scenario::builtin_names() {
+            assert!(Scenario::builtin(name).is_some(), "{name}");
+        }
+        assert!(Scenario::builtin("nope").is_none());
+    }
+
+    #[test]
+    fn documented_example_parses_as_described() {
+        let doc = include_str!("../../../docs/rig-emulator.md");
+        let start = doc.find("```toml").unwrap() + "```toml".len();
+        let len = doc[start..].find("```").unwrap();
+        let s = Scenario::from_toml_str(&doc[start..start + len], "docs/rig-emulator.md").unwrap();
+        assert_eq!(s.name, "example");
+        assert_eq!(s.keyframes.len(), 2);
+        let m = s.sample_at(15.0); // loops: 15 s -> 5 s, half-way
+        assert!((m.valve_in - 0.5).abs() < 1e-12 && (m.pump_mmhg - 95.0).abs() < 1e-12);
+        assert_eq!(
+            s.faults.events,
+            vec![super::super::FaultEvent {
+                at_s: 5.0,
+                fault: super::super::Fault::GarbageBurst { bytes: 64 }
+            }]
+        );
     }
 }
