@@ -589,4 +589,37 @@ mod tests {
             })
         );
     }
+
+    #[test]
+    fn hydraulics_keys_are_validated_and_the_record_path_defaults_to_the_state_dir() {
+        let err = Config::from_toml_str(
+            "[hydraulics.params.pump]\nmax_flow_ml_per_min = -1\n",
+            "c.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            err.contains("c.toml") && err.contains("hydraulics.params.pump.max_flow_ml_per_min"),
+            "{err}"
+        );
+        let err = Config::from_toml_str("[hydraulics]\nsave_interval_ms = 0\n", "c.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("hydraulics.save_interval_ms"), "{err}");
+        let err = Config::from_toml_str("[hydraulics]\nrecrd = \"x\"\n", "c.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("recrd") && err.contains("line 2"), "{err}");
+        let c = Config::from_toml_str("[paths]\nstate_dir = \"/var/lib/hm\"\n", "c").unwrap();
+        assert_eq!(
+            c.hydraulics.record_path(&c.paths),
+            Some(PathBuf::from("/var/lib/hm/procedure.rec"))
+        );
+        assert_eq!(
+            Config::default()
+                .hydraulics
+                .record_path(&PathsConfig::default()),
+            None
+        );
+    }
 }
