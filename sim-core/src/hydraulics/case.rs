@@ -1,6 +1,6 @@
 //! The hydraulic part of a case: events on the scenario clock and the case's own parameters.
 //!
-//! A scenario file (see `docs/rig-protocol.md` / the emulator) may carry a `[hydraulics]` table that
+//! A scenario file (see `docs/rig-emulator.md`) may carry a `[hydraulics]` table that
 //! the rig ignores and the daemon reads:
 //!
 //! ```toml
