@@ -15,10 +15,97 @@ use hydrometra_sim::units::{m3_per_s_to_ml_per_min, m3_to_ml, mmhg_to_pa, pa_to_
 #[derive(Subcommand, Debug)]
 pub enum HydraulicsCommand {
     /// Drive the hydraulic model from a scenario's valve and pump keyframes (and its
-    /// `[hydraulics]` case events) and write the trace as CSV and a markdown table.
+    /// `[hydraulics]` case events) and write the trace as CSV, a markdown table and an SVG plot.
     Simulate(SimulateArgs),
     /// Print the default hydraulic parameters as TOML (the daemon's `[hydraulics]` keys).
     PrintDefaultParams,
+}
+
+/// One plotted sample: t, pressure mmHg, inflow, outflow, perforation ml/min, deficit ml.
+type PlotPoint = (f64, f64, f64, f64, f64, f64);
+
+/// Writes the three-panel SVG plot (pressure; flows; deficit with its limit) of a trace.
+fn write_plot(
+    path: &std::path::Path,
+    title: &str,
+    points: &[PlotPoint],
+    limit_ml: f64,
+) -> Result<()> {
+    use plotters::prelude::*;
+    let t_max = points.last().map_or(1.0, |p| p.0).max(1.0);
+    let max_of = |f: fn(&PlotPoint) -> f64| points.iter().map(f).fold(1.0_f64, f64::max);
+    let p_max = max_of(|p| p.1) * 1.1;
+    let p_min = points.iter().map(|p| p.1).fold(0.0_f64, f64::min) * 1.1;
+    let q_max = max_of(|p| p.2.max(p.3).max(p.4)) * 1.1;
+    let d_max = max_of(|p| p.5).max(limit_ml) * 1.1;
+    let root = SVGBackend::new(path, (1000, 900)).into_drawing_area();
+    let draw = || -> std::result::Result<(), Box<dyn std::error::Error>> {
+        root.fill(&WHITE)?;
+        let panels = root.split_evenly((3, 1));
+        let mut c = ChartBuilder::on(&panels[0])
+            .caption(format!("{title}: cavity pressure"), ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..t_max, p_min..p_max)?;
+        c.configure_mesh().x_desc("t (s)").y_desc("mmHg").draw()?;
+        c.draw_series(LineSeries::new(points.iter().map(|p| (p.0, p.1)), &BLUE))?;
+
+        let mut c = ChartBuilder::on(&panels[1])
+            .caption("flows", ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..t_max, 0.0..q_max)?;
+        c.configure_mesh().x_desc("t (s)").y_desc("ml/min").draw()?;
+        for (series, color, label) in [
+            (2usize, BLUE, "inflow"),
+            (3, GREEN, "outflow"),
+            (4, RED, "perforation"),
+        ] {
+            let pick = move |p: &PlotPoint| match series {
+                2 => p.2,
+                3 => p.3,
+                _ => p.4,
+            };
+            c.draw_series(LineSeries::new(
+                points.iter().map(|p| (p.0, pick(p))),
+                &color,
+            ))?
+            .label(label)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
+        }
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+
+        let mut c = ChartBuilder::on(&panels[2])
+            .caption("fluid deficit", ("sans-serif", 18))
+            .margin(8)
+            .x_label_area_size(28)
+            .y_label_area_size(55)
+            .build_cartesian_2d(0.0..t_max, 0.0..d_max)?;
+        c.configure_mesh().x_desc("t (s)").y_desc("ml").draw()?;
+        c.draw_series(LineSeries::new(points.iter().map(|p| (p.0, p.5)), &BLACK))?
+            .label("deficit")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+        c.draw_series(LineSeries::new(
+            vec![(0.0, limit_ml), (t_max, limit_ml)],
+            &RED,
+        ))?
+        .label("limit")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+        c.configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    };
+    draw().map_err(|e| anyhow::anyhow!("drawing {}: {e}", path.display()))
 }
 
 /// Arguments of `hydrometra hydraulics simulate`.
@@ -30,7 +117,7 @@ pub struct SimulateArgs {
     /// Hydraulic parameters (TOML); a scenario's `[hydraulics.params]` replaces them.
     #[arg(long)]
     pub params: Option<PathBuf>,
-    /// Output directory for `hydraulics.csv` and `hydraulics.md`.
+    /// Output directory for `hydraulics.csv`, `hydraulics.md` and `hydraulics.svg` (plot).
     #[arg(long, default_value = "hydraulics-out")]
     pub out: PathBuf,
     /// Simulated time, s (default: the scenario's length).
@@ -173,6 +260,7 @@ fn simulate(args: &SimulateArgs) -> Result<()> {
     let mut csv = String::from(csv_header());
     csv.push('\n');
     let mut table = Vec::new();
+    let mut plot = Vec::new();
     let mut events = Vec::new();
     let mut last_stage = 0;
     let mut last_rate = false;
@@ -229,6 +317,15 @@ fn simulate(args: &SimulateArgs) -> Result<()> {
         last_perforated = state.perforated;
         let row = Row { t_s, inputs, state };
         if k % csv_every == 0 {
+            let s = &row.state;
+            plot.push((
+                t_s,
+                pa_to_mmhg(s.cavity_pressure_pa),
+                m3_per_s_to_ml_per_min(s.flows.inflow_m3_per_s),
+                m3_per_s_to_ml_per_min(s.flows.outflow_m3_per_s),
+                m3_per_s_to_ml_per_min(s.flows.perforation_m3_per_s),
+                m3_to_ml(s.deficit.deficit_m3),
+            ));
             csv.push_str(&csv_row(&row));
             csv.push('\n');
         }
@@ -281,17 +378,25 @@ fn simulate(args: &SimulateArgs) -> Result<()> {
         .with_context(|| format!("creating output directory {}", args.out.display()))?;
     let csv_path = args.out.join("hydraulics.csv");
     let md_path = args.out.join("hydraulics.md");
+    let svg_path = args.out.join("hydraulics.svg");
+    write_plot(
+        &svg_path,
+        &format!("scenario {}", scenario.name),
+        &plot,
+        m3_to_ml(s.deficit.limit_m3),
+    )?;
     std::fs::write(&csv_path, csv).with_context(|| format!("writing {}", csv_path.display()))?;
     std::fs::write(&md_path, &md).with_context(|| format!("writing {}", md_path.display()))?;
     for e in &events {
         println!("{e}");
     }
     println!(
-        "deficit {:.1} ml of {:.0} ml; wrote {} and {}",
+        "deficit {:.1} ml of {:.0} ml; wrote {}, {} and {}",
         m3_to_ml(s.deficit.deficit_m3),
         m3_to_ml(s.deficit.limit_m3),
         csv_path.display(),
-        md_path.display()
+        md_path.display(),
+        svg_path.display()
     );
     Ok(())
 }
