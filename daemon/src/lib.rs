@@ -1,3 +1,4 @@
 //! Internals shared by the `hydrometrad` service and the `hydrometra` CLI.
 
 pub mod cli;
+pub mod service;

@@ -15,6 +15,14 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
+    Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
+    /// Hydraulic model tools (offline simulation of a scenario).
+    #[command(subcommand)]
+    Hydraulics(hydrometra_daemon::cli::hydraulics::HydraulicsCommand),
+    /// The procedure's fluid deficit record: show it, or start a new procedure.
+    #[command(subcommand)]
+    Procedure(hydrometra_daemon::cli::procedure::ProcedureCommand),
     /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
     #[command(subcommand)]
     Rig(hydrometra_daemon::cli::rig::RigCommand),
@@ -34,6 +42,9 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
+        Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
+        Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
         Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
     }
 }

@@ -1,2 +1,5 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
+pub mod hydraulics;
+pub mod monitor;
+pub mod procedure;
 pub mod rig;

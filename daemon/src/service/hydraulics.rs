@@ -1,0 +1,371 @@
+//! The hydraulics stage of hydrometrad: runs the lumped model on every tick, writes its fields and
+//! alarms into status, persists the procedure record on its own thread (file I/O never runs on the
+//! sim thread) and applies reset requests. See docs/hydraulics.md.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use anyhow::{bail, Context};
+use hydrometra_drivers::emulator::Scenario;
+use hydrometra_ipc::{alarms, Status};
+use hydrometra_sim::hydraulics::{
+    CaseScript, HydraulicInputs, HydraulicModel, HydraulicParams, ProcedureInfo, ProcedureRecord,
+};
+
+use super::sim::{SimInputs, Stage};
+
+/// `hydraulic_flags` bit: the stage is active (hydraulic fields are valid).
+pub const FLAG_ACTIVE: u64 = 1 << 0;
+/// `hydraulic_flags` bit: the cavity is perforated.
+pub const FLAG_PERFORATED: u64 = 1 << 1;
+/// `hydraulic_flags` bit: the pump is stopped because the procedure is terminated.
+pub const FLAG_PUMP_STOPPED: u64 = 1 << 2;
+/// `hydraulic_flags` bit: the pump delivers its maximum flow.
+pub const FLAG_PUMP_FLOW_LIMITED: u64 = 1 << 3;
+/// `hydraulic_flags` bit: the procedure was restored from the record when the daemon started.
+pub const FLAG_RESTORED: u64 = 1 << 4;
+
+/// A scenario with its hydraulic case script, from a built-in name or a file.
+pub fn load_scenario(name_or_path: &str) -> anyhow::Result<(Scenario, CaseScript)> {
+    let path = Path::new(name_or_path);
+    if path.exists() {
+        let scenario = Scenario::load(path)?;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading scenario {}", path.display()))?;
+        let case = CaseScript::from_scenario_toml(&text, &path.display().to_string())?;
+        return Ok((scenario, case));
+    }
+    let Some(scenario) = Scenario::builtin(name_or_path) else {
+        bail!(
+            "scenario `{name_or_path}` is neither a file nor a built-in scenario (built-ins: {})",
+            Scenario::builtin_names().join(", ")
+        );
+    };
+    let case = match &scenario.hydraulics {
+        Some(table) => CaseScript::from_table(table, &format!("builtin:{name_or_path}"))?,
+        None => CaseScript::default(),
+    };
+    Ok((scenario, case))
+}
+
+/// The file whose presence asks the daemon to start a new procedure: `<record>.reset`.
+pub fn reset_request_path(record: &Path) -> PathBuf {
+    let mut name = record.as_os_str().to_owned();
+    name.push(".reset");
+    PathBuf::from(name)
+}
+
+fn now_unix_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map_or(0, |d| d.as_millis() as u64)
+}
+
+fn new_procedure() -> ProcedureInfo {
+    let now = now_unix_ms();
+    ProcedureInfo {
+        id: now,
+        started_unix_ms: now,
+    }
+}
+
+/// What the stage is built from.
+pub struct HydraulicsSetup {
+    /// Parameters (the config's, unless the case replaces them).
+    pub params: HydraulicParams,
+    /// Case events (empty for a real rig).
+    pub case: CaseScript,
+    /// Length of a looping scenario, s, so case events repeat with it.
+    pub case_period_s: Option<f64>,
+    /// The procedure record, if persisted.
+    pub record: Option<PathBuf>,
+    /// Save interval.
+    pub save_interval: Duration,
+    /// Start a new procedure instead of restoring the record.
+    pub new_procedure: bool,
+}
+
+/// The record writer thread and its channel.
+struct Persister {
+    tx: Option<SyncSender<ProcedureRecord>>,
+    thread: Option<JoinHandle<()>>,
+}
+
+/// Writes records as they arrive (the newest pending one wins) and watches for reset requests.
+fn persist_loop(
+    path: PathBuf,
+    rx: Receiver<ProcedureRecord>,
+    reset: Arc<AtomicBool>,
+    poll: Duration,
+) {
+    let request = reset_request_path(&path);
+    let mut failing = false;
+    loop {
+        let mut latest = match rx.recv_timeout(poll) {
+            Ok(r) => Some(r),
+            Err(RecvTimeoutError::Timeout) => None,
+            Err(RecvTimeoutError::Disconnected) => break,
+        };
+        while let Ok(r) = rx.try_recv() {
+            latest = Some(r);
+        }
+        if let Some(record) = latest {
+            match record.save(&path) {
+                Ok(()) => {
+                    if failing {
+                        tracing::info!(path = %path.display(), "procedure record writable again");
+                    }
+                    failing = false;
+                }
+                Err(e) => {
+                    if !failing {
+                        tracing::error!("{e}; the deficit is kept in memory and retried");
+                    }
+                    failing = true;
+                }
+            }
+        }
+        if request.exists() {
+            match std::fs::remove_file(&request) {
+                Ok(()) => {
+                    tracing::info!(request = %request.display(), "new procedure requested");
+                    reset.store(true, Ordering::Relaxed);
+                }
+                Err(e) => {
+                    tracing::warn!(request = %request.display(), "cannot remove reset request: {e}")
+                }
+            }
+        }
+    }
+}
+
+/// The hydraulics stage.
+pub struct HydraulicsStage {
+    model: HydraulicModel,
+    case: CaseScript,
+    case_period_s: Option<f64>,
+    clock_s: f64,
+    flags: u64,
+    persister: Option<Persister>,
+    save_interval_s: f64,
+    since_save_s: f64,
+    last_alarm_bits: u32,
+    reset: Arc<AtomicBool>,
+}
+
+impl HydraulicsStage {
+    /// Builds the model, restores the procedure record (or starts a new procedure) and starts the
+    /// record writer.
+    pub fn start(setup: HydraulicsSetup) -> anyhow::Result<Self> {
+        let mut model =
+            HydraulicModel::new(setup.params).context("invalid hydraulic parameters")?;
+        let mut flags = FLAG_ACTIVE;
+        let reset = Arc::new(AtomicBool::new(false));
+        let mut persister = None;
+        match &setup.record {
+            None => {
+                tracing::warn!(
+                    "no procedure record configured ([hydraulics] record or [paths] state_dir): \
+                     the fluid deficit will not survive a restart"
+                );
+                model.start_new_procedure(new_procedure());
+            }
+            Some(path) => {
+                let requested = reset_request_path(path);
+                let reset_pending = requested.exists();
+                if reset_pending {
+                    let _ = std::fs::remove_file(&requested);
+                }
+                if setup.new_procedure || reset_pending {
+                    model.start_new_procedure(new_procedure());
+                    tracing::info!(record = %path.display(), "starting a new procedure");
+                } else {
+                    match ProcedureRecord::load(path) {
+                        Ok(Some(record)) => {
+                            model.restore(&record);
+                            flags |= FLAG_RESTORED;
+                            tracing::info!(
+                                record = %path.display(),
+                                procedure = record.procedure.id,
+                                deficit_ml = record.deficit.deficit_m3 * 1e6,
+                                terminated = record.deficit.terminated,
+                                "procedure restored"
+                            );
+                        }
+                        Ok(None) => {
+                            model.start_new_procedure(new_procedure());
+                            tracing::info!(record = %path.display(), "no saved procedure; starting a new one");
+                        }
+                        Err(e) => {
+                            // Never silently drop a deficit: keep the bad file for inspection.
+                            let aside = PathBuf::from(format!(
+                                "{}.corrupt-{}",
+                                path.display(),
+                                now_unix_ms()
+                            ));
+                            let _ = std::fs::rename(path, &aside);
+                            tracing::error!(
+                                "{e}; moved aside to {} and starting a new procedure",
+                                aside.display()
+                            );
+                            model.start_new_procedure(new_procedure());
+                        }
+                    }
+                }
+                if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+                    std::fs::create_dir_all(dir).with_context(|| {
+                        format!("creating the procedure record directory {}", dir.display())
+                    })?;
+                }
+                // Write the (new or restored) procedure at once so a crash now keeps it.
+                model
+                    .record(now_unix_ms())
+                    .save(path)
+                    .with_context(|| format!("writing the procedure record {}", path.display()))?;
+                let (tx, rx) = sync_channel(8);
+                let thread = {
+                    let (path, reset) = (path.clone(), reset.clone());
+                    let poll = setup.save_interval;
+                    std::thread::Builder::new()
+                        .name("hm-record".into())
+                        .spawn(move || persist_loop(path, rx, reset, poll))
+                        .context("cannot start the procedure record thread")?
+                };
+                persister = Some(Persister {
+                    tx: Some(tx),
+                    thread: Some(thread),
+                });
+            }
+        }
+        let last_alarm_bits = model.state().deficit.alarm_bits();
+        Ok(Self {
+            model,
+            case: setup.case,
+            case_period_s: setup.case_period_s.filter(|p| *p > 0.0),
+            clock_s: 0.0,
+            flags,
+            persister,
+            save_interval_s: setup.save_interval.as_secs_f64(),
+            since_save_s: 0.0,
+            last_alarm_bits,
+            reset,
+        })
+    }
+
+    fn send_record(&mut self) {
+        if let Some(tx) = self.persister.as_ref().and_then(|p| p.tx.as_ref()) {
+            // Never blocks the sim thread; a full channel means a newer record follows shortly.
+            let _ = tx.try_send(self.model.record(now_unix_ms()));
+        }
+        self.since_save_s = 0.0;
+    }
+}
+
+impl Stage for HydraulicsStage {
+    fn name(&self) -> &'static str {
+        "hydraulics"
+    }
+
+    fn step(&mut self, inputs: &SimInputs, dt_s: f64) {
+        if self.reset.swap(false, Ordering::Relaxed) {
+            self.model.start_new_procedure(new_procedure());
+            self.flags &= !FLAG_RESTORED;
+            tracing::info!(
+                procedure = self.model.procedure().id,
+                "new procedure started"
+            );
+            self.send_record();
+        }
+        self.clock_s += dt_s;
+        let case_t = match self.case_period_s {
+            Some(period) => self.clock_s.rem_euclid(period),
+            None => self.clock_s,
+        };
+        let h = HydraulicInputs {
+            valve_in_opening: inputs.valve_in_opening,
+            valve_out_opening: inputs.valve_out_opening,
+            pump_set_pressure_pa: inputs.pump_set_pressure_pa,
+            perforation: self.case.perforated_at(case_t),
+        };
+        let bits = self.model.step(&h, dt_s).deficit.alarm_bits();
+        self.since_save_s += dt_s;
+        if bits != self.last_alarm_bits || self.since_save_s >= self.save_interval_s {
+            if bits != self.last_alarm_bits {
+                let d = self.model.state().deficit;
+                tracing::warn!(
+                    deficit_ml = d.deficit_m3 * 1e6,
+                    limit_ml = d.limit_m3 * 1e6,
+                    warning_stage = d.warning_stage,
+                    rate_alarm = d.rate_alarm,
+                    terminated = d.terminated,
+                    "hydraulic alarms changed"
+                );
+            }
+            self.last_alarm_bits = bits;
+            self.send_record();
+        }
+    }
+
+    fn write_status(&self, status: &mut Status) {
+        let s = self.model.state();
+        let d = &s.deficit;
+        status.cavity_pressure_pa = s.cavity_pressure_pa;
+        status.cavity_volume_m3 = s.cavity_volume_m3;
+        status.inflow_m3_per_s = s.flows.inflow_m3_per_s;
+        status.outflow_m3_per_s = s.flows.outflow_m3_per_s;
+        status.leak_m3_per_s = s.flows.leak_m3_per_s;
+        status.absorption_m3_per_s = s.flows.absorption_m3_per_s;
+        status.perforation_m3_per_s = s.flows.perforation_m3_per_s;
+        status.inflow_port_velocity_m_per_s = s.inflow_port_velocity_m_per_s;
+        status.outflow_port_velocity_m_per_s = s.outflow_port_velocity_m_per_s;
+        status.fluid_in_m3 = s.totals.inflow_m3;
+        status.fluid_collected_m3 = s.totals.collected_m3();
+        status.deficit_m3 = d.deficit_m3;
+        status.deficit_rate_m3_per_s = d.rate_m3_per_s;
+        status.deficit_limit_m3 = d.limit_m3;
+        status.procedure_id = self.model.procedure().id;
+        status.procedure_time_s = s.time_s;
+        status.deficit_warning_stage = u64::from(d.warning_stage);
+        let mut flags = self.flags;
+        if s.perforated {
+            flags |= FLAG_PERFORATED;
+        }
+        if s.pump_stopped {
+            flags |= FLAG_PUMP_STOPPED;
+        }
+        if s.pump_flow_limited {
+            flags |= FLAG_PUMP_FLOW_LIMITED;
+        }
+        status.hydraulic_flags = flags;
+        let fraction = d.fraction_of_limit();
+        for (on, bit) in [
+            (fraction >= 0.5, alarms::DEFICIT_WARNING_50),
+            (fraction >= 0.75, alarms::DEFICIT_WARNING_75),
+            (fraction >= 1.0, alarms::DEFICIT_LIMIT),
+            (d.rate_alarm, alarms::DEFICIT_RATE),
+            (d.terminated, alarms::PROCEDURE_TERMINATED),
+            (d.overpressure, alarms::OVERPRESSURE),
+        ] {
+            if on {
+                status.alarm_bits |= bit;
+            }
+        }
+    }
+}
+
+impl Drop for HydraulicsStage {
+    fn drop(&mut self) {
+        // Final save on a clean shutdown, then let the writer finish.
+        self.send_record();
+        if let Some(mut p) = self.persister.take() {
+            drop(p.tx.take());
+            if let Some(t) = p.thread.take() {
+                let _ = t.join();
+            }
+        }
+    }
+}

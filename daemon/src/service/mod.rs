@@ -1,0 +1,283 @@
+//! hydrometrad: configuration, the rig input, the fixed-rate simulation loop, the publisher
+//! thread and the supervisor that ties them together (signals, systemd, periodic logs).
+
+pub mod config;
+pub mod hydraulics;
+pub mod latency;
+pub mod notify;
+pub mod publisher;
+pub mod realtime;
+pub mod rig_input;
+pub mod rig_link;
+pub mod sim;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::sync_channel;
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use anyhow::Context;
+use hydrometra_ipc::ServiceNames;
+
+use config::Config;
+use latency::LatencySummary;
+use publisher::PublisherThread;
+use rig_input::RigSource;
+use sim::{LoopSettings, SimLoop, Telemetry};
+
+/// Capacity of the sim -> publisher channel: 64 ms of statuses at 1 kHz before statuses drop.
+const STATUS_CHANNEL_CAPACITY: usize = 64;
+/// How often the supervisor checks signals, the duration and the watchdog.
+const SUPERVISOR_PERIOD: Duration = Duration::from_millis(20);
+/// How often the supervisor removes resources of dead iceoryx2 nodes (crashed renderers). Done
+/// here, not in the publisher, because it walks the file system and would delay publication.
+const DEAD_NODE_CLEANUP_INTERVAL: Duration = Duration::from_secs(5);
+
+/// A node of its own for removing dead nodes' resources off the publisher's hot path.
+fn janitor_node() -> Option<iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>> {
+    use iceoryx2::prelude::*;
+    let name = NodeName::new("hydrometrad-janitor").ok()?;
+    match NodeBuilder::new()
+        .name(&name)
+        .signal_handling_mode(SignalHandlingMode::Disabled)
+        .create::<ipc::Service>()
+    {
+        Ok(node) => Some(node),
+        Err(e) => {
+            tracing::warn!("cannot create the dead-node cleanup node ({e:?}); crashed renderers' resources stay until restart");
+            None
+        }
+    }
+}
+
+/// Figures of a finished run.
+#[derive(Debug, Clone, Copy)]
+pub struct RunSummary {
+    /// Ticks executed.
+    pub ticks: u64,
+    /// Deadline misses.
+    pub deadline_misses: u64,
+    /// Statuses published.
+    pub statuses_published: u64,
+    /// Statuses dropped between loop and publisher.
+    pub statuses_dropped: u64,
+    /// Rig-sample-to-status latency.
+    pub latency: LatencySummary,
+    /// Wall time of the run.
+    pub elapsed: Duration,
+}
+
+fn summary(telemetry: &Telemetry, elapsed: Duration) -> RunSummary {
+    RunSummary {
+        ticks: telemetry.ticks.load(Ordering::Relaxed),
+        deadline_misses: telemetry.deadline_misses.load(Ordering::Relaxed),
+        statuses_published: telemetry.statuses_published.load(Ordering::Relaxed),
+        statuses_dropped: telemetry.statuses_dropped.load(Ordering::Relaxed),
+        latency: telemetry
+            .latency
+            .lock()
+            .map(|h| h.summary())
+            .unwrap_or(LatencySummary::EMPTY),
+        elapsed,
+    }
+}
+
+fn ms(s: f64) -> String {
+    if s.is_nan() {
+        "-".into()
+    } else {
+        format!("{:.3}", s * 1e3)
+    }
+}
+
+/// Logs a one-line summary: the line the benchmarks quote.
+pub fn log_summary(what: &str, s: &RunSummary) {
+    tracing::info!(
+        "{what}: {:.1} s, ticks {} (deadline misses {}), statuses {} (dropped {}), \
+         rig-sample-to-status latency ms p50 {} p99 {} max {} (n {})",
+        s.elapsed.as_secs_f64(),
+        s.ticks,
+        s.deadline_misses,
+        s.statuses_published,
+        s.statuses_dropped,
+        ms(s.latency.p50_s),
+        ms(s.latency.p99_s),
+        ms(s.latency.max_s),
+        s.latency.count
+    );
+}
+
+/// A run id that differs between daemon starts.
+fn new_run_id() -> u64 {
+    let nanos = SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0);
+    nanos ^ (u64::from(std::process::id()) << 32)
+}
+
+/// The simulation stages the loop steps every tick, in order. Each stage reads the inputs (the
+/// rig's or the safe ones) and writes its fields into the status: hydraulics now; deformation,
+/// fluid and particle stages are added here as they land.
+pub fn build_stages(config: &Config) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
+    let h = &config.hydraulics;
+    let (case, case_period_s) = if config.rig.mode == config::RigMode::Emulated {
+        let (scenario, case) = hydraulics::load_scenario(&config.rig.emulated.scenario)?;
+        let period = scenario.looping.then(|| scenario.duration_s());
+        (case, period)
+    } else {
+        Default::default()
+    };
+    let params = case.params.clone().unwrap_or_else(|| h.params.clone());
+    let stage = hydraulics::HydraulicsStage::start(hydraulics::HydraulicsSetup {
+        params,
+        case,
+        case_period_s,
+        record: h.record_path(&config.paths),
+        save_interval: Duration::from_millis(h.save_interval_ms),
+        new_procedure: h.new_procedure,
+    })?;
+    Ok(vec![Box::new(stage)])
+}
+
+/// Runs the daemon until SIGINT/SIGTERM or `duration` elapses; returns the run's figures.
+pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSummary> {
+    let names = ServiceNames::new(&config.ipc.service_prefix)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // A second signal while shutting down exits at once (exit code 1).
+        signal_hook::flag::register_conditional_shutdown(signal, 1, stop.clone())
+            .context("cannot install signal handlers")?;
+        signal_hook::flag::register(signal, stop.clone())
+            .context("cannot install signal handlers")?;
+    }
+    let systemd = notify::Systemd::from_env();
+    let started = Instant::now();
+
+    let stages = build_stages(config)?;
+    // Real-time scheduling is set on the main thread before any other thread starts, so the rig
+    // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
+    let priority = config.sim_loop.realtime_priority;
+    realtime::apply("main", priority);
+    let rig = rig_link::RigInput::start(&config.rig)?;
+    let telemetry = Arc::new(Telemetry::default());
+    let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
+    let publisher =
+        match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
+            Ok(p) => p,
+            Err(e) => {
+                rig.shutdown();
+                return Err(e);
+            }
+        };
+
+    let settings = LoopSettings {
+        tick: Duration::from_secs_f64(1.0 / config.sim_loop.tick_rate_hz),
+        ticks_per_status: config.sim_loop.ticks_per_status(),
+        safe_state_timeout: Duration::from_millis(config.rig.safe_state_timeout_ms),
+        run_id: new_run_id(),
+    };
+    let sim_stop = Arc::new(AtomicBool::new(false));
+    let sim = {
+        let source: Arc<dyn RigSource> = rig.source();
+        let (sim_stop, telemetry) = (sim_stop.clone(), telemetry.clone());
+        std::thread::Builder::new()
+            .name("hm-sim".into())
+            .spawn(move || {
+                realtime::apply("hm-sim", priority);
+                let mut sim_loop = SimLoop::new(settings);
+                for stage in stages {
+                    sim_loop = sim_loop.with_stage(stage);
+                }
+                sim_loop.run(&*source, &frames_tx, &sim_stop, &telemetry);
+                // `frames_tx` drops here: the publisher drains and stops.
+            })
+            .context("cannot start the simulation thread")?
+    };
+
+    tracing::info!(
+        tick_rate_hz = config.sim_loop.tick_rate_hz,
+        status_rate_hz = config.sim_loop.status_rate_hz,
+        prefix = %names.prefix(),
+        "hydrometrad running"
+    );
+    systemd.ready(&format!("publishing on {}", names.prefix()));
+
+    let janitor = janitor_node();
+    let mut last_cleanup = Instant::now();
+    let log_interval = Duration::from_secs_f64(config.sim_loop.log_interval_s);
+    let mut next_log = Instant::now() + log_interval;
+    let mut last_watchdog = Instant::now();
+    let mut watchdog_marks = (0u64, 0u64);
+    while !stop.load(Ordering::Relaxed) {
+        std::thread::sleep(SUPERVISOR_PERIOD);
+        if duration.is_some_and(|d| started.elapsed() >= d) {
+            break;
+        }
+        if sim.is_finished() {
+            tracing::error!("simulation thread ended unexpectedly");
+            break;
+        }
+        if let Some(interval) = systemd.watchdog_interval() {
+            if last_watchdog.elapsed() >= interval {
+                // Only a daemon that still ticks and publishes feeds the watchdog.
+                let marks = (
+                    telemetry.ticks.load(Ordering::Relaxed),
+                    telemetry.statuses_published.load(Ordering::Relaxed),
+                );
+                if marks.0 > watchdog_marks.0 && marks.1 > watchdog_marks.1 {
+                    systemd.watchdog();
+                    watchdog_marks = marks;
+                } else {
+                    tracing::warn!(
+                        "no progress since the last watchdog ping; not feeding the watchdog"
+                    );
+                }
+                last_watchdog = Instant::now();
+            }
+        }
+        if last_cleanup.elapsed() >= DEAD_NODE_CLEANUP_INTERVAL {
+            last_cleanup = Instant::now();
+            if let Some(cleaned) = janitor.as_ref().map(|n| n.try_cleanup_dead_nodes()) {
+                if cleaned.cleanups > 0 {
+                    tracing::info!(
+                        removed = cleaned.cleanups,
+                        "removed resources of dead iceoryx2 nodes"
+                    );
+                }
+            }
+        }
+        if Instant::now() >= next_log {
+            next_log += log_interval;
+            let s = summary(&telemetry, started.elapsed());
+            let view = rig.source().view();
+            tracing::info!(
+                link = ?view.link_state,
+                frames = view.counters.frames,
+                crc_errors = view.counters.crc_errors,
+                reconnects = view.counters.reconnects,
+                "rig link"
+            );
+            log_summary("running", &s);
+            systemd.status(&format!(
+                "link {:?}; latency p99 {} ms; deadline misses {}",
+                view.link_state,
+                ms(s.latency.p99_s),
+                s.deadline_misses
+            ));
+        }
+    }
+
+    tracing::info!("shutting down");
+    drop(janitor);
+    systemd.stopping();
+    sim_stop.store(true, Ordering::Relaxed);
+    if sim.join().is_err() {
+        tracing::error!("simulation thread panicked");
+    }
+    publisher.join();
+    rig.shutdown();
+    let s = summary(&telemetry, started.elapsed());
+    log_summary("stopped", &s);
+    Ok(s)
+}

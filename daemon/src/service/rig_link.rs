@@ -1,0 +1,117 @@
+//! The rig input of the daemon: the transport (`RigLink`) on a real device, or on the pty of an
+//! in-process emulated rig so the whole path (bytes, framing, calibration) runs.
+
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::Context;
+use hydrometra_drivers::calibration::Calibration;
+use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
+use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink};
+
+use super::config::{RigConfig, RigMode};
+use super::rig_input::{RigSource, RigView};
+
+impl RigSource for RigLink {
+    fn view(&self) -> RigView {
+        let s = self.snapshot();
+        RigView {
+            link_state: s.link_state,
+            counters: s.counters,
+            latest: s.latest,
+            last_sample_age: s.last_sample_age,
+        }
+    }
+}
+
+/// The running rig input.
+pub struct RigInput {
+    link: Arc<RigLink>,
+    emulator: Option<EmulatedRig>,
+}
+
+/// Resolves `rig.emulated.scenario`: a built-in name, else a file path.
+pub fn load_scenario(name_or_path: &str) -> anyhow::Result<Scenario> {
+    if let Some(s) = Scenario::builtin(name_or_path) {
+        return Ok(s);
+    }
+    let path = Path::new(name_or_path);
+    if !path.exists() {
+        anyhow::bail!(
+            "rig.emulated.scenario = {name_or_path:?}: expected a built-in scenario ({}) or an \
+             existing scenario file",
+            Scenario::builtin_names().join(", ")
+        );
+    }
+    Scenario::load(path).with_context(|| format!("rig.emulated.scenario = {name_or_path:?}"))
+}
+
+impl RigInput {
+    /// Starts the emulator (if configured) and the transport. A missing device is not an error:
+    /// the transport keeps retrying and status reports the link as disconnected.
+    pub fn start(config: &RigConfig) -> anyhow::Result<Self> {
+        let calibration = match &config.calibration {
+            Some(path) => Calibration::load(path)
+                .with_context(|| format!("rig.calibration = {}", path.display()))?,
+            None => Calibration::default(),
+        };
+        let (target, emulator) = match config.mode {
+            RigMode::Device => (DeviceTarget::Path(config.device.clone()), None),
+            RigMode::Usb => {
+                let usb = config
+                    .usb
+                    .as_ref()
+                    .context("rig.mode = \"usb\" needs a [rig.usb] table with vid and pid")?;
+                (
+                    DeviceTarget::Usb {
+                        vid: usb.vid,
+                        pid: usb.pid,
+                        serial_number: usb.serial_number.clone(),
+                    },
+                    None,
+                )
+            }
+            RigMode::Emulated => {
+                let scenario = load_scenario(&config.emulated.scenario)?;
+                let options = EmulatorOptions {
+                    sample_rate_hz: config.emulated.sample_rate_hz,
+                    faults: scenario.faults.clone(),
+                    // The emulated rig converts the scenario's SI values to raw counts with the
+                    // same calibration the transport uses to convert them back.
+                    calibration: calibration.clone(),
+                    ..EmulatorOptions::default()
+                };
+                let rig = EmulatedRig::start(scenario, options)
+                    .context("cannot start the emulated rig")?;
+                tracing::info!(pty = %rig.device_path().display(), scenario = %config.emulated.scenario, "emulated rig started");
+                (
+                    DeviceTarget::Path(rig.device_path().to_path_buf()),
+                    Some(rig),
+                )
+            }
+        };
+        let link = RigLink::spawn(LinkConfig::new(target, calibration))
+            .context("cannot start the rig transport")?;
+        Ok(Self {
+            link: Arc::new(link),
+            emulator,
+        })
+    }
+
+    /// The source the simulation loop polls.
+    pub fn source(&self) -> Arc<RigLink> {
+        self.link.clone()
+    }
+
+    /// Stops the transport (after every other holder of [`RigInput::source`] dropped it) and the
+    /// emulator.
+    pub fn shutdown(self) {
+        match Arc::try_unwrap(self.link) {
+            Ok(link) => link.shutdown(),
+            Err(_) => tracing::warn!("rig link still shared at shutdown; its thread ends on drop"),
+        }
+        if let Some(emulator) = self.emulator {
+            emulator.stop();
+        }
+    }
+}
