@@ -1,0 +1,296 @@
+//! Geometric multigrid V-cycle on voxelized (irregular) domains, used as the CG preconditioner.
+//!
+//! Each level is a 7-point Poisson operator on the "fluid" cells of a label grid (0 = solid wall,
+//! Neumann; 1 = fluid, unknown; 2 = open, Dirichlet p = 0), stored as compressed rows with neighbour
+//! lists (periodic axes wrap). A coarse cell is open if any child is open, else fluid if any child
+//! is fluid, else solid. Restriction sums the children's residuals (times a scale), prolongation
+//! injects the coarse value into every child (its transpose). Smoothing is red-black Gauss-Seidel,
+//! forward before and reversed after the coarse correction, so the V-cycle is a symmetric operator and
+//! CG preconditioned by it stays valid.
+
+use super::topology::NONE;
+
+/// Label codes of a level.
+pub(crate) const L_SOLID: u8 = 0;
+pub(crate) const L_FLUID: u8 = 1;
+pub(crate) const L_OPEN: u8 = 2;
+
+/// One multigrid level.
+#[derive(Default, Debug)]
+pub(crate) struct Level {
+    pub dims: [usize; 3],
+    pub periodic: [bool; 3],
+    pub label: Vec<u8>,
+    pub row_of_cell: Vec<u32>,
+    pub cell_of_row: Vec<u32>,
+    /// Neighbour rows (NONE for wall or open neighbours), order -x +x -y +y -z +z.
+    pub nbr: Vec<[u32; 6]>,
+    /// Number of fluid or open neighbours.
+    pub diag: Vec<f32>,
+    pub inv_diag: Vec<f32>,
+    pub red: Vec<u32>,
+    pub black: Vec<u32>,
+    /// Coarse row of each row's parent cell (NONE when the parent is open).
+    pub parent: Vec<u32>,
+    pub x: Vec<f32>,
+    pub b: Vec<f32>,
+    pub r: Vec<f32>,
+}
+
+impl Level {
+    pub fn rows(&self) -> usize {
+        self.cell_of_row.len()
+    }
+
+    fn neighbour_cell(&self, c: [usize; 3], axis: usize, dir: i32) -> Option<usize> {
+        let n = self.dims[axis];
+        let mut g = c;
+        if dir < 0 {
+            if c[axis] == 0 {
+                if !self.periodic[axis] {
+                    return None;
+                }
+                g[axis] = n - 1;
+            } else {
+                g[axis] -= 1;
+            }
+        } else if c[axis] + 1 == n {
+            if !self.periodic[axis] {
+                return None;
+            }
+            g[axis] = 0;
+        } else {
+            g[axis] += 1;
+        }
+        Some(g[0] + self.dims[0] * (g[1] + self.dims[1] * g[2]))
+    }
+
+    /// Builds rows, stencils and colours from `self.label`, `dims`, `periodic`.
+    pub fn build_rows(&mut self) {
+        let [nx, ny, _] = self.dims;
+        let ncell = self.label.len();
+        self.row_of_cell.clear();
+        self.row_of_cell.resize(ncell, NONE);
+        self.cell_of_row.clear();
+        for (i, &l) in self.label.iter().enumerate() {
+            if l == L_FLUID {
+                self.row_of_cell[i] = self.cell_of_row.len() as u32;
+                self.cell_of_row.push(i as u32);
+            }
+        }
+        self.nbr.clear();
+        self.diag.clear();
+        self.inv_diag.clear();
+        self.red.clear();
+        self.black.clear();
+        for row in 0..self.cell_of_row.len() {
+            let ci = self.cell_of_row[row] as usize;
+            let c = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
+            let mut nb = [NONE; 6];
+            let mut diag = 0.0f32;
+            for axis in 0..3 {
+                for (s, dir) in [-1i32, 1].into_iter().enumerate() {
+                    if let Some(g) = self.neighbour_cell(c, axis, dir) {
+                        match self.label[g] {
+                            L_FLUID => {
+                                nb[2 * axis + s] = self.row_of_cell[g];
+                                diag += 1.0;
+                            }
+                            L_OPEN => diag += 1.0,
+                            _ => {}
+                        }
+                    }
+                }
+            }
+            self.nbr.push(nb);
+            self.diag.push(diag);
+            self.inv_diag.push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
+            if (c[0] + c[1] + c[2]) % 2 == 0 {
+                self.red.push(row as u32);
+            } else {
+                self.black.push(row as u32);
+            }
+        }
+        let n = self.cell_of_row.len();
+        for v in [&mut self.x, &mut self.b, &mut self.r] {
+            v.clear();
+            v.resize(n, 0.0);
+        }
+    }
+
+    /// Labels of the next coarser level, or None when this level should be the coarsest.
+    fn coarsen(&self, coarse: &mut Level) -> bool {
+        if self.rows() <= 64 || self.dims.iter().all(|&n| n <= 2) {
+            return false;
+        }
+        for a in 0..3 {
+            if self.periodic[a] && self.dims[a] > 1 && self.dims[a] % 2 == 1 {
+                return false;
+            }
+        }
+        let cd: [usize; 3] = std::array::from_fn(|a| self.dims[a].div_ceil(2));
+        coarse.dims = cd;
+        coarse.periodic = std::array::from_fn(|a| self.periodic[a] && cd[a] > 1);
+        coarse.label.clear();
+        coarse.label.resize(cd[0] * cd[1] * cd[2], L_SOLID);
+        let [nx, ny, nz] = self.dims;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let l = self.label[i + nx * (j + ny * k)];
+                    let p = i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2));
+                    let cl = &mut coarse.label[p];
+                    if l == L_OPEN || (l == L_FLUID && *cl == L_SOLID) {
+                        *cl = l;
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    fn link_parents(&mut self, coarse: &Level) {
+        let [nx, ny, _] = self.dims;
+        let cd = coarse.dims;
+        self.parent.clear();
+        for row in 0..self.rows() {
+            let ci = self.cell_of_row[row] as usize;
+            let (i, j, k) = (ci % nx, (ci / nx) % ny, ci / (nx * ny));
+            let p = i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2));
+            self.parent.push(coarse.row_of_cell[p]);
+        }
+    }
+
+    #[inline]
+    fn relax(&mut self, row: usize) {
+        let nb = self.nbr[row];
+        let mut s = self.b[row];
+        for &n in &nb {
+            if n != NONE {
+                s += self.x[n as usize];
+            }
+        }
+        self.x[row] = s * self.inv_diag[row];
+    }
+
+    /// Red then black Gauss-Seidel sweep.
+    pub fn smooth_forward(&mut self) {
+        for n in 0..self.red.len() {
+            let r = self.red[n] as usize;
+            self.relax(r);
+        }
+        for n in 0..self.black.len() {
+            let r = self.black[n] as usize;
+            self.relax(r);
+        }
+    }
+
+    /// The adjoint of `smooth_forward`: black then red, each in reverse order.
+    pub fn smooth_backward(&mut self) {
+        for n in (0..self.black.len()).rev() {
+            let r = self.black[n] as usize;
+            self.relax(r);
+        }
+        for n in (0..self.red.len()).rev() {
+            let r = self.red[n] as usize;
+            self.relax(r);
+        }
+    }
+
+    fn residual(&mut self) {
+        for row in 0..self.rows() {
+            let nb = self.nbr[row];
+            let mut s = self.b[row] - self.diag[row] * self.x[row];
+            for &n in &nb {
+                if n != NONE {
+                    s += self.x[n as usize];
+                }
+            }
+            self.r[row] = s;
+        }
+    }
+}
+
+/// The level hierarchy.
+#[derive(Default, Debug)]
+pub(crate) struct Multigrid {
+    pub levels: Vec<Level>,
+    /// Number of levels in use (levels beyond stay allocated for reuse).
+    pub used: usize,
+    /// Scale of the restricted residual (1/4 is Galerkin for injection; larger over-corrects).
+    pub coarse_scale: f32,
+    /// Smoothing sweeps before and after the coarse correction.
+    pub sweeps: usize,
+    /// Symmetric sweeps on the coarsest level.
+    pub coarsest_sweeps: usize,
+}
+
+impl Multigrid {
+    /// Builds the hierarchy under a finished level 0 (`levels[0]` must be built by the caller).
+    pub fn build_hierarchy(&mut self) {
+        self.used = 1;
+        loop {
+            let l = self.used;
+            if self.levels.len() <= l {
+                self.levels.push(Level::default());
+            }
+            let (fine, coarse) = self.levels.split_at_mut(l);
+            let fine = &mut fine[l - 1];
+            if !fine.coarsen(&mut coarse[0]) {
+                fine.parent.clear();
+                break;
+            }
+            coarse[0].build_rows();
+            fine.link_parents(&coarse[0]);
+            self.used += 1;
+            if self.used >= 16 {
+                break;
+            }
+        }
+        if self.used >= 16 {
+            self.levels[self.used - 1].parent.clear();
+        }
+    }
+
+    /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b`.
+    pub fn vcycle(&mut self) {
+        let n = self.used;
+        for l in 0..n - 1 {
+            let (fine, coarse) = self.levels.split_at_mut(l + 1);
+            let fine = &mut fine[l];
+            let coarse = &mut coarse[0];
+            fine.x.fill(0.0);
+            for _ in 0..self.sweeps {
+                fine.smooth_forward();
+            }
+            fine.residual();
+            coarse.b.fill(0.0);
+            for row in 0..fine.rows() {
+                let p = fine.parent[row];
+                if p != NONE {
+                    coarse.b[p as usize] += self.coarse_scale * fine.r[row];
+                }
+            }
+        }
+        let last = &mut self.levels[n - 1];
+        last.x.fill(0.0);
+        for _ in 0..self.coarsest_sweeps {
+            last.smooth_forward();
+            last.smooth_backward();
+        }
+        for l in (0..n - 1).rev() {
+            let (fine, coarse) = self.levels.split_at_mut(l + 1);
+            let fine = &mut fine[l];
+            let coarse = &coarse[0];
+            for row in 0..fine.rows() {
+                let p = fine.parent[row];
+                if p != NONE {
+                    fine.x[row] += coarse.x[p as usize];
+                }
+            }
+            for _ in 0..self.sweeps {
+                fine.smooth_backward();
+            }
+        }
+    }
+}

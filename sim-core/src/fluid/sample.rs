@@ -1,0 +1,150 @@
+//! Trilinear interpolation of staggered (MAC) fields, in grid units.
+//!
+//! A position `p` is measured in cells from the grid origin (`p = (x - origin) / h`). Component `c`
+//! of the velocity is sampled on its faces: along axis `c` the samples sit at integer positions, along
+//! the other axes at half-integer ones. Periodic axes wrap; other axes clamp to the outermost samples.
+
+/// Samples per axis of each velocity component, and the periodicity.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Layout {
+    pub periodic: [bool; 3],
+    /// Face-array dimensions of component c: dims with dims[c] + 1 unless periodic along c.
+    pub fdims: [[usize; 3]; 3],
+}
+
+impl Layout {
+    pub fn new(dims: [usize; 3], periodic: [bool; 3]) -> Self {
+        let fdims = std::array::from_fn(|c| {
+            let mut d = dims;
+            if !periodic[c] {
+                d[c] += 1;
+            }
+            d
+        });
+        Self { periodic, fdims }
+    }
+
+    #[inline]
+    pub fn face_index(&self, c: usize, f: [usize; 3]) -> usize {
+        let d = self.fdims[c];
+        f[0] + d[0] * (f[1] + d[1] * f[2])
+    }
+
+    #[inline]
+    pub fn face_coords(&self, c: usize, idx: usize) -> [usize; 3] {
+        let d = self.fdims[c];
+        let i = idx % d[0];
+        let r = idx / d[0];
+        [i, r % d[1], r / d[1]]
+    }
+
+    pub fn face_count(&self, c: usize) -> usize {
+        self.fdims[c].iter().product()
+    }
+
+    /// Two sample indices and the weight of the second along one axis.
+    #[inline]
+    fn axis(s: f32, npts: usize, periodic: bool) -> (usize, usize, f32) {
+        if periodic {
+            let fl = s.floor();
+            let t = s - fl;
+            let i0 = (fl as i64).rem_euclid(npts as i64) as usize;
+            let i1 = if i0 + 1 == npts { 0 } else { i0 + 1 };
+            (i0, i1, t)
+        } else if npts == 1 {
+            (0, 0, 0.0)
+        } else {
+            let s = s.clamp(0.0, (npts - 1) as f32);
+            let i0 = (s as usize).min(npts - 2);
+            (i0, i0 + 1, s - i0 as f32)
+        }
+    }
+
+    #[inline]
+    fn stencil(&self, c: usize, p: [f32; 3]) -> ([usize; 8], [f32; 8]) {
+        let d = self.fdims[c];
+        let mut ax = [(0usize, 0usize, 0f32); 3];
+        for (a, slot) in ax.iter_mut().enumerate() {
+            let s = if a == c { p[a] } else { p[a] - 0.5 };
+            *slot = Self::axis(s, d[a], self.periodic[a]);
+        }
+        let (x0, x1, tx) = ax[0];
+        let (y0, y1, ty) = ax[1];
+        let (z0, z1, tz) = ax[2];
+        let r00 = d[0] * (y0 + d[1] * z0);
+        let r10 = d[0] * (y1 + d[1] * z0);
+        let r01 = d[0] * (y0 + d[1] * z1);
+        let r11 = d[0] * (y1 + d[1] * z1);
+        let idx = [
+            r00 + x0,
+            r00 + x1,
+            r10 + x0,
+            r10 + x1,
+            r01 + x0,
+            r01 + x1,
+            r11 + x0,
+            r11 + x1,
+        ];
+        let (sx, sy, sz) = (1.0 - tx, 1.0 - ty, 1.0 - tz);
+        let w = [
+            sx * sy * sz,
+            tx * sy * sz,
+            sx * ty * sz,
+            tx * ty * sz,
+            sx * sy * tz,
+            tx * sy * tz,
+            sx * ty * tz,
+            tx * ty * tz,
+        ];
+        (idx, w)
+    }
+
+    /// Component `c` of `field` at `p`.
+    #[inline]
+    pub fn sample(&self, c: usize, field: &[f32], p: [f32; 3]) -> f32 {
+        let (idx, w) = self.stencil(c, p);
+        let mut v = 0.0;
+        for n in 0..8 {
+            v += w[n] * field[idx[n]];
+        }
+        v
+    }
+
+    /// Component `c` at `p`, with the minimum and maximum of the samples used (for clamping).
+    #[inline]
+    pub fn sample_bounds(&self, c: usize, field: &[f32], p: [f32; 3]) -> (f32, f32, f32) {
+        let (idx, w) = self.stencil(c, p);
+        let mut v = 0.0;
+        let mut lo = f32::INFINITY;
+        let mut hi = f32::NEG_INFINITY;
+        for n in 0..8 {
+            let f = field[idx[n]];
+            v += w[n] * f;
+            lo = lo.min(f);
+            hi = hi.max(f);
+        }
+        (v, lo, hi)
+    }
+
+    /// The velocity vector at `p`.
+    #[inline]
+    pub fn velocity(&self, u: [&[f32]; 3], p: [f32; 3]) -> [f32; 3] {
+        [
+            self.sample(0, u[0], p),
+            self.sample(1, u[1], p),
+            self.sample(2, u[2], p),
+        ]
+    }
+
+    /// Position (grid units) of face `f` of component `c`.
+    #[inline]
+    pub fn face_position(c: usize, f: [usize; 3]) -> [f32; 3] {
+        std::array::from_fn(|a| {
+            if a == c {
+                f[a] as f32
+            } else {
+                f[a] as f32 + 0.5
+            }
+        })
+    }
+}
