@@ -20,13 +20,21 @@ pub enum AdvectionScheme {
 
 const CHUNK: usize = 1024;
 
+/// Cell-centred velocity used for tracing.
+pub(crate) struct Centred<'a> {
+    pub dims: [usize; 3],
+    pub v: &'a [[f32; 3]],
+}
+
 /// Traces from face position `x0` (grid units) over `dt_cells` (= dt / h, so velocity * dt_cells is
 /// a displacement in cells) with the midpoint rule and returns the foot point.
+/// The velocity is interpolated from its cell-centred average `vc` (one stencil for all three
+/// components: the trace needs a smooth velocity, not the staggered detail).
 #[inline]
-fn trace(layout: &Layout, u: [&[f32]; 3], x0: [f32; 3], dt_cells: f32) -> [f32; 3] {
-    let v0 = layout.velocity(u, x0);
+fn trace(layout: &Layout, vc: &Centred, x0: [f32; 3], dt_cells: f32) -> [f32; 3] {
+    let v0 = layout.sample_centred(vc.dims, vc.v, x0);
     let xm: [f32; 3] = std::array::from_fn(|a| x0[a] - 0.5 * dt_cells * v0[a]);
-    let vm = layout.velocity(u, xm);
+    let vm = layout.sample_centred(vc.dims, vc.v, xm);
     std::array::from_fn(|a| x0[a] - dt_cells * vm[a])
 }
 
@@ -35,7 +43,7 @@ fn trace(layout: &Layout, u: [&[f32]; 3], x0: [f32; 3], dt_cells: f32) -> [f32; 
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn semi_lagrangian(
     layout: &Layout,
-    u: [&[f32]; 3],
+    vc: &Centred,
     src: &[f32],
     c: usize,
     active: &[u32],
@@ -47,7 +55,7 @@ pub(crate) fn semi_lagrangian(
     let one = |idx: u32| {
         let f = layout.face_coords(c, idx as usize);
         let x0 = Layout::face_position(c, f);
-        let xb = trace(layout, u, x0, dt_cells);
+        let xb = trace(layout, vc, x0, dt_cells);
         layout.sample_bounds(c, src, xb)
     };
     match (bounds, parallel) {
@@ -88,7 +96,7 @@ pub(crate) fn semi_lagrangian(
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn maccormack_correct(
     layout: &Layout,
-    u: [&[f32]; 3],
+    vc: &Centred,
     orig: &[f32],
     hat: &[f32],
     c: usize,
@@ -102,7 +110,7 @@ pub(crate) fn maccormack_correct(
     let one = |idx: u32, fwd_val: f32, l: f32, h: f32| {
         let f = layout.face_coords(c, idx as usize);
         let x0 = Layout::face_position(c, f);
-        let xf = trace(layout, u, x0, -dt_cells);
+        let xf = trace(layout, vc, x0, -dt_cells);
         let back = layout.sample(c, hat, xf);
         let v = fwd_val + 0.5 * (orig[idx as usize] - back);
         if v.is_finite() {

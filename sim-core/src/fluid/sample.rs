@@ -126,6 +126,26 @@ impl Layout {
         (v, lo, hi)
     }
 
+    /// Trilinear interpolation of a cell-centred vector field at `p`.
+    #[inline]
+    pub fn sample_centred(&self, dims: [usize; 3], field: &[[f32; 3]], p: [f32; 3]) -> [f32; 3] {
+        let (x0, x1, tx) = Self::axis(p[0] - 0.5, dims[0], self.periodic[0]);
+        let (y0, y1, ty) = Self::axis(p[1] - 0.5, dims[1], self.periodic[1]);
+        let (z0, z1, tz) = Self::axis(p[2] - 0.5, dims[2], self.periodic[2]);
+        let r00 = dims[0] * (y0 + dims[1] * z0);
+        let r10 = dims[0] * (y1 + dims[1] * z0);
+        let r01 = dims[0] * (y0 + dims[1] * z1);
+        let r11 = dims[0] * (y1 + dims[1] * z1);
+        let lerp = |a: [f32; 3], b: [f32; 3], t: f32| -> [f32; 3] {
+            [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])]
+        };
+        let c00 = lerp(field[r00 + x0], field[r00 + x1], tx);
+        let c10 = lerp(field[r10 + x0], field[r10 + x1], tx);
+        let c01 = lerp(field[r01 + x0], field[r01 + x1], tx);
+        let c11 = lerp(field[r11 + x0], field[r11 + x1], tx);
+        lerp(lerp(c00, c10, ty), lerp(c01, c11, ty), tz)
+    }
+
     /// The velocity vector at `p`.
     #[inline]
     pub fn velocity(&self, u: [&[f32]; 3], p: [f32; 3]) -> [f32; 3] {

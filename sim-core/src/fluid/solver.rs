@@ -9,7 +9,7 @@ use super::grid::FluidGrid;
 use super::multigrid::{L_FLUID, L_OPEN, L_SOLID};
 use super::pressure::{PressureSolver, ProjectionMethod};
 use super::sample::Layout;
-use super::topology::{self, FaceSet, ACTIVE, EXT1, FIXED, NONE};
+use super::topology::{self, FaceSet, NONE};
 use super::viscosity::{self, ViscosityMode, ViscosityScratch};
 use super::{CellLabel, FluidError};
 
@@ -139,6 +139,8 @@ pub struct FluidSolver {
     /// Face velocities per component (m/s).
     u: [Vec<f32>; 3],
     tmp: [Vec<f32>; 3],
+    /// Cell-centred velocity (for tracing).
+    centred: Vec<[f32; 3]>,
     faces: [FaceSet; 3],
     compact: [Vec<f32>; 3],
     lo: [Vec<f32>; 3],
@@ -159,6 +161,7 @@ impl FluidSolver {
         let u: [Vec<f32>; 3] = std::array::from_fn(|c| vec![0.0; layout.face_count(c)]);
         let mut s = Self {
             tmp: u.clone(),
+            centred: vec![[0.0; 3]; grid.cell_count()],
             u,
             grid,
             params,
@@ -232,7 +235,7 @@ impl FluidSolver {
 
     /// Sets every face velocity from `field(component, position_m)` (initial conditions), then
     /// re-applies boundary values. Does not project.
-    pub fn set_velocity_field(&mut self, field: impl Fn(usize, [f64; 3]) -> f64) {
+    pub fn set_velocity_field(&mut self, mut field: impl FnMut(usize, [f64; 3]) -> f64) {
         for c in 0..3 {
             for idx in 0..self.u[c].len() {
                 let x = self.face_position_m(c, idx);
@@ -298,11 +301,27 @@ impl FluidSolver {
             for &[idx, a, b] in &set.fixed {
                 self.u[c][idx as usize] = topology::wall_velocity(&self.grid, c, a, b);
             }
-            let g = &mut self.ghost[c];
-            g.fill(0.0);
-            for &[n, a, b] in &set.ghosts {
-                g[n as usize] += 2.0 * topology::wall_velocity(&self.grid, c, a, b);
+        }
+    }
+
+    /// Wall-ghost terms of the viscous stencil of component `c`. The ghost value behind a wall is the
+    /// quadratic extrapolation through the wall velocity w and the two faces inside,
+    /// `8/3 w - 2 u1 + 1/3 u2`: the `2 w - u1` part is implicit (in the stencil diagonal), the rest is
+    /// lagged from the current field, so the matrix stays symmetric and steady states see the exact
+    /// quadratic wall profile (a linear ghost alone over-predicts duct flow by ~1.5 % at 16 cells).
+    fn update_ghosts(&mut self, c: usize) {
+        let set = &self.faces[c];
+        let g = &mut self.ghost[c];
+        let u = &self.u[c];
+        g.fill(0.0);
+        for &[n, a, b, opp] in &set.ghosts {
+            let w = topology::wall_velocity(&self.grid, c, a, b);
+            let mut v = 2.0 * w;
+            if opp != NONE {
+                let u1 = u[set.active[n as usize] as usize];
+                v += 2.0 / 3.0 * w - u1 + u[opp as usize] / 3.0;
             }
+            g[n as usize] += v;
         }
     }
 
@@ -311,24 +330,13 @@ impl FluidSolver {
         for c in 0..3 {
             let set = &self.faces[c];
             let u = &mut self.u[c];
-            for (list, from) in [(&set.ext1, ACTIVE), (&set.ext2, EXT1)] {
-                for &idx in list {
-                    let f = self.layout.face_coords(c, idx as usize);
-                    let mut s = 0.0;
-                    let mut n = 0;
-                    for slot in 0..6 {
-                        let dir = if slot % 2 == 0 { -1 } else { 1 };
-                        if let Some(g) = topology::face_neighbour(&self.layout, c, f, slot / 2, dir) {
-                            let gi = self.layout.face_index(c, g);
-                            let cl = set.class[gi];
-                            if cl == from || (from == ACTIVE && cl == FIXED) {
-                                s += u[gi];
-                                n += 1;
-                            }
-                        }
-                    }
-                    u[idx as usize] = if n > 0 { s / n as f32 } else { 0.0 };
+            for (n, &idx) in set.ext1.iter().chain(&set.ext2).enumerate() {
+                let (s0, s1) = (set.ext_start[n] as usize, set.ext_start[n + 1] as usize);
+                let mut s = 0.0;
+                for &g in &set.ext_src[s0..s1] {
+                    s += u[g as usize];
                 }
+                u[idx as usize] = if s1 > s0 { s / (s1 - s0) as f32 } else { 0.0 };
             }
         }
     }
@@ -405,22 +413,27 @@ impl FluidSolver {
         self.advect(dt / h, parallel);
         stats.advect_ms += t.elapsed().as_secs_f64() * 1e3;
 
-        // Body forces and viscosity.
+        // Body forces and viscosity. The force goes in before an implicit and after an explicit
+        // viscous step, and the lagged wall terms are taken before the force: then a steady state
+        // of the split step is the steady state of the equations, whatever dt.
         let t = Instant::now();
-        let f = self.params.body_force_m_s2;
-        for c in 0..3 {
-            if f[c] != 0.0 {
-                let df = (f[c] * dt) as f32;
-                for &idx in &self.faces[c].active {
-                    self.u[c][idx as usize] += df;
-                }
+        let nu = self.params.viscosity_m2_s;
+        let a = nu * dt / (h * h);
+        let implicit = nu > 0.0 && a > viscosity::EXPLICIT_LIMIT;
+        stats.viscosity = match (nu > 0.0, implicit) {
+            (false, _) => ViscosityMode::Skipped,
+            (true, false) => ViscosityMode::Explicit,
+            (true, true) => ViscosityMode::Implicit,
+        };
+        if nu > 0.0 {
+            for c in 0..3 {
+                self.update_ghosts(c);
             }
         }
-        stats.viscosity = ViscosityMode::Skipped;
-        if self.params.viscosity_m2_s > 0.0 {
-            let a = self.params.viscosity_m2_s * dt / (h * h);
-            let implicit = a > viscosity::EXPLICIT_LIMIT;
-            stats.viscosity = if implicit { ViscosityMode::Implicit } else { ViscosityMode::Explicit };
+        if nu == 0.0 || implicit {
+            self.add_body_force(dt);
+        }
+        if nu > 0.0 {
             for c in 0..3 {
                 let set = &self.faces[c];
                 if implicit {
@@ -443,22 +456,38 @@ impl FluidSolver {
                     }
                 }
             }
+            if !implicit {
+                self.add_body_force(dt);
+            }
         }
         stats.diffuse_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
         self.project(dt, stats);
-        self.extrapolate();
         stats.project_ms += t.elapsed().as_secs_f64() * 1e3;
         self.time_s += dt;
+    }
+
+    fn add_body_force(&mut self, dt: f64) {
+        let f = self.params.body_force_m_s2;
+        for c in 0..3 {
+            if f[c] != 0.0 {
+                let df = (f[c] * dt) as f32;
+                for &idx in &self.faces[c].active {
+                    self.u[c][idx as usize] += df;
+                }
+            }
+        }
     }
 
     fn advect(&mut self, dt_cells: f64, parallel: bool) {
         let dt_cells = dt_cells as f32;
         let mac = self.params.advection == AdvectionScheme::MacCormack;
+        self.update_centred();
         let layout = &self.layout;
         let [u0, u1, u2] = &self.u;
         let uref: [&[f32]; 3] = [u0, u1, u2];
+        let vc = advection::Centred { dims: self.grid.dims(), v: &self.centred };
         for c in 0..3 {
             let set = &self.faces[c];
             let bounds = if mac {
@@ -468,7 +497,7 @@ impl FluidSolver {
             };
             advection::semi_lagrangian(
                 layout,
-                uref,
+                &vc,
                 uref[c],
                 c,
                 &set.active,
@@ -488,7 +517,7 @@ impl FluidSolver {
             for c in 0..3 {
                 advection::maccormack_correct(
                     layout,
-                    uref,
+                    &vc,
                     uref[c],
                     &self.tmp[c],
                     c,
@@ -504,6 +533,34 @@ impl FluidSolver {
         for c in 0..3 {
             for (n, &idx) in self.faces[c].active.iter().enumerate() {
                 self.u[c][idx as usize] = self.compact[c][n];
+            }
+        }
+    }
+
+    /// Averages the face velocities to cell centres.
+    fn update_centred(&mut self) {
+        let dims = self.grid.dims();
+        let periodic = self.grid.periodic();
+        let [nx, ny, nz] = dims;
+        let mut idx = 0;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let cell = [i, j, k];
+                    let mut v = [0.0f32; 3];
+                    for (c, vc) in v.iter_mut().enumerate() {
+                        let lo = self.layout.face_index(c, cell);
+                        let mut up = cell;
+                        up[c] += 1;
+                        if periodic[c] && up[c] == dims[c] {
+                            up[c] = 0;
+                        }
+                        let hi = self.layout.face_index(c, up);
+                        *vc = 0.5 * (self.u[c][lo] + self.u[c][hi]);
+                    }
+                    self.centred[idx] = v;
+                    idx += 1;
+                }
             }
         }
     }

@@ -34,14 +34,19 @@ pub(crate) struct FaceSet {
     pub stencil: Vec<[u32; 6]>,
     /// Diagonal of the negative Laplacian (6, plus one per wall ghost, minus one per outflow side).
     pub diag: Vec<f32>,
-    /// Wall ghosts: (compact face, cell a, cell b): the wall velocity is the mean of the prescribed
-    /// velocities of `Velocity` cells among a and b (zero for solids and outside).
-    pub ghosts: Vec<[u32; 3]>,
+    /// Wall ghosts: (compact face, cell a, cell b, opposite face): the wall velocity is the mean of the
+    /// prescribed velocities of `Velocity` cells among a and b (zero for solids and outside); the
+    /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
+    /// quadratic wall extrapolation.
+    pub ghosts: Vec<[u32; 4]>,
     /// Fixed faces: (full face, cell a, cell b) as for ghosts.
     pub fixed: Vec<[u32; 3]>,
     /// Extrapolation layers: faces next to active faces, and next to those.
     pub ext1: Vec<u32>,
     pub ext2: Vec<u32>,
+    /// Sources of the extrapolated faces (ext1 then ext2): `ext_src[ext_start[n]..ext_start[n+1]]`.
+    pub ext_start: Vec<u32>,
+    pub ext_src: Vec<u32>,
 }
 
 fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
@@ -137,6 +142,8 @@ impl FaceSet {
         self.ghosts.clear();
         self.ext1.clear();
         self.ext2.clear();
+        self.ext_start.clear();
+        self.ext_src.clear();
 
         for idx in 0..nf {
             let f = layout.face_coords(c, idx);
@@ -184,10 +191,16 @@ impl FaceSet {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
                     let slot = 2 * d + s;
                     let g = face_neighbour(layout, c, f, d, dir);
+                    let opposite = || {
+                        face_neighbour(layout, c, f, d, -dir)
+                            .map(|o| layout.face_index(c, o))
+                            .filter(|&o| matches!(self.class[o], ACTIVE | FIXED))
+                            .map_or(NONE, |o| o as u32)
+                    };
                     let Some(g) = g else {
                         // Beyond a non-periodic tangential boundary: wall at rest.
                         diag += 1.0;
-                        self.ghosts.push([n as u32, NONE, NONE]);
+                        self.ghosts.push([n as u32, NONE, NONE, opposite()]);
                         continue;
                     };
                     let gi = layout.face_index(c, g);
@@ -204,7 +217,7 @@ impl FaceSet {
                     let (ul, ui) = label_of(grid, up);
                     if ll.is_wall() && ul.is_wall() {
                         diag += 1.0;
-                        self.ghosts.push([n as u32, li, ui]);
+                        self.ghosts.push([n as u32, li, ui, opposite()]);
                     } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
                         st[slot] = match self.class[gi] {
                             ACTIVE => self.compact[gi],
@@ -231,6 +244,20 @@ impl FaceSet {
                         .is_some_and(|g| self.class[layout.face_index(c, g)] == from)
                 });
                 if near {
+                    if self.ext_start.is_empty() {
+                        self.ext_start.push(0);
+                    }
+                    for slot in 0..6 {
+                        let dir = if slot % 2 == 0 { -1 } else { 1 };
+                        if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
+                            let gi = layout.face_index(c, g);
+                            let cl = self.class[gi];
+                            if cl == from || (from == ACTIVE && cl == FIXED) {
+                                self.ext_src.push(gi as u32);
+                            }
+                        }
+                    }
+                    self.ext_start.push(self.ext_src.len() as u32);
                     self.class[idx] = layer;
                     if layer == EXT1 {
                         self.ext1.push(idx as u32);
