@@ -23,7 +23,8 @@ pub(crate) struct Level {
     pub label: Vec<u8>,
     pub row_of_cell: Vec<u32>,
     pub cell_of_row: Vec<u32>,
-    /// Neighbour rows (NONE for wall or open neighbours), order -x +x -y +y -z +z.
+    /// Neighbour rows, order -x +x -y +y -z +z; a wall or open neighbour points at the extra slot
+    /// `rows()` of `x`, which is always zero, so the smoother needs no branches.
     pub nbr: Vec<[u32; 6]>,
     /// Number of fluid or open neighbours.
     pub diag: Vec<f32>,
@@ -83,10 +84,11 @@ impl Level {
         self.inv_diag.clear();
         self.red.clear();
         self.black.clear();
+        let zero_slot = self.cell_of_row.len() as u32;
         for row in 0..self.cell_of_row.len() {
             let ci = self.cell_of_row[row] as usize;
             let c = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
-            let mut nb = [NONE; 6];
+            let mut nb = [zero_slot; 6];
             let mut diag = 0.0f32;
             for axis in 0..3 {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
@@ -111,7 +113,7 @@ impl Level {
                 self.black.push(row as u32);
             }
         }
-        let n = self.cell_of_row.len();
+        let n = self.cell_of_row.len() + 1;
         for v in [&mut self.x, &mut self.b, &mut self.r] {
             v.clear();
             v.resize(n, 0.0);
@@ -120,7 +122,7 @@ impl Level {
 
     /// Labels of the next coarser level, or None when this level should be the coarsest.
     fn coarsen(&self, coarse: &mut Level) -> bool {
-        if self.rows() <= 64 || self.dims.iter().all(|&n| n <= 2) {
+        if self.rows() <= 8 || self.dims.iter().all(|&n| n <= 1) {
             return false;
         }
         for a in 0..3 {
@@ -164,12 +166,11 @@ impl Level {
     #[inline]
     fn relax(&mut self, row: usize) {
         let nb = self.nbr[row];
-        let mut s = self.b[row];
-        for &n in &nb {
-            if n != NONE {
-                s += self.x[n as usize];
-            }
-        }
+        let x = &self.x;
+        let s = self.b[row]
+            + (x[nb[0] as usize] + x[nb[1] as usize])
+            + (x[nb[2] as usize] + x[nb[3] as usize])
+            + (x[nb[4] as usize] + x[nb[5] as usize]);
         self.x[row] = s * self.inv_diag[row];
     }
 
@@ -200,13 +201,11 @@ impl Level {
     fn residual(&mut self) {
         for row in 0..self.rows() {
             let nb = self.nbr[row];
-            let mut s = self.b[row] - self.diag[row] * self.x[row];
-            for &n in &nb {
-                if n != NONE {
-                    s += self.x[n as usize];
-                }
-            }
-            self.r[row] = s;
+            let x = &self.x;
+            self.r[row] = self.b[row] - self.diag[row] * x[row]
+                + (x[nb[0] as usize] + x[nb[1] as usize])
+                + (x[nb[2] as usize] + x[nb[3] as usize])
+                + (x[nb[4] as usize] + x[nb[5] as usize]);
         }
     }
 }

@@ -11,7 +11,6 @@ use rayon::prelude::*;
 
 use super::multigrid::{Level, Multigrid};
 use super::regions::Regions;
-use super::topology::NONE;
 use serde::{Deserialize, Serialize};
 
 /// How the pressure is solved.
@@ -55,11 +54,12 @@ pub(crate) struct PressureSolver {
 const CHUNK: usize = 2048;
 
 fn matvec(l: &Level, x: &[f64], y: &mut [f64], parallel: bool) {
+    let n_rows = x.len();
     let row_op = |row: usize, x: &[f64]| {
         let nb = l.nbr[row];
         let mut s = l.diag[row] as f64 * x[row];
         for &n in &nb {
-            if n != NONE {
+            if (n as usize) < n_rows {
                 s -= x[n as usize];
             }
         }
@@ -189,11 +189,12 @@ impl PressureSolver {
         self.regions.remove_closed_means(&mut self.b);
         self.q.fill(0.0);
         let l = &self.mg.levels[0];
+        let n_rows = self.q.len();
         for _ in 0..sweeps {
-            for row in 0..self.q.len() {
+            for row in 0..n_rows {
                 let mut s = self.b[row];
                 for &nb in &l.nbr[row] {
-                    if nb != NONE {
+                    if (nb as usize) < n_rows {
                         s += self.q[nb as usize];
                     }
                 }

@@ -42,13 +42,13 @@ impl Regions {
             while let Some(r) = self.queue.pop() {
                 size += 1;
                 let nb = level.nbr[r as usize];
-                let fluid_nb = nb.iter().filter(|&&x| x != NONE).count() as f32;
+                let fluid_nb = nb.iter().filter(|&&x| (x as usize) < n).count() as f32;
                 // Fluid neighbours through a periodic self-wrap count too; diag counts open ones.
                 if level.diag[r as usize] > fluid_nb {
                     closed = false;
                 }
                 for &x in &nb {
-                    if x != NONE && self.of_row[x as usize] == NONE {
+                    if (x as usize) < n && self.of_row[x as usize] == NONE {
                         self.of_row[x as usize] = id;
                         self.queue.push(x);
                     }

@@ -177,6 +177,8 @@ impl FluidSolver {
             pressure_pa: Vec::new(),
             time_s: 0.0,
         };
+        // Measured on the benchmark cavity: 2 sweeps and a coarse scale of 1/2 (twice Galerkin,
+        // compensating piecewise-constant prolongation) give ~8 iterations to 1e-6.
         s.pressure.mg.coarse_scale = 0.5;
         s.pressure.mg.sweeps = 2;
         s.pressure.mg.coarsest_sweeps = 16;
