@@ -15,6 +15,9 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Fluid solver: run case files, benchmark, soak.
+    #[command(subcommand)]
+    Fluid(hydrometra_daemon::cli::fluid::FluidCommand),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +34,6 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Fluid(cmd) => hydrometra_daemon::cli::fluid::run(cmd),
     }
 }

@@ -1,1 +1,2 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
+pub mod fluid;

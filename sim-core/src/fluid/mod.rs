@@ -25,7 +25,9 @@
 
 mod advection;
 pub mod cavity;
+pub mod benchmark;
 pub mod case;
+pub mod soak;
 mod grid;
 mod labels;
 mod multigrid;
