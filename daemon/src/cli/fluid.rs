@@ -163,6 +163,7 @@ fn bench(a: BenchArgs) -> Result<()> {
     anyhow::ensure!(a.steps > 0, "--steps must be at least 1");
     anyhow::ensure!(a.dt_s.is_finite() && a.dt_s > 0.0, "--dt-s must be > 0, got {}", a.dt_s);
     let mut rows: Vec<(BenchRow, BenchRow)> = Vec::new();
+    let mut cpu: Vec<(f64, f64)> = Vec::new();
     for &mm in &a.voxels_mm {
         let h = mm * 1e-3;
         let ours = FluidParams {
@@ -175,13 +176,26 @@ fn bench(a: BenchArgs) -> Result<()> {
             projection: ProjectionMethod::GaussSeidel { sweeps: a.sweeps },
             ..Default::default()
         };
+        let c0 = process_cpu_s();
         let r1 = bench_cavity(h, a.jet_m_s, a.dt_s, a.warmup, a.steps, ours)?;
+        let c1 = process_cpu_s();
         let r2 = bench_cavity(h, a.jet_m_s, a.dt_s, a.warmup, a.steps, base)?;
+        let c2 = process_cpu_s();
+        let per_step = |c: Option<f64>, d: Option<f64>| match (c, d) {
+            (Some(c), Some(d)) => (d - c) * 1e3 / (a.warmup + a.steps) as f64,
+            _ => f64::NAN,
+        };
+        cpu.push((per_step(c0, c1), per_step(c1, c2)));
         tracing::info!("{mm} mm done");
         rows.push((r1, r2));
     }
     if a.json {
-        println!("{}", serde_json::to_string_pretty(&rows)?);
+        let out: Vec<_> = rows
+            .iter()
+            .zip(&cpu)
+            .map(|((o, b), (co, cb))| serde_json::json!({"ours": o, "baseline": b, "ours_cpu_ms_per_step": co, "baseline_cpu_ms_per_step": cb}))
+            .collect();
+        println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
     let [sa, sb, sc] = CAVITY_SEMI_AXES_M.map(|v| v * 1e3);
@@ -196,15 +210,15 @@ fn bench(a: BenchArgs) -> Result<()> {
         a.sweeps
     );
     println!();
-    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | ours ms mean ± sem | ours p99 | ours advect/project ms | ours CG its | ours max div h/U | GS ms mean ± sem | GS p99 | GS mean div h/U |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for (o, b) in &rows {
+    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | ours ms mean ± sem | ours p99 | ours CPU ms | ours advect/project ms | ours CG its | ours max div h/U | GS ms mean ± sem | GS p99 | GS CPU ms | GS mean div h/U |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for ((o, b), (co, cb)) in rows.iter().zip(&cpu) {
         let paper = PAPER_VOXELS_M.iter().position(|&v| (v - o.voxel_m).abs() < 1e-9);
         let (pf, pm) = paper.map_or(("-".into(), "-".into()), |i| {
             (PAPER_FLUID_VOXELS[i].to_string(), PAPER_MS[i].to_string())
         });
         println!(
-            "| {:.1} | {} | {} ({}) | {} | {:.2} ± {:.2} | {:.2} | {:.2} / {:.2} | {:.1} | {:.1e} | {:.2} ± {:.2} | {:.2} | {:.1e} |",
+            "| {:.1} | {} | {} ({}) | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.2} / {:.2} | {:.1} | {:.1e} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.1e} |",
             o.voxel_m * 1e3,
             o.voxels_total,
             o.fluid_voxels,
@@ -213,6 +227,7 @@ fn bench(a: BenchArgs) -> Result<()> {
             o.ms_mean,
             o.ms_sem,
             o.ms_p99,
+            co,
             o.advect_ms_mean,
             o.project_ms_mean,
             o.iterations_mean,
@@ -220,10 +235,24 @@ fn bench(a: BenchArgs) -> Result<()> {
             b.ms_mean,
             b.ms_sem,
             b.ms_p99,
+            cb,
             b.div_rel_mean
         );
     }
     Ok(())
+}
+
+/// CPU time (user + system, all threads) of this process so far, from /proc/self/stat (Linux);
+/// None elsewhere. Under a loaded machine this is closer to the unloaded wall time than wall time is.
+fn process_cpu_s() -> Option<f64> {
+    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
+    // Fields after the command name (which is in parentheses and may contain spaces).
+    let rest = &stat[stat.rfind(')')? + 2..];
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let utime: f64 = f.get(11)?.parse().ok()?;
+    let stime: f64 = f.get(12)?.parse().ok()?;
+    // Linux reports in clock ticks of 1/100 s (USER_HZ) on every mainstream configuration.
+    Some((utime + stime) / 100.0)
 }
 
 fn soak(a: SoakArgs) -> Result<()> {

@@ -52,16 +52,17 @@ pub(crate) fn semi_lagrangian(
     bounds: Option<(&mut [f32], &mut [f32])>,
     parallel: bool,
 ) {
-    let one = |idx: u32| {
+    let foot = |idx: u32| {
         let f = layout.face_coords(c, idx as usize);
         let x0 = Layout::face_position(c, f);
-        let xb = trace(layout, vc, x0, dt_cells);
-        layout.sample_bounds(c, src, xb)
+        trace(layout, vc, x0, dt_cells)
     };
+    let one = |idx: u32| layout.sample_bounds(c, src, foot(idx));
+    let plain = |idx: u32| layout.sample(c, src, foot(idx));
     match (bounds, parallel) {
         (None, false) => {
             for (o, &idx) in out.iter_mut().zip(active) {
-                *o = one(idx).0;
+                *o = plain(idx);
             }
         }
         (None, true) => out
@@ -69,7 +70,7 @@ pub(crate) fn semi_lagrangian(
             .zip(active.par_chunks(CHUNK))
             .for_each(|(os, is)| {
                 for (o, &idx) in os.iter_mut().zip(is) {
-                    *o = one(idx).0;
+                    *o = plain(idx);
                 }
             }),
         (Some((lo, hi)), false) => {

@@ -32,10 +32,12 @@ impl Layout {
 
     #[inline]
     pub fn face_coords(&self, c: usize, idx: usize) -> [usize; 3] {
+        // u32 arithmetic: grids are limited to < 2^30 cells, and 32-bit division is much cheaper.
         let d = self.fdims[c];
-        let i = idx % d[0];
-        let r = idx / d[0];
-        [i, r % d[1], r / d[1]]
+        let (idx, d0, d1) = (idx as u32, d[0] as u32, d[1] as u32);
+        let i = idx % d0;
+        let r = idx / d0;
+        [i as usize, (r % d1) as usize, (r / d1) as usize]
     }
 
     pub fn face_count(&self, c: usize) -> usize {
