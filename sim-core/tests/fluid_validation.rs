@@ -3,24 +3,22 @@
 use hydrometra_sim::fluid::{
     AdvectionScheme, CellLabel, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
 };
-use std::f64::consts::PI;
+use hydrometra_sim::fluid::validation::{duct_series, ethier_steinman, square_duct, taylor_green};
+
+fn duct(n: usize, dt_factor: f64, steps: usize) -> (f64, f64) {
+    let (r, worst) = square_duct(n, dt_factor, steps).unwrap();
+    assert!(r.all_converged);
+    (r.error, worst)
+}
+
+fn tg(n: usize, scheme: AdvectionScheme) -> f64 {
+    let r = taylor_green(n, scheme).unwrap();
+    assert!(r.all_converged, "{r:?}");
+    r.error
+}
 
 fn water() -> FluidParams {
     FluidParams { density_kg_m3: 1000.0, viscosity_m2_s: 1e-6, ..Default::default() }
-}
-
-/// Square-duct velocity u / (a^2 G / mu) at (y/a, z/a), from the series in references.md.
-fn duct_series(y: f64, z: f64) -> f64 {
-    let mut sum = 0.0;
-    for m in 0..200 {
-        let n = (2 * m + 1) as f64;
-        let sign = if m % 2 == 0 { 1.0 } else { -1.0 };
-        let ratio = ((n * PI * z / 2.0).abs() - n * PI / 2.0).exp()
-            * (1.0 + (-n * PI * z.abs()).exp())
-            / (1.0 + (-n * PI).exp());
-        sum += sign * (1.0 - ratio) * (n * PI * y / 2.0).cos() / n.powi(3);
-    }
-    16.0 / PI.powi(3) * sum
 }
 
 #[test]
@@ -32,65 +30,15 @@ fn duct_series_matches_the_reference_profile() {
     }
 }
 
-/// Steady Poiseuille flow in a square duct (walls = the grid's outside), x periodic, driven by a body
-/// force. Returns (flow rate error, max profile error / u_max along the centre line).
-fn square_duct(n: usize, dt_factor: f64, steps: usize) -> (f64, f64) {
-    let h = 1e-3;
-    let l = n as f64 * h;
-    let a = l / 2.0;
-    let nu = 1e-6;
-    let rho = 1000.0;
-    let mu = rho * nu;
-    // Pick G so u_max ~ 1 mm/s.
-    let g_over_mu = 1e-3 / (0.2946854 * a * a);
-    let g = g_over_mu * mu;
-    let grid = FluidGrid::new([4, n, n], h, [0.0, -a, -a], [true, false, false]).unwrap();
-    let params = FluidParams {
-        density_kg_m3: rho,
-        viscosity_m2_s: nu,
-        body_force_m_s2: [g / rho, 0.0, 0.0],
-        tolerance: 1e-7,
-        ..Default::default()
-    };
-    let mut s = FluidSolver::new(grid, params).unwrap();
-    let dt = dt_factor * h * h / nu;
-    for _ in 0..steps {
-        let st = s.step(dt).unwrap();
-        assert!(st.projection_converged);
-    }
-    // Flow rate through the x = 0 face plane.
-    let u = s.face_velocities(0);
-    let mut q = 0.0;
-    for k in 0..n {
-        for j in 0..n {
-            q += u[4 * (j + n * k)] as f64 * h * h;
-        }
-    }
-    let q_exact = 0.0351443 * l.powi(4) * g / mu;
-    let q_err = (q - q_exact).abs() / q_exact;
-    // Every x-face of the cross-section against the series solution.
-    let u_max = 0.2946854 * a * a * g / mu;
-    let mut worst = 0.0f64;
-    for k in 0..n {
-        for j in 0..n {
-            let y = (j as f64 + 0.5) * h - a;
-            let z = (k as f64 + 0.5) * h - a;
-            let exact = duct_series(y / a, z / a) * a * a * g / mu;
-            worst = worst.max((u[4 * (j + n * k)] as f64 - exact).abs() / u_max);
-        }
-    }
-    (q_err, worst)
-}
-
 #[test]
 fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
     // Implicit viscosity (nu dt / h^2 = 2), run to steady state.
-    let (q_err, prof) = square_duct(16, 2.0, 200);
+    let (q_err, prof) = duct(16, 2.0, 200);
     println!("square duct 16 cells: flow-rate error {:.3} %, max face error {:.3} % of u_max", q_err * 100.0, prof * 100.0);
     assert!(q_err < 0.01, "flow rate error {q_err}");
     assert!(prof < 0.01, "profile error {prof}");
     // Second order: the error at 8 cells is about four times larger.
-    let (q8, _) = square_duct(8, 2.0, 200);
+    let (q8, _) = duct(8, 2.0, 200);
     println!("square duct 8 cells: flow-rate error {:.3} %, observed order {:.2}", q8 * 100.0, (q8 / q_err).log2());
     assert!(q8 > 2.5 * q_err);
 }
@@ -98,54 +46,20 @@ fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
 #[test]
 fn poiseuille_steady_state_is_independent_of_time_step_and_viscosity_mode() {
     // Explicit viscosity (nu dt / h^2 = 0.07) against implicit (nu dt / h^2 = 2).
-    let (q_exp, _) = square_duct(8, 0.07, 3000);
-    let (q_imp, _) = square_duct(8, 2.0, 200);
+    let (q_exp, _) = duct(8, 0.07, 3000);
+    let (q_imp, _) = duct(8, 2.0, 200);
     println!("square duct 8 cells: flow-rate error explicit {:.4} %, implicit {:.4} %", q_exp * 100.0, q_imp * 100.0);
     // The split step's steady state must not depend on dt or on the viscosity mode.
     assert!((q_exp - q_imp).abs() < 1e-4, "explicit {q_exp} vs implicit {q_imp}");
 }
 
-/// 2D Taylor-Green vortex on an n x n x 1 periodic grid; returns nu_eff / nu.
-fn taylor_green(n: usize, scheme: AdvectionScheme) -> f64 {
-    let l = 1.0;
-    let h = l / n as f64;
-    let k = 2.0 * PI / l;
-    let u0 = 1.0;
-    let nu = 0.01;
-    let grid = FluidGrid::new([n, n, 1], h, [0.0; 3], [true; 3]).unwrap();
-    let params = FluidParams {
-        density_kg_m3: 1.0,
-        viscosity_m2_s: nu,
-        advection: scheme,
-        ..Default::default()
-    };
-    let mut s = FluidSolver::new(grid, params).unwrap();
-    s.set_velocity_field(|c, x| match c {
-        0 => u0 * (k * x[0]).sin() * (k * x[1]).cos(),
-        1 => -u0 * (k * x[0]).cos() * (k * x[1]).sin(),
-        _ => 0.0,
-    });
-    let e0 = s.kinetic_energy_j();
-    let dt = 0.5 * h / u0;
-    let t_end = 0.5;
-    let steps = (t_end / dt).round() as usize;
-    for _ in 0..steps {
-        let st = s.step(dt).unwrap();
-        assert!(st.max_div_rel <= 1e-5);
-    }
-    let t = s.time_s();
-    let e = s.kinetic_energy_j();
-    let nu_eff = -(e / e0).ln() / (4.0 * k * k * t);
-    nu_eff / nu
-}
-
 #[test]
 fn taylor_green_effective_viscosity_converges_with_resolution() {
-    let r16 = taylor_green(16, AdvectionScheme::SemiLagrangian);
-    let r32 = taylor_green(32, AdvectionScheme::SemiLagrangian);
-    let r64 = taylor_green(64, AdvectionScheme::SemiLagrangian);
-    let m32 = taylor_green(32, AdvectionScheme::MacCormack);
-    let m64 = taylor_green(64, AdvectionScheme::MacCormack);
+    let r16 = tg(16, AdvectionScheme::SemiLagrangian);
+    let r32 = tg(32, AdvectionScheme::SemiLagrangian);
+    let r64 = tg(64, AdvectionScheme::SemiLagrangian);
+    let m32 = tg(32, AdvectionScheme::MacCormack);
+    let m64 = tg(64, AdvectionScheme::MacCormack);
     println!("Taylor-Green nu_eff/nu at CFL 0.5, Re 100: SL 16/32/64 = {r16:.3} {r32:.3} {r64:.3}; MacCormack 32/64 = {m32:.3} {m64:.3}");
     // Numerical dissipation only adds: nu_eff >= nu (within 2 %), and the excess shrinks with h.
     for r in [r16, r32, r64, m32, m64] {
@@ -157,89 +71,10 @@ fn taylor_green_effective_viscosity_converges_with_resolution() {
     assert!((m64 - 1.0).abs() < 0.1);
 }
 
-/// Ethier-Steinman exact velocity.
-fn ethier_steinman(x: [f64; 3], t: f64, nu: f64) -> [f64; 3] {
-    let (a, d) = (PI / 4.0, PI / 2.0);
-    let f = (-nu * d * d * t).exp();
-    let [x, y, z] = x;
-    [
-        -a * ((a * x).exp() * (a * y + d * z).sin() + (a * z).exp() * (a * x + d * y).cos()) * f,
-        -a * ((a * y).exp() * (a * z + d * x).sin() + (a * x).exp() * (a * y + d * z).cos()) * f,
-        -a * ((a * z).exp() * (a * x + d * y).sin() + (a * y).exp() * (a * z + d * x).cos()) * f,
-    ]
-}
-
-/// Ethier-Steinman on [-1,1]^3 with n cells across, prescribed velocity on every face; returns the
-/// max velocity error over fluid faces relative to the max exact speed at t_end.
-fn ethier_steinman_error(n: usize) -> f64 {
-    let nu = 1.0;
-    let h = 2.0 / n as f64;
-    let m = n + 2;
-    let mut grid = FluidGrid::new([m; 3], h, [-1.0 - h; 3], [false; 3]).unwrap();
-    for k in 0..m {
-        for j in 0..m {
-            for i in 0..m {
-                let c = [i, j, k];
-                if c.iter().any(|&v| v == 0 || v == m - 1) {
-                    grid.set_label(c, CellLabel::Velocity).unwrap();
-                }
-            }
-        }
-    }
-    let params = FluidParams {
-        density_kg_m3: 1.0,
-        viscosity_m2_s: nu,
-        tolerance: 1e-7,
-        ..Default::default()
-    };
-    let mut s = FluidSolver::new(grid, params).unwrap();
-    let set_boundary = |s: &mut FluidSolver, t: f64| {
-        for k in 0..m {
-            for j in 0..m {
-                for i in 0..m {
-                    let c = [i, j, k];
-                    if c.iter().any(|&v| v == 0 || v == m - 1) {
-                        // The point on the boundary this cell borders.
-                        let x = s.grid().cell_centre_m(c).map(|v| v.clamp(-1.0, 1.0));
-                        let u = ethier_steinman(x, t, nu);
-                        s.grid_mut().set_velocity(c, u.map(|v| v as f32)).unwrap();
-                    }
-                }
-            }
-        }
-    };
-    set_boundary(&mut s, 0.0);
-    s.set_velocity_field(|c, x| ethier_steinman(x, 0.0, nu)[c]);
-    s.project_now(1.0);
-    let dt = 0.25 * h * h;
-    let t_end = 0.05;
-    let steps = (t_end / dt).round() as usize;
-    for _ in 0..steps {
-        let t_next = s.time_s() + dt;
-        set_boundary(&mut s, t_next);
-        s.step(dt).unwrap();
-    }
-    let t = s.time_s();
-    let mut err = 0.0f64;
-    let mut umax = 0.0f64;
-    for c in 0..3 {
-        let u = s.face_velocities(c);
-        for (idx, &v) in u.iter().enumerate() {
-            let x = s.face_position_m(c, idx);
-            if x.iter().all(|&v| v > -1.0 + 0.5 * h && v < 1.0 - 0.5 * h) {
-                let e = ethier_steinman(x, t, nu)[c];
-                err = err.max((v as f64 - e).abs());
-                umax = umax.max(e.abs());
-            }
-        }
-    }
-    err / umax
-}
-
 #[test]
 fn ethier_steinman_converges() {
-    let e8 = ethier_steinman_error(8);
-    let e16 = ethier_steinman_error(16);
+    let e8 = ethier_steinman(8).unwrap().error;
+    let e16 = ethier_steinman(16).unwrap().error;
     let order = (e8 / e16).log2();
     println!("Ethier-Steinman max velocity error: n=8 {e8:.3e}, n=16 {e16:.3e}, observed order {order:.2}");
     assert!(e16 < 0.02, "error {e16}");

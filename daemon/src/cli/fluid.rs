@@ -21,6 +21,19 @@ pub enum FluidCommand {
     Bench(BenchArgs),
     /// The stability soak: random inflow switching, CFL up to 50, labels flipping.
     Soak(SoakArgs),
+    /// The analytic validation cases at several resolutions: error against run time.
+    Validate(ValidateArgs),
+}
+
+/// Arguments of `fluid validate`.
+#[derive(Args, Debug)]
+pub struct ValidateArgs {
+    /// Also run the finest (slowest) resolutions: duct 32, Taylor-Green 128, Ethier-Steinman 32.
+    #[arg(long)]
+    pub fine: bool,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Arguments of `fluid run`.
@@ -89,6 +102,7 @@ pub fn run(cmd: FluidCommand) -> Result<()> {
         FluidCommand::Run(a) => run_case(a),
         FluidCommand::Bench(a) => bench(a),
         FluidCommand::Soak(a) => soak(a),
+        FluidCommand::Validate(a) => validate(a),
     }
 }
 
@@ -237,6 +251,38 @@ fn bench(a: BenchArgs) -> Result<()> {
             b.ms_p99,
             cb,
             b.div_rel_mean
+        );
+    }
+    Ok(())
+}
+
+fn validate(a: ValidateArgs) -> Result<()> {
+    use hydrometra_sim::fluid::validation::{ethier_steinman, square_duct, taylor_green};
+    let mut rows = Vec::new();
+    let duct_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
+    for &n in duct_n {
+        rows.push(square_duct(n, 2.0, 200)?.0);
+    }
+    let tg_n: &[usize] = if a.fine { &[16, 32, 64, 128] } else { &[16, 32, 64] };
+    for scheme in [AdvectionScheme::SemiLagrangian, AdvectionScheme::MacCormack] {
+        for &n in tg_n {
+            rows.push(taylor_green(n, scheme)?);
+        }
+    }
+    let es_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
+    for &n in es_n {
+        rows.push(ethier_steinman(n)?);
+    }
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!("| case | cells across | error | metric | steps | wall s | converged |");
+    println!("|---|---|---|---|---|---|---|");
+    for r in &rows {
+        println!(
+            "| {} | {} | {:.4e} | {} | {} | {:.2} | {} |",
+            r.case, r.cells_across, r.error, r.metric, r.steps, r.wall_s, r.all_converged
         );
     }
     Ok(())

@@ -28,6 +28,7 @@ pub mod cavity;
 pub mod benchmark;
 pub mod case;
 pub mod soak;
+pub mod validation;
 mod grid;
 mod labels;
 mod multigrid;
