@@ -3,7 +3,10 @@
 use std::process::Command;
 
 fn case_path(name: &str) -> String {
-    format!("{}/../docs/fluid-cases/{name}.toml", env!("CARGO_MANIFEST_DIR"))
+    format!(
+        "{}/../docs/fluid-cases/{name}.toml",
+        env!("CARGO_MANIFEST_DIR")
+    )
 }
 
 #[test]
@@ -29,7 +32,13 @@ fn fluid_run_writes_probes_as_json_and_csv() {
     let stats = &v["statistics"];
     assert!(stats["steps"].as_u64().unwrap() > 0);
     assert!(stats["final_max_div_rel"].as_f64().unwrap() <= 1e-5);
-    for key in ["ms_per_step_mean", "ms_per_step_p99", "projection_iterations_mean", "kinetic_energy_j", "simulated_time_s"] {
+    for key in [
+        "ms_per_step_mean",
+        "ms_per_step_p99",
+        "projection_iterations_mean",
+        "kinetic_energy_j",
+        "simulated_time_s",
+    ] {
         assert!(stats[key].is_number(), "{key}");
     }
     let probe = &v["probes"][0];
@@ -54,7 +63,10 @@ fn fluid_run_rejects_a_malformed_case_naming_file_and_key() {
     let case = dir.join("bad.toml");
     let text = std::fs::read_to_string(case_path("port_channel"))
         .unwrap()
-        .replace("velocity_m_s = [0.2, 0.0, 0.0]", "velocity_m_s = [0.2, 0.0]");
+        .replace(
+            "velocity_m_s = [0.2, 0.0, 0.0]",
+            "velocity_m_s = [0.2, 0.0]",
+        );
     std::fs::write(&case, text).unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
         .args(["fluid", "run", "--case"])
@@ -63,6 +75,9 @@ fn fluid_run_rejects_a_malformed_case_naming_file_and_key() {
         .unwrap();
     assert!(!o.status.success());
     let err = String::from_utf8_lossy(&o.stderr);
-    assert!(err.contains("bad.toml") && err.contains("velocity_m_s"), "{err}");
+    assert!(
+        err.contains("bad.toml") && err.contains("velocity_m_s"),
+        "{err}"
+    );
     std::fs::remove_dir_all(&dir).ok();
 }

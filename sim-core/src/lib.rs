@@ -4,6 +4,6 @@
 //! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
 #![warn(missing_docs)]
 
+pub mod fluid;
 pub mod mesh;
 pub mod units;
-pub mod fluid;

@@ -4,7 +4,10 @@
 use hydrometra_sim::fluid::case::{Case, CaseError};
 
 fn example(name: &str) -> String {
-    let path = format!("{}/../docs/fluid-cases/{name}.toml", env!("CARGO_MANIFEST_DIR"));
+    let path = format!(
+        "{}/../docs/fluid-cases/{name}.toml",
+        env!("CARGO_MANIFEST_DIR")
+    );
     std::fs::read_to_string(path).unwrap()
 }
 
@@ -88,19 +91,31 @@ fn malformed_case_files_name_the_key_and_the_problem() {
     assert!(e.contains("time") && e.contains("exactly one"), "{e}");
     let e = err(&BASE.replace("end_s = 0.1", ""));
     assert!(e.contains("steady_tolerance"), "{e}");
-    let e = err(&format!("{BASE}[[region]]\nlabel = \"velocity\"\nmin_m = [0,0,0]\nmax_m = [1,1,1]\n"));
-    assert!(e.contains("region[0].velocity_m_s") && e.contains("required"), "{e}");
-    let e = err(&format!("{BASE}[[region]]\nlabel = \"wall\"\nmin_m = [0,0,0]\nmax_m = [1,1,1]\n"));
+    let e = err(&format!(
+        "{BASE}[[region]]\nlabel = \"velocity\"\nmin_m = [0,0,0]\nmax_m = [1,1,1]\n"
+    ));
+    assert!(
+        e.contains("region[0].velocity_m_s") && e.contains("required"),
+        "{e}"
+    );
+    let e = err(&format!(
+        "{BASE}[[region]]\nlabel = \"wall\"\nmin_m = [0,0,0]\nmax_m = [1,1,1]\n"
+    ));
     assert!(e.contains("region[0].label") && e.contains("wall"), "{e}");
     let e = err(&format!("{BASE}[solver]\nprojection = \"sor\"\n"));
     assert!(e.contains("solver.projection") && e.contains("sor"), "{e}");
     let e = err(&format!("{BASE}[solver]\ntolerance = 0.0\n"));
     assert!(e.contains("tolerance"), "{e}");
-    let e = err(&format!("{BASE}[[probe]]\nname = \"a\"\nfrom_m = [0,0,0]\nto_m = [1,1,1]\npoints = 0\n"));
+    let e = err(&format!(
+        "{BASE}[[probe]]\nname = \"a\"\nfrom_m = [0,0,0]\nto_m = [1,1,1]\npoints = 0\n"
+    ));
     assert!(e.contains("probe[0].points"), "{e}");
     let e = err(&BASE.replace("density_kg_m3 = 1000.0", "density_kg_m3 = \"water\""));
     assert!(e.contains("density_kg_m3"), "{e}");
-    assert!(matches!(Case::parse("not toml ["), Err(CaseError::Parse(_))));
+    assert!(matches!(
+        Case::parse("not toml ["),
+        Err(CaseError::Parse(_))
+    ));
 }
 
 #[test]

@@ -1,9 +1,9 @@
 //! Validation of the fluid solver against analytic flows (references.md section 2).
 
+use hydrometra_sim::fluid::validation::{duct_series, ethier_steinman, square_duct, taylor_green};
 use hydrometra_sim::fluid::{
     AdvectionScheme, CellLabel, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
 };
-use hydrometra_sim::fluid::validation::{duct_series, ethier_steinman, square_duct, taylor_green};
 
 fn duct(n: usize, dt_factor: f64, steps: usize) -> (f64, f64) {
     let (r, worst) = square_duct(n, dt_factor, steps).unwrap();
@@ -18,13 +18,20 @@ fn tg(n: usize, scheme: AdvectionScheme) -> f64 {
 }
 
 fn water() -> FluidParams {
-    FluidParams { density_kg_m3: 1000.0, viscosity_m2_s: 1e-6, ..Default::default() }
+    FluidParams {
+        density_kg_m3: 1000.0,
+        viscosity_m2_s: 1e-6,
+        ..Default::default()
+    }
 }
 
 #[test]
 fn duct_series_matches_the_reference_profile() {
     let csv = include_str!("data/square_duct_poiseuille_profile.csv");
-    for line in csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with('y')) {
+    for line in csv
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with('y'))
+    {
         let v: Vec<f64> = line.split(',').map(|v| v.trim().parse().unwrap()).collect();
         assert!((duct_series(v[0], 0.0) - v[1]).abs() < 2e-6, "{line}");
     }
@@ -34,12 +41,20 @@ fn duct_series_matches_the_reference_profile() {
 fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
     // Implicit viscosity (nu dt / h^2 = 2), run to steady state.
     let (q_err, prof) = duct(16, 2.0, 200);
-    println!("square duct 16 cells: flow-rate error {:.3} %, max face error {:.3} % of u_max", q_err * 100.0, prof * 100.0);
+    println!(
+        "square duct 16 cells: flow-rate error {:.3} %, max face error {:.3} % of u_max",
+        q_err * 100.0,
+        prof * 100.0
+    );
     assert!(q_err < 0.01, "flow rate error {q_err}");
     assert!(prof < 0.01, "profile error {prof}");
     // Second order: the error at 8 cells is about four times larger.
     let (q8, _) = duct(8, 2.0, 200);
-    println!("square duct 8 cells: flow-rate error {:.3} %, observed order {:.2}", q8 * 100.0, (q8 / q_err).log2());
+    println!(
+        "square duct 8 cells: flow-rate error {:.3} %, observed order {:.2}",
+        q8 * 100.0,
+        (q8 / q_err).log2()
+    );
     assert!(q8 > 2.5 * q_err);
 }
 
@@ -48,9 +63,16 @@ fn poiseuille_steady_state_is_independent_of_time_step_and_viscosity_mode() {
     // Explicit viscosity (nu dt / h^2 = 0.07) against implicit (nu dt / h^2 = 2).
     let (q_exp, _) = duct(8, 0.07, 3000);
     let (q_imp, _) = duct(8, 2.0, 200);
-    println!("square duct 8 cells: flow-rate error explicit {:.4} %, implicit {:.4} %", q_exp * 100.0, q_imp * 100.0);
+    println!(
+        "square duct 8 cells: flow-rate error explicit {:.4} %, implicit {:.4} %",
+        q_exp * 100.0,
+        q_imp * 100.0
+    );
     // The split step's steady state must not depend on dt or on the viscosity mode.
-    assert!((q_exp - q_imp).abs() < 1e-4, "explicit {q_exp} vs implicit {q_imp}");
+    assert!(
+        (q_exp - q_imp).abs() < 1e-4,
+        "explicit {q_exp} vs implicit {q_imp}"
+    );
 }
 
 #[test]
@@ -87,10 +109,23 @@ fn fluid_at_rest_stays_at_rest_under_gravity_with_hydrostatic_pressure() {
     let n = 12;
     let mut grid = FluidGrid::new([n, n, n], h, [0.0; 3], [false; 3]).unwrap();
     // An obstacle and a sealed pocket make it a closed, irregular, disconnected domain.
-    grid.fill_box([0.004, 0.004, 0.0], [0.006, 0.006, 0.006], CellLabel::Solid, [0.0; 3]);
-    grid.fill_box([0.0, 0.0, 0.0095], [0.012, 0.012, 0.0105], CellLabel::Solid, [0.0; 3]);
+    grid.fill_box(
+        [0.004, 0.004, 0.0],
+        [0.006, 0.006, 0.006],
+        CellLabel::Solid,
+        [0.0; 3],
+    );
+    grid.fill_box(
+        [0.0, 0.0, 0.0095],
+        [0.012, 0.012, 0.0105],
+        CellLabel::Solid,
+        [0.0; 3],
+    );
     let g = 9.81;
-    let params = FluidParams { body_force_m_s2: [0.0, 0.0, -g], ..water() };
+    let params = FluidParams {
+        body_force_m_s2: [0.0, 0.0, -g],
+        ..water()
+    };
     let mut s = FluidSolver::new(grid, params).unwrap();
     assert_eq!(s.regions(), (2, 2));
     let dt = 1e-2;
@@ -98,10 +133,17 @@ fn fluid_at_rest_stays_at_rest_under_gravity_with_hydrostatic_pressure() {
         let st = s.step(dt).unwrap();
         assert!(st.projection_converged);
     }
-    assert!(s.max_speed_m_s() < 1e-5 * g * dt, "max speed {}", s.max_speed_m_s());
+    assert!(
+        s.max_speed_m_s() < 1e-5 * g * dt,
+        "max speed {}",
+        s.max_speed_m_s()
+    );
     // Hydrostatic: p(z) - p(z + h) = rho g h between vertically adjacent fluid cells.
     let dp = s.cell_pressure_pa([1, 1, 2]).unwrap() - s.cell_pressure_pa([1, 1, 3]).unwrap();
-    assert!((dp - 1000.0 * g * h).abs() < 1e-4 * 1000.0 * g * h, "dp = {dp}");
+    assert!(
+        (dp - 1000.0 * g * h).abs() < 1e-4 * 1000.0 * g * h,
+        "dp = {dp}"
+    );
 }
 
 #[test]
@@ -120,10 +162,23 @@ fn uniform_flow_through_ports_stays_uniform_at_cfl_3() {
     // Inflow layer at x = 0, outflow layer at the end, periodic in y and z.
     let (n, h, u_in) = (16, 1e-3, 0.2f32);
     let mut grid = FluidGrid::new([n, 6, 6], h, [0.0; 3], [false, true, true]).unwrap();
-    grid.fill_box([0.0, 0.0, 0.0], [0.001, 0.006, 0.006], CellLabel::Velocity, [u_in, 0.0, 0.0]);
-    grid.fill_box([0.015, 0.0, 0.0], [0.016, 0.006, 0.006], CellLabel::Outflow, [0.0; 3]);
+    grid.fill_box(
+        [0.0, 0.0, 0.0],
+        [0.001, 0.006, 0.006],
+        CellLabel::Velocity,
+        [u_in, 0.0, 0.0],
+    );
+    grid.fill_box(
+        [0.015, 0.0, 0.0],
+        [0.016, 0.006, 0.006],
+        CellLabel::Outflow,
+        [0.0; 3],
+    );
     for scheme in [AdvectionScheme::SemiLagrangian, AdvectionScheme::MacCormack] {
-        let params = FluidParams { advection: scheme, ..water() };
+        let params = FluidParams {
+            advection: scheme,
+            ..water()
+        };
         let mut s = FluidSolver::new(grid.clone(), params).unwrap();
         s.set_velocity_field(|c, _| if c == 0 { u_in as f64 } else { 0.0 });
         let dt = 3.0 * h / u_in as f64;
@@ -135,7 +190,10 @@ fn uniform_flow_through_ports_stays_uniform_at_cfl_3() {
                 let x = s.face_position_m(c, idx);
                 if x[0] > 0.0011 && x[0] < 0.0149 {
                     let want = if c == 0 { u_in } else { 0.0 };
-                    assert!((v - want).abs() <= 1e-5 * u_in, "{scheme:?} c={c} x={x:?} v={v}");
+                    assert!(
+                        (v - want).abs() <= 1e-5 * u_in,
+                        "{scheme:?} c={c} x={x:?} v={v}"
+                    );
                 }
             }
         }
@@ -145,11 +203,17 @@ fn uniform_flow_through_ports_stays_uniform_at_cfl_3() {
 /// A rough, random (deterministic) velocity field on the benchmark cavity.
 fn rough_cavity(voxel_m: f64, method: ProjectionMethod) -> FluidSolver {
     let grid = hydrometra_sim::fluid::cavity::ellipsoid_cavity(voxel_m, 1.0).unwrap();
-    let params = FluidParams { projection: method, tolerance: 1e-6, ..water() };
+    let params = FluidParams {
+        projection: method,
+        tolerance: 1e-6,
+        ..water()
+    };
     let mut s = FluidSolver::new(grid, params).unwrap();
     let mut state = 12345u64;
     s.set_velocity_field(move |_, _| {
-        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((state >> 33) as f64 / (1u64 << 31) as f64) - 0.5
     });
     s
@@ -183,7 +247,10 @@ fn projection_reaches_divergence_tolerance_and_matches_the_reference_solver() {
 fn paper_class_gauss_seidel_leaves_divergence() {
     let mut gs = rough_cavity(0.0015, ProjectionMethod::GaussSeidel { sweeps: 20 });
     let st = gs.project_now(1e-2);
-    println!("Gauss-Seidel 20 sweeps: max div h/U = {:.2e}", st.max_div_rel);
+    println!(
+        "Gauss-Seidel 20 sweeps: max div h/U = {:.2e}",
+        st.max_div_rel
+    );
     assert!(!st.projection_converged);
     assert!(st.max_div_rel > 1e-3);
 }

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::fluid::benchmark::{bench_cavity, BenchRow, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M};
+use hydrometra_sim::fluid::benchmark::{
+    bench_cavity, BenchRow, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
+};
 use hydrometra_sim::fluid::case::Case;
 use hydrometra_sim::fluid::cavity::CAVITY_SEMI_AXES_M;
 use hydrometra_sim::fluid::soak::run_soak;
@@ -110,7 +112,9 @@ fn run_case(a: RunArgs) -> Result<()> {
     let text = std::fs::read_to_string(&a.case)
         .with_context(|| format!("reading case file {}", a.case.display()))?;
     let case = Case::parse(&text).with_context(|| format!("in {}", a.case.display()))?;
-    let report = case.run().with_context(|| format!("running {}", a.case.display()))?;
+    let report = case
+        .run()
+        .with_context(|| format!("running {}", a.case.display()))?;
     let json = serde_json::to_string_pretty(&report)?;
     if let Some(dir) = &a.out {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -120,7 +124,13 @@ fn run_case(a: RunArgs) -> Result<()> {
             let safe: String = p
                 .name
                 .chars()
-                .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+                .map(|c| {
+                    if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                        c
+                    } else {
+                        '_'
+                    }
+                })
                 .collect();
             let mut csv = String::from("x_m,y_m,z_m,u_m_s,v_m_s,w_m_s,pressure_pa\n");
             for s in &p.samples {
@@ -159,7 +169,9 @@ fn run_case(a: RunArgs) -> Result<()> {
             for s in &p.samples {
                 let [x, y, z] = s.position_m;
                 let [u, v, w] = s.velocity_m_s;
-                let pr = s.pressure_pa.map_or("-".to_string(), |p| format!("{p:.4e}"));
+                let pr = s
+                    .pressure_pa
+                    .map_or("-".to_string(), |p| format!("{p:.4e}"));
                 println!("  ({x:.5}, {y:.5}, {z:.5}) m  u = ({u:.5e}, {v:.5e}, {w:.5e}) m/s  p = {pr} Pa");
             }
         }
@@ -175,7 +187,11 @@ fn bench(a: BenchArgs) -> Result<()> {
             .context("configuring the rayon thread pool")?;
     }
     anyhow::ensure!(a.steps > 0, "--steps must be at least 1");
-    anyhow::ensure!(a.dt_s.is_finite() && a.dt_s > 0.0, "--dt-s must be > 0, got {}", a.dt_s);
+    anyhow::ensure!(
+        a.dt_s.is_finite() && a.dt_s > 0.0,
+        "--dt-s must be > 0, got {}",
+        a.dt_s
+    );
     let mut rows: Vec<(BenchRow, BenchRow)> = Vec::new();
     let mut cpu: Vec<(f64, f64)> = Vec::new();
     for &mm in &a.voxels_mm {
@@ -227,7 +243,9 @@ fn bench(a: BenchArgs) -> Result<()> {
     println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | ours ms mean ± sem | ours p99 | ours CPU ms | ours advect/project ms | ours CG its | ours max div h/U | GS ms mean ± sem | GS p99 | GS CPU ms | GS mean div h/U |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for ((o, b), (co, cb)) in rows.iter().zip(&cpu) {
-        let paper = PAPER_VOXELS_M.iter().position(|&v| (v - o.voxel_m).abs() < 1e-9);
+        let paper = PAPER_VOXELS_M
+            .iter()
+            .position(|&v| (v - o.voxel_m).abs() < 1e-9);
         let (pf, pm) = paper.map_or(("-".into(), "-".into()), |i| {
             (PAPER_FLUID_VOXELS[i].to_string(), PAPER_MS[i].to_string())
         });
@@ -263,7 +281,11 @@ fn validate(a: ValidateArgs) -> Result<()> {
     for &n in duct_n {
         rows.push(square_duct(n, 2.0, 200)?.0);
     }
-    let tg_n: &[usize] = if a.fine { &[16, 32, 64, 128] } else { &[16, 32, 64] };
+    let tg_n: &[usize] = if a.fine {
+        &[16, 32, 64, 128]
+    } else {
+        &[16, 32, 64]
+    };
     for scheme in [AdvectionScheme::SemiLagrangian, AdvectionScheme::MacCormack] {
         for &n in tg_n {
             rows.push(taylor_green(n, scheme)?);
@@ -302,9 +324,17 @@ fn process_cpu_s() -> Option<f64> {
 }
 
 fn soak(a: SoakArgs) -> Result<()> {
-    let scheme = if a.maccormack { AdvectionScheme::MacCormack } else { AdvectionScheme::SemiLagrangian };
+    let scheme = if a.maccormack {
+        AdvectionScheme::MacCormack
+    } else {
+        AdvectionScheme::SemiLagrangian
+    };
     let r = run_soak(a.steps, a.seed, scheme)?;
     println!("{}", serde_json::to_string_pretty(&r)?);
-    anyhow::ensure!(r.non_finite_steps == 0, "{} steps produced non-finite values", r.non_finite_steps);
+    anyhow::ensure!(
+        r.non_finite_steps == 0,
+        "{} steps produced non-finite values",
+        r.non_finite_steps
+    );
     Ok(())
 }

@@ -74,7 +74,12 @@ pub(crate) fn semi_lagrangian(
                 }
             }),
         (Some((lo, hi)), false) => {
-            for (((o, l), h), &idx) in out.iter_mut().zip(lo.iter_mut()).zip(hi.iter_mut()).zip(active) {
+            for (((o, l), h), &idx) in out
+                .iter_mut()
+                .zip(lo.iter_mut())
+                .zip(hi.iter_mut())
+                .zip(active)
+            {
                 (*o, *l, *h) = one(idx);
             }
         }
@@ -84,7 +89,9 @@ pub(crate) fn semi_lagrangian(
             .zip(hi.par_chunks_mut(CHUNK))
             .zip(active.par_chunks(CHUNK))
             .for_each(|(((os, ls), hs), is)| {
-                for (((o, l), h), &idx) in os.iter_mut().zip(ls.iter_mut()).zip(hs.iter_mut()).zip(is) {
+                for (((o, l), h), &idx) in
+                    os.iter_mut().zip(ls.iter_mut()).zip(hs.iter_mut()).zip(is)
+                {
                     (*o, *l, *h) = one(idx);
                 }
             }),

@@ -79,7 +79,10 @@ pub fn bench_cavity(
     let var = ms.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
     let mut sorted = ms.clone();
     sorted.sort_by(|a, b| a.total_cmp(b));
-    let p99 = sorted.get(((n * 0.99).ceil() as usize).saturating_sub(1)).copied().unwrap_or(0.0);
+    let p99 = sorted
+        .get(((n * 0.99).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(0.0);
     Ok(BenchRow {
         voxel_m,
         method,

@@ -147,7 +147,11 @@ pub struct Case {
 }
 
 fn invalid(key: impl Into<String>, value: impl std::fmt::Debug, problem: &str) -> CaseError {
-    CaseError::Invalid { key: key.into(), value: format!("{value:?}"), problem: problem.into() }
+    CaseError::Invalid {
+        key: key.into(),
+        value: format!("{value:?}"),
+        problem: problem.into(),
+    }
 }
 
 fn finite3(key: &str, v: [f64; 3]) -> Result<(), CaseError> {
@@ -169,18 +173,34 @@ impl Case {
     fn validate(&self) -> Result<(), CaseError> {
         let g = &self.grid;
         if g.cells.contains(&0) {
-            return Err(invalid("grid.cells", g.cells, "every axis needs at least one cell"));
+            return Err(invalid(
+                "grid.cells",
+                g.cells,
+                "every axis needs at least one cell",
+            ));
         }
         if !(g.spacing_m.is_finite() && g.spacing_m > 0.0) {
-            return Err(invalid("grid.spacing_m", g.spacing_m, "expected a length > 0"));
+            return Err(invalid(
+                "grid.spacing_m",
+                g.spacing_m,
+                "expected a length > 0",
+            ));
         }
         finite3("grid.origin_m", g.origin_m)?;
         let f = &self.fluid;
         if !(f.density_kg_m3.is_finite() && f.density_kg_m3 > 0.0) {
-            return Err(invalid("fluid.density_kg_m3", f.density_kg_m3, "expected a value > 0"));
+            return Err(invalid(
+                "fluid.density_kg_m3",
+                f.density_kg_m3,
+                "expected a value > 0",
+            ));
         }
         if !(f.viscosity_m2_s.is_finite() && f.viscosity_m2_s >= 0.0) {
-            return Err(invalid("fluid.viscosity_m2_s", f.viscosity_m2_s, "expected a value >= 0"));
+            return Err(invalid(
+                "fluid.viscosity_m2_s",
+                f.viscosity_m2_s,
+                "expected a value >= 0",
+            ));
         }
         finite3("fluid.body_force_m_s2", f.body_force_m_s2)?;
         let t = &self.time;
@@ -192,7 +212,11 @@ impl Case {
                 return Err(invalid("time.cfl", c, "expected a CFL number > 0"))
             }
             (Some(_), Some(_)) | (None, None) => {
-                return Err(invalid("time", (t.dt_s, t.cfl), "give exactly one of dt_s and cfl"))
+                return Err(invalid(
+                    "time",
+                    (t.dt_s, t.cfl),
+                    "give exactly one of dt_s and cfl",
+                ))
             }
             _ => {}
         }
@@ -215,7 +239,11 @@ impl Case {
         }
         if let Some(s) = t.steady_tolerance {
             if !(s.is_finite() && s > 0.0) {
-                return Err(invalid("time.steady_tolerance", s, "expected a rate > 0 (1/s)"));
+                return Err(invalid(
+                    "time.steady_tolerance",
+                    s,
+                    "expected a rate > 0 (1/s)",
+                ));
             }
         }
         if t.max_steps == Some(0) {
@@ -223,20 +251,37 @@ impl Case {
         }
         self.params()?.validate()?;
         for (i, r) in self.regions.iter().enumerate() {
-            let label = parse_label(&r.label)
-                .ok_or_else(|| invalid(format!("region[{i}].label"), &r.label, "expected fluid, solid, velocity or outflow"))?;
+            let label = parse_label(&r.label).ok_or_else(|| {
+                invalid(
+                    format!("region[{i}].label"),
+                    &r.label,
+                    "expected fluid, solid, velocity or outflow",
+                )
+            })?;
             finite3(&format!("region[{i}].min_m"), r.min_m)?;
             finite3(&format!("region[{i}].max_m"), r.max_m)?;
             if (0..3).any(|a| r.min_m[a] > r.max_m[a]) {
-                return Err(invalid(format!("region[{i}].max_m"), r.max_m, "must not be below min_m on any axis"));
+                return Err(invalid(
+                    format!("region[{i}].max_m"),
+                    r.max_m,
+                    "must not be below min_m on any axis",
+                ));
             }
             match (label, r.velocity_m_s) {
                 (CellLabel::Velocity, None) => {
-                    return Err(invalid(format!("region[{i}].velocity_m_s"), "missing", "required for label velocity"))
+                    return Err(invalid(
+                        format!("region[{i}].velocity_m_s"),
+                        "missing",
+                        "required for label velocity",
+                    ))
                 }
                 (CellLabel::Velocity, Some(v)) => finite3(&format!("region[{i}].velocity_m_s"), v)?,
                 (_, Some(v)) => {
-                    return Err(invalid(format!("region[{i}].velocity_m_s"), v, "only velocity regions take a velocity"))
+                    return Err(invalid(
+                        format!("region[{i}].velocity_m_s"),
+                        v,
+                        "only velocity regions take a velocity",
+                    ))
                 }
                 _ => {}
             }
@@ -245,10 +290,18 @@ impl Case {
             finite3(&format!("probe[{i}].from_m"), p.from_m)?;
             finite3(&format!("probe[{i}].to_m"), p.to_m)?;
             if p.points == 0 {
-                return Err(invalid(format!("probe[{i}].points"), 0, "expected at least 1"));
+                return Err(invalid(
+                    format!("probe[{i}].points"),
+                    0,
+                    "expected at least 1",
+                ));
             }
             if self.probes[..i].iter().any(|q| q.name == p.name) {
-                return Err(invalid(format!("probe[{i}].name"), &p.name, "probe names must be unique"));
+                return Err(invalid(
+                    format!("probe[{i}].name"),
+                    &p.name,
+                    "probe names must be unique",
+                ));
             }
         }
         Ok(())
@@ -267,18 +320,34 @@ impl Case {
         p.advection = match s.advection.as_deref() {
             None | Some("semi_lagrangian") => AdvectionScheme::SemiLagrangian,
             Some("maccormack") => AdvectionScheme::MacCormack,
-            Some(o) => return Err(invalid("solver.advection", o, "expected semi_lagrangian or maccormack")),
+            Some(o) => {
+                return Err(invalid(
+                    "solver.advection",
+                    o,
+                    "expected semi_lagrangian or maccormack",
+                ))
+            }
         };
         p.projection = match s.projection.as_deref() {
             None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
             Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
-            Some("gauss_seidel") => ProjectionMethod::GaussSeidel { sweeps: s.sweeps.unwrap_or(20) },
+            Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
+                sweeps: s.sweeps.unwrap_or(20),
+            },
             Some(o) => {
-                return Err(invalid("solver.projection", o, "expected multigrid_pcg, jacobi_pcg or gauss_seidel"))
+                return Err(invalid(
+                    "solver.projection",
+                    o,
+                    "expected multigrid_pcg, jacobi_pcg or gauss_seidel",
+                ))
             }
         };
         if s.sweeps.is_some() && !matches!(p.projection, ProjectionMethod::GaussSeidel { .. }) {
-            return Err(invalid("solver.sweeps", s.sweeps, "only used with projection = \"gauss_seidel\""));
+            return Err(invalid(
+                "solver.sweeps",
+                s.sweeps,
+                "only used with projection = \"gauss_seidel\"",
+            ));
         }
         if let Some(t) = s.tolerance {
             p.tolerance = t;
@@ -290,7 +359,11 @@ impl Case {
             p.parallel_threshold_cells = t;
         }
         p.validate().map_err(|e| match e {
-            FluidError::InvalidParameter { key, value, expected } => CaseError::Invalid {
+            FluidError::InvalidParameter {
+                key,
+                value,
+                expected,
+            } => CaseError::Invalid {
                 key: format!("solver.{key}"),
                 value,
                 problem: format!("expected {expected}"),
@@ -318,14 +391,19 @@ impl Case {
         let h = self.grid.spacing_m;
         let t = &self.time;
         let max_steps = t.max_steps.unwrap_or(1_000_000);
-        let port_speed = solver.grid().labels().iter().enumerate().fold(0.0f64, |m, (i, l)| {
-            if *l == CellLabel::Velocity {
-                let v = solver.grid().velocity_at(i);
-                m.max((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() as f64)
-            } else {
-                m
-            }
-        });
+        let port_speed = solver
+            .grid()
+            .labels()
+            .iter()
+            .enumerate()
+            .fold(0.0f64, |m, (i, l)| {
+                if *l == CellLabel::Velocity {
+                    let v = solver.grid().velocity_at(i);
+                    m.max((v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt() as f64)
+                } else {
+                    m
+                }
+            });
         let mut prev: [Vec<f32>; 3] = std::array::from_fn(|c| solver.face_velocities(c).to_vec());
         let mut step_ms = Vec::new();
         let mut iterations = 0usize;
@@ -344,13 +422,11 @@ impl Case {
                         (true, Some(m)) => (cfl * h / u).min(m),
                         (true, None) => cfl * h / u,
                         (false, Some(m)) => m,
-                        (false, None) => {
-                            return Err(invalid(
-                                "time.max_dt_s",
-                                "missing",
-                                "nothing moves at the start, so cfl gives no time step: add max_dt_s",
-                            ))
-                        }
+                        (false, None) => return Err(invalid(
+                            "time.max_dt_s",
+                            "missing",
+                            "nothing moves at the start, so cfl gives no time step: add max_dt_s",
+                        )),
                     }
                 }
                 (None, None) => return Err(invalid("time", "none", "give dt_s or cfl")),
@@ -373,7 +449,11 @@ impl Case {
                         *a = *b;
                     }
                 }
-                let rate = if umax > 0.0 { change as f64 / (umax as f64 * dt) } else { 0.0 };
+                let rate = if umax > 0.0 {
+                    change as f64 / (umax as f64 * dt)
+                } else {
+                    0.0
+                };
                 steady_rate = Some(rate);
                 if rate < tol {
                     steady = true;
@@ -385,7 +465,10 @@ impl Case {
         let mean = step_ms.iter().sum::<f64>() / steps.max(1) as f64;
         let mut sorted = step_ms.clone();
         sorted.sort_by(|a, b| a.total_cmp(b));
-        let p99 = sorted.get(((steps as f64 * 0.99).ceil() as usize).saturating_sub(1)).copied().unwrap_or(0.0);
+        let p99 = sorted
+            .get(((steps as f64 * 0.99).ceil() as usize).saturating_sub(1))
+            .copied()
+            .unwrap_or(0.0);
         let last = last.unwrap_or_default();
         let probes = self
             .probes
@@ -394,8 +477,13 @@ impl Case {
                 name: p.name.clone(),
                 samples: (0..p.points)
                     .map(|i| {
-                        let s = if p.points == 1 { 0.0 } else { i as f64 / (p.points - 1) as f64 };
-                        let x: [f64; 3] = std::array::from_fn(|a| p.from_m[a] + s * (p.to_m[a] - p.from_m[a]));
+                        let s = if p.points == 1 {
+                            0.0
+                        } else {
+                            i as f64 / (p.points - 1) as f64
+                        };
+                        let x: [f64; 3] =
+                            std::array::from_fn(|a| p.from_m[a] + s * (p.to_m[a] - p.from_m[a]));
                         ProbeSample {
                             position_m: x,
                             velocity_m_s: solver.sample_velocity_m_s(x),
@@ -430,9 +518,14 @@ impl Case {
 }
 
 fn parse_label(s: &str) -> Option<CellLabel> {
-    [CellLabel::Fluid, CellLabel::Solid, CellLabel::Velocity, CellLabel::Outflow]
-        .into_iter()
-        .find(|l| l.name() == s)
+    [
+        CellLabel::Fluid,
+        CellLabel::Solid,
+        CellLabel::Velocity,
+        CellLabel::Outflow,
+    ]
+    .into_iter()
+    .find(|l| l.name() == s)
 }
 
 /// Run statistics.

@@ -124,7 +124,10 @@ impl FluidGrid {
     /// Sets one cell's label. Out-of-range cells are an error.
     pub fn set_label(&mut self, cell: [usize; 3], label: CellLabel) -> Result<(), FluidError> {
         if !self.in_range(cell) {
-            return Err(FluidError::OutOfRange { cell, dims: self.dims });
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
         }
         let idx = self.index(cell);
         if self.labels[idx] != label {
@@ -136,9 +139,16 @@ impl FluidGrid {
 
     /// Sets a cell's prescribed velocity (used where the label is `Velocity`). Changing a velocity
     /// does not change the topology.
-    pub fn set_velocity(&mut self, cell: [usize; 3], velocity_m_s: [f32; 3]) -> Result<(), FluidError> {
+    pub fn set_velocity(
+        &mut self,
+        cell: [usize; 3],
+        velocity_m_s: [f32; 3],
+    ) -> Result<(), FluidError> {
         if !self.in_range(cell) {
-            return Err(FluidError::OutOfRange { cell, dims: self.dims });
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
         }
         let idx = self.index(cell);
         self.velocity_m_s[idx] = velocity_m_s;
@@ -155,9 +165,18 @@ impl FluidGrid {
         velocity_m_s: [f32; 3],
     ) -> usize {
         let mut count = 0;
-        let (lo, hi) = (self.cell_range(min_m, max_m, 0), self.cell_range(min_m, max_m, 1));
-        let (lo2, hi2) = (self.cell_range(min_m, max_m, 2), self.cell_range(min_m, max_m, 3));
-        let (lo3, hi3) = (self.cell_range(min_m, max_m, 4), self.cell_range(min_m, max_m, 5));
+        let (lo, hi) = (
+            self.cell_range(min_m, max_m, 0),
+            self.cell_range(min_m, max_m, 1),
+        );
+        let (lo2, hi2) = (
+            self.cell_range(min_m, max_m, 2),
+            self.cell_range(min_m, max_m, 3),
+        );
+        let (lo3, hi3) = (
+            self.cell_range(min_m, max_m, 4),
+            self.cell_range(min_m, max_m, 5),
+        );
         for k in lo3..hi3 {
             for j in lo2..hi2 {
                 for i in lo..hi {
@@ -183,9 +202,7 @@ impl FluidGrid {
         let first = ((min_m[a] - self.origin_m[a]) / h - 0.5).ceil().max(0.0);
         let last = ((max_m[a] - self.origin_m[a]) / h - 0.5).floor();
         let n = self.dims[a] as f64;
-        if which % 2 == 0 {
-            first.min(n) as usize
-        } else if last < first {
+        if which.is_multiple_of(2) || last < first {
             first.min(n) as usize
         } else {
             (last + 1.0).clamp(0.0, n) as usize

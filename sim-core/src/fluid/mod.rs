@@ -24,19 +24,19 @@
 //! ```
 
 mod advection;
-pub mod cavity;
 pub mod benchmark;
 pub mod case;
-pub mod soak;
-pub mod validation;
+pub mod cavity;
 mod grid;
 mod labels;
 mod multigrid;
 mod pressure;
 mod regions;
 mod sample;
+pub mod soak;
 mod solver;
 mod topology;
+pub mod validation;
 mod viscosity;
 
 pub use advection::AdvectionScheme;

@@ -106,8 +106,9 @@ impl Level {
             }
             self.nbr.push(nb);
             self.diag.push(diag);
-            self.inv_diag.push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
-            if (c[0] + c[1] + c[2]) % 2 == 0 {
+            self.inv_diag
+                .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
+            if (c[0] + c[1] + c[2]).is_multiple_of(2) {
                 self.red.push(row as u32);
             } else {
                 self.black.push(row as u32);

@@ -136,7 +136,10 @@ impl PressureSolver {
     ) -> SolveOutcome {
         let n = self.q.len();
         if n == 0 {
-            return SolveOutcome { iterations: 0, converged: true };
+            return SolveOutcome {
+                iterations: 0,
+                converged: true,
+            };
         }
         if let ProjectionMethod::GaussSeidel { sweeps } = method {
             return self.gauss_seidel(sweeps, tol_abs);
@@ -149,7 +152,10 @@ impl PressureSolver {
         }
         self.regions.remove_closed_means(&mut self.r);
         if max_abs(&self.r) <= tol_abs {
-            return SolveOutcome { iterations: 0, converged: true };
+            return SolveOutcome {
+                iterations: 0,
+                converged: true,
+            };
         }
         self.precondition(method);
         self.p.copy_from_slice(&self.z);
@@ -157,8 +163,11 @@ impl PressureSolver {
         for it in 1..=max_iterations {
             matvec(&self.mg.levels[0], &self.p, &mut self.ap, parallel);
             let pap = dot(&self.p, &self.ap);
-            if !(pap > 0.0) || !rz.is_finite() {
-                return SolveOutcome { iterations: it, converged: false };
+            if pap.is_nan() || pap <= 0.0 || !rz.is_finite() {
+                return SolveOutcome {
+                    iterations: it,
+                    converged: false,
+                };
             }
             let alpha = rz / pap;
             for ((q, r), (&p, &ap)) in self
@@ -171,7 +180,10 @@ impl PressureSolver {
                 *r -= alpha * ap;
             }
             if max_abs(&self.r) <= tol_abs {
-                return SolveOutcome { iterations: it, converged: true };
+                return SolveOutcome {
+                    iterations: it,
+                    converged: true,
+                };
             }
             self.precondition(method);
             let rz_new = dot(&self.r, &self.z);
@@ -181,7 +193,10 @@ impl PressureSolver {
                 *p = z + beta * *p;
             }
         }
-        SolveOutcome { iterations: max_iterations, converged: false }
+        SolveOutcome {
+            iterations: max_iterations,
+            converged: false,
+        }
     }
 
     /// The baseline: `sweeps` lexicographic Gauss-Seidel sweeps from q = 0.
@@ -206,6 +221,9 @@ impl PressureSolver {
         for (r, &b) in self.r.iter_mut().zip(&self.b) {
             *r = b - *r;
         }
-        SolveOutcome { iterations: sweeps, converged: max_abs(&self.r) <= tol_abs }
+        SolveOutcome {
+            iterations: sweeps,
+            converged: max_abs(&self.r) <= tol_abs,
+        }
     }
 }

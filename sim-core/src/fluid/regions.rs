@@ -83,7 +83,11 @@ impl Regions {
         }
         let mut worst = 0.0f64;
         for (id, s) in self.sum.iter_mut().enumerate() {
-            *s = if self.closed[id] { *s / self.size[id] as f64 } else { 0.0 };
+            *s = if self.closed[id] {
+                *s / self.size[id] as f64
+            } else {
+                0.0
+            };
             worst = worst.max(s.abs());
         }
         for (r, x) in v.iter_mut().enumerate() {

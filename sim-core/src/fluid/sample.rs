@@ -139,7 +139,11 @@ impl Layout {
         let r01 = dims[0] * (y0 + dims[1] * z1);
         let r11 = dims[0] * (y1 + dims[1] * z1);
         let lerp = |a: [f32; 3], b: [f32; 3], t: f32| -> [f32; 3] {
-            [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]), a[2] + t * (b[2] - a[2])]
+            [
+                a[0] + t * (b[0] - a[0]),
+                a[1] + t * (b[1] - a[1]),
+                a[2] + t * (b[2] - a[2]),
+            ]
         };
         let c00 = lerp(field[r00 + x0], field[r00 + x1], tx);
         let c10 = lerp(field[r10 + x0], field[r10 + x1], tx);

@@ -32,19 +32,29 @@ pub struct SoakReport {
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
 /// Runs the soak for `steps` steps.
-pub fn run_soak(steps: usize, seed: u64, scheme: AdvectionScheme) -> Result<SoakReport, FluidError> {
+pub fn run_soak(
+    steps: usize,
+    seed: u64,
+    scheme: AdvectionScheme,
+) -> Result<SoakReport, FluidError> {
     let t0 = std::time::Instant::now();
     let (n, h) = (8usize, 1e-3);
     let u_port = 0.5f32;
     let mut rng = Lcg(seed);
     let grid = FluidGrid::new([n; 3], h, [0.0; 3], [false; 3])?;
-    let params = FluidParams { advection: scheme, ..Default::default() };
+    let params = FluidParams {
+        advection: scheme,
+        ..Default::default()
+    };
     let mut s = FluidSolver::new(grid, params.clone())?;
     let inlet = ([0.0, 0.003, 0.003], [0.001, 0.005, 0.005]);
     let outlet = ([0.007, 0.002, 0.002], [0.008, 0.006, 0.006]);
@@ -65,7 +75,11 @@ pub fn run_soak(steps: usize, seed: u64, scheme: AdvectionScheme) -> Result<Soak
             inflow = u_port * [0.0, 1.0, -1.0, 0.3][(rng.next() * 4.0) as usize % 4];
             let g = s.grid_mut();
             g.fill_box(inlet.0, inlet.1, CellLabel::Velocity, [inflow, 0.0, 0.0]);
-            let label = if rng.next() < 0.7 { CellLabel::Outflow } else { CellLabel::Solid };
+            let label = if rng.next() < 0.7 {
+                CellLabel::Outflow
+            } else {
+                CellLabel::Solid
+            };
             g.fill_box(outlet.0, outlet.1, label, [0.0; 3]);
         }
         if step % 53 == 0 {
@@ -73,14 +87,21 @@ pub fn run_soak(steps: usize, seed: u64, scheme: AdvectionScheme) -> Result<Soak
             let e: [f64; 3] = std::array::from_fn(|_| rng.next() * 0.003);
             let lo = [c[0] - e[0], c[1] - e[1], c[2] - e[2]];
             let hi = [c[0] + e[0], c[1] + e[1], c[2] + e[2]];
-            let label = if rng.next() < 0.5 { CellLabel::Solid } else { CellLabel::Fluid };
+            let label = if rng.next() < 0.5 {
+                CellLabel::Solid
+            } else {
+                CellLabel::Fluid
+            };
             let g = s.grid_mut();
             g.fill_box(lo, hi, label, [0.0; 3]);
             g.fill_box(inlet.0, inlet.1, CellLabel::Velocity, [inflow, 0.0, 0.0]);
         }
         if step % 1000 == 0 {
             let nu = if rng.next() < 0.3 { 1e-3 } else { 1e-6 };
-            s.set_params(FluidParams { viscosity_m2_s: nu, ..params.clone() })?;
+            s.set_params(FluidParams {
+                viscosity_m2_s: nu,
+                ..params.clone()
+            })?;
         }
         let cfl = 0.1 + rng.next() * 49.9;
         let st = s.step(cfl * h / u_port as f64)?;

@@ -1,5 +1,8 @@
 //! The stable-fluids step on the MAC grid: advect, add body forces, diffuse, project.
 
+// Loops over the three velocity components index several per-component arrays at once.
+#![allow(clippy::needless_range_loop)]
+
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -63,19 +66,39 @@ impl FluidParams {
     /// Checks the parameters, naming the first bad one.
     pub fn validate(&self) -> Result<(), FluidError> {
         let bad = |key: &str, value: String, expected: &str| {
-            Err(FluidError::InvalidParameter { key: key.into(), value, expected: expected.into() })
+            Err(FluidError::InvalidParameter {
+                key: key.into(),
+                value,
+                expected: expected.into(),
+            })
         };
         if !(self.density_kg_m3.is_finite() && self.density_kg_m3 > 0.0) {
-            return bad("density_kg_m3", self.density_kg_m3.to_string(), "a finite value > 0");
+            return bad(
+                "density_kg_m3",
+                self.density_kg_m3.to_string(),
+                "a finite value > 0",
+            );
         }
         if !(self.viscosity_m2_s.is_finite() && self.viscosity_m2_s >= 0.0) {
-            return bad("viscosity_m2_s", self.viscosity_m2_s.to_string(), "a finite value >= 0");
+            return bad(
+                "viscosity_m2_s",
+                self.viscosity_m2_s.to_string(),
+                "a finite value >= 0",
+            );
         }
         if self.body_force_m_s2.iter().any(|f| !f.is_finite()) {
-            return bad("body_force_m_s2", format!("{:?}", self.body_force_m_s2), "finite values");
+            return bad(
+                "body_force_m_s2",
+                format!("{:?}", self.body_force_m_s2),
+                "finite values",
+            );
         }
         if !(self.tolerance.is_finite() && self.tolerance > 0.0) {
-            return bad("tolerance", self.tolerance.to_string(), "a finite value > 0");
+            return bad(
+                "tolerance",
+                self.tolerance.to_string(),
+                "a finite value > 0",
+            );
         }
         if self.max_iterations == 0 {
             return bad("max_iterations", "0".into(), "at least 1");
@@ -280,7 +303,12 @@ impl FluidSolver {
             let row_of_cell = &self.pressure.mg.levels[0].row_of_cell;
             self.faces[c].rebuild(&self.grid, &self.layout, c, row_of_cell);
             let n = self.faces[c].active.len();
-            for v in [&mut self.compact[c], &mut self.lo[c], &mut self.hi[c], &mut self.ghost[c]] {
+            for v in [
+                &mut self.compact[c],
+                &mut self.lo[c],
+                &mut self.hi[c],
+                &mut self.ghost[c],
+            ] {
                 v.clear();
                 v.resize(n, 0.0);
             }
@@ -380,7 +408,10 @@ impl FluidSolver {
             });
         }
         let t0 = Instant::now();
-        let mut stats = StepStats { projection_converged: true, ..Default::default() };
+        let mut stats = StepStats {
+            projection_converged: true,
+            ..Default::default()
+        };
         if self.revision != self.grid.revision() {
             self.rebuild_topology();
             stats.topology_rebuilt = true;
@@ -452,7 +483,13 @@ impl FluidSolver {
                         self.u[c][idx as usize] = self.visc.x[n];
                     }
                 } else {
-                    viscosity::explicit(set, &self.u[c], &self.ghost[c], a as f32, &mut self.compact[c]);
+                    viscosity::explicit(
+                        set,
+                        &self.u[c],
+                        &self.ghost[c],
+                        a as f32,
+                        &mut self.compact[c],
+                    );
                     for (n, &idx) in set.active.iter().enumerate() {
                         self.u[c][idx as usize] = self.compact[c][n];
                     }
@@ -489,7 +526,10 @@ impl FluidSolver {
         let layout = &self.layout;
         let [u0, u1, u2] = &self.u;
         let uref: [&[f32]; 3] = [u0, u1, u2];
-        let vc = advection::Centred { dims: self.grid.dims(), v: &self.centred };
+        let vc = advection::Centred {
+            dims: self.grid.dims(),
+            v: &self.centred,
+        };
         for c in 0..3 {
             let set = &self.faces[c];
             let bounds = if mac {
@@ -599,9 +639,15 @@ impl FluidSolver {
         }
         let h = self.grid.spacing_m();
         let rho = self.params.density_kg_m3;
-        let u_ref = self.max_speed_m_s().max(self.params.velocity_scale_m_s).max(1e-12);
+        let u_ref = self
+            .max_speed_m_s()
+            .max(self.params.velocity_scale_m_s)
+            .max(1e-12);
         self.divergence_rhs();
-        let mismatch = self.pressure.regions.remove_closed_means(&mut self.pressure.b);
+        let mismatch = self
+            .pressure
+            .regions
+            .remove_closed_means(&mut self.pressure.b);
         stats.closed_region_mismatch_m_s = stats.closed_region_mismatch_m_s.max(mismatch);
         let to_q = dt / (rho * h);
         for (q, &p) in self.pressure.q.iter_mut().zip(&self.pressure_pa) {
@@ -628,7 +674,9 @@ impl FluidSolver {
             }
         }
         self.divergence_rhs();
-        self.pressure.regions.remove_closed_means(&mut self.pressure.b);
+        self.pressure
+            .regions
+            .remove_closed_means(&mut self.pressure.b);
         let max_div = self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
         stats.max_div_rel = max_div / u_ref;
     }
@@ -660,7 +708,11 @@ impl FluidSolver {
         for a in 0..3 {
             let s = (p[a] as f64 - 0.5).clamp(
                 if periodic[a] { f64::MIN } else { 0.0 },
-                if periodic[a] { f64::MAX } else { (dims[a] - 1) as f64 },
+                if periodic[a] {
+                    f64::MAX
+                } else {
+                    (dims[a] - 1) as f64
+                },
             );
             let fl = s.floor();
             let t = s - fl;
@@ -712,16 +764,24 @@ impl FluidSolver {
         if self.fluid_cells() == 0 {
             return 0.0;
         }
-        let u_ref = self.max_speed_m_s().max(self.params.velocity_scale_m_s).max(1e-12);
+        let u_ref = self
+            .max_speed_m_s()
+            .max(self.params.velocity_scale_m_s)
+            .max(1e-12);
         self.divergence_rhs();
-        self.pressure.regions.remove_closed_means(&mut self.pressure.b);
+        self.pressure
+            .regions
+            .remove_closed_means(&mut self.pressure.b);
         self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs())) / u_ref
     }
 
     /// Projects the current velocity field (e.g. after setting an initial condition) without
     /// advancing time.
     pub fn project_now(&mut self, dt_s: f64) -> StepStats {
-        let mut stats = StepStats { projection_converged: true, ..Default::default() };
+        let mut stats = StepStats {
+            projection_converged: true,
+            ..Default::default()
+        };
         if self.revision != self.grid.revision() {
             self.rebuild_topology();
         }

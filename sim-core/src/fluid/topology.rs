@@ -151,13 +151,7 @@ impl FaceSet {
             let (ll, li) = label_of(grid, lo);
             let (ul, ui) = label_of(grid, up);
             let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
-            let class = if ll == CellLabel::Velocity || ul == CellLabel::Velocity {
-                if open(ll) || open(ul) {
-                    FIXED
-                } else {
-                    OTHER
-                }
-            } else if ll == CellLabel::Solid || ul == CellLabel::Solid {
+            let class = if ll.is_wall() || ul.is_wall() {
                 if open(ll) || open(ul) {
                     FIXED
                 } else {
@@ -174,7 +168,13 @@ impl FaceSet {
                 ACTIVE => {
                     self.compact[idx] = self.active.len() as u32;
                     self.active.push(idx as u32);
-                    let row = |i: u32| if i == NONE { NONE } else { row_of_cell[i as usize] };
+                    let row = |i: u32| {
+                        if i == NONE {
+                            NONE
+                        } else {
+                            row_of_cell[i as usize]
+                        }
+                    };
                     self.rows.push([row(li), row(ui)]);
                 }
                 _ => {}

@@ -34,7 +34,8 @@ pub fn duct_series(y: f64, z: f64) -> f64 {
         let n = (2 * m + 1) as f64;
         let sign = if m % 2 == 0 { 1.0 } else { -1.0 };
         // cosh(n pi z / 2) / cosh(n pi / 2), written to avoid overflow.
-        let ratio = ((n * PI * z / 2.0).abs() - n * PI / 2.0).exp() * (1.0 + (-n * PI * z.abs()).exp())
+        let ratio = ((n * PI * z / 2.0).abs() - n * PI / 2.0).exp()
+            * (1.0 + (-n * PI * z.abs()).exp())
             / (1.0 + (-n * PI).exp());
         sum += sign * (1.0 - ratio) * (n * PI * y / 2.0).cos() / n.powi(3);
     }
@@ -44,7 +45,11 @@ pub fn duct_series(y: f64, z: f64) -> f64 {
 /// Steady Poiseuille flow in a periodic square duct of `n` cells across (walls = the grid's outside),
 /// driven by a body force, run `steps` steps of `dt = dt_factor h^2 / nu`. Returns the relative
 /// flow-rate error and the largest face error over the cross-section relative to the centre speed.
-pub fn square_duct(n: usize, dt_factor: f64, steps: usize) -> Result<(ValidationResult, f64), FluidError> {
+pub fn square_duct(
+    n: usize,
+    dt_factor: f64,
+    steps: usize,
+) -> Result<(ValidationResult, f64), FluidError> {
     let t0 = Instant::now();
     let h = 1e-3;
     let l = n as f64 * h;
@@ -102,7 +107,12 @@ pub fn taylor_green(n: usize, scheme: AdvectionScheme) -> Result<ValidationResul
     let h = l / n as f64;
     let k = 2.0 * PI / l;
     let grid = FluidGrid::new([n, n, 1], h, [0.0; 3], [true; 3])?;
-    let params = FluidParams { density_kg_m3: 1.0, viscosity_m2_s: nu, advection: scheme, ..Default::default() };
+    let params = FluidParams {
+        density_kg_m3: 1.0,
+        viscosity_m2_s: nu,
+        advection: scheme,
+        ..Default::default()
+    };
     let mut s = FluidSolver::new(grid, params)?;
     s.set_velocity_field(|c, x| match c {
         0 => u0 * (k * x[0]).sin() * (k * x[1]).cos(),
@@ -160,7 +170,12 @@ pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
             }
         }
     }
-    let params = FluidParams { density_kg_m3: 1.0, viscosity_m2_s: nu, tolerance: 1e-7, ..Default::default() };
+    let params = FluidParams {
+        density_kg_m3: 1.0,
+        viscosity_m2_s: nu,
+        tolerance: 1e-7,
+        ..Default::default()
+    };
     let mut s = FluidSolver::new(grid, params)?;
     let set_boundary = |s: &mut FluidSolver, t: f64| -> Result<(), FluidError> {
         for k in 0..m {
@@ -168,7 +183,10 @@ pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
                 for i in 0..m {
                     if boundary([i, j, k]) {
                         // The point of the boundary this cell borders.
-                        let x = s.grid().cell_centre_m([i, j, k]).map(|v| v.clamp(-1.0, 1.0));
+                        let x = s
+                            .grid()
+                            .cell_centre_m([i, j, k])
+                            .map(|v| v.clamp(-1.0, 1.0));
                         let u = ethier_steinman_velocity(x, t, nu).map(|v| v as f32);
                         s.grid_mut().set_velocity([i, j, k], u)?;
                     }

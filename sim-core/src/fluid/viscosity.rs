@@ -2,6 +2,9 @@
 //! otherwise. Walls enter through ghost values (no-slip at the wall, moving with `Velocity` cells),
 //! outflow sides as zero gradient.
 
+// Index loops over several parallel arrays read clearer than zipped iterators here.
+#![allow(clippy::needless_range_loop)]
+
 use super::topology::{FaceSet, CONST_BIT, NONE};
 
 /// Which viscosity step ran.
@@ -115,7 +118,7 @@ pub(crate) fn implicit(
             ap[i] = apply(p, i);
             pap += (p[i] * ap[i]) as f64;
         }
-        if !(pap > 0.0) {
+        if pap.is_nan() || pap <= 0.0 {
             return it;
         }
         let alpha = (rz / pap) as f32;
