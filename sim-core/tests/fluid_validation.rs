@@ -5,8 +5,8 @@ use hydrometra_sim::fluid::{
     AdvectionScheme, CellLabel, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
 };
 
-fn duct(n: usize, dt_factor: f64, steps: usize) -> (f64, f64) {
-    let (r, worst) = square_duct(n, dt_factor, steps).unwrap();
+fn duct(n: usize, dt_factor: f64) -> (f64, f64) {
+    let (r, worst) = square_duct(n, dt_factor).unwrap();
     assert!(r.all_converged);
     (r.error, worst)
 }
@@ -40,7 +40,7 @@ fn duct_series_matches_the_reference_profile() {
 #[test]
 fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
     // Implicit viscosity (nu dt / h^2 = 2), run to steady state.
-    let (q_err, prof) = duct(16, 2.0, 200);
+    let (q_err, prof) = duct(16, 2.0);
     println!(
         "square duct 16 cells: flow-rate error {:.3} %, max face error {:.3} % of u_max",
         q_err * 100.0,
@@ -49,7 +49,7 @@ fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
     assert!(q_err < 0.01, "flow rate error {q_err}");
     assert!(prof < 0.01, "profile error {prof}");
     // Second order: the error at 8 cells is about four times larger.
-    let (q8, _) = duct(8, 2.0, 200);
+    let (q8, _) = duct(8, 2.0);
     println!(
         "square duct 8 cells: flow-rate error {:.3} %, observed order {:.2}",
         q8 * 100.0,
@@ -61,8 +61,8 @@ fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
 #[test]
 fn poiseuille_steady_state_is_independent_of_time_step_and_viscosity_mode() {
     // Explicit viscosity (nu dt / h^2 = 0.07) against implicit (nu dt / h^2 = 2).
-    let (q_exp, _) = duct(8, 0.07, 3000);
-    let (q_imp, _) = duct(8, 2.0, 200);
+    let (q_exp, _) = duct(8, 0.07);
+    let (q_imp, _) = duct(8, 2.0);
     println!(
         "square duct 8 cells: flow-rate error explicit {:.4} %, implicit {:.4} %",
         q_exp * 100.0,

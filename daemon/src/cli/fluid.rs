@@ -279,7 +279,7 @@ fn validate(a: ValidateArgs) -> Result<()> {
     let mut rows = Vec::new();
     let duct_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
     for &n in duct_n {
-        rows.push(square_duct(n, 2.0, 200)?.0);
+        rows.push(square_duct(n, 2.0)?.0);
     }
     let tg_n: &[usize] = if a.fine {
         &[16, 32, 64, 128]
