@@ -29,7 +29,10 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn steady_steps_do_not_allocate() {
-    for (scheme, nu) in [(AdvectionScheme::SemiLagrangian, 1e-6), (AdvectionScheme::MacCormack, 1e-3)] {
+    for (scheme, nu) in [
+        (AdvectionScheme::SemiLagrangian, 1e-6),
+        (AdvectionScheme::MacCormack, 1e-3),
+    ] {
         let grid = ellipsoid_cavity(0.0018, 1.0).unwrap();
         let params = FluidParams {
             advection: scheme,
@@ -49,8 +52,15 @@ fn steady_steps_do_not_allocate() {
             stats.push(s.step(1.0 / 60.0).unwrap());
         }
         let after = ALLOCS.load(Ordering::Relaxed);
-        assert_eq!(after, after_reserve, "{scheme:?}: {} allocations in 20 steps", after - after_reserve);
+        assert_eq!(
+            after,
+            after_reserve,
+            "{scheme:?}: {} allocations in 20 steps",
+            after - after_reserve
+        );
         assert!(after_reserve > before);
-        assert!(stats.iter().all(|s| s.projection_converged && s.projection_iterations > 0));
+        assert!(stats
+            .iter()
+            .all(|s| s.projection_converged && s.projection_iterations > 0));
     }
 }

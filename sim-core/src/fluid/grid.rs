@@ -235,3 +235,37 @@ impl FluidGrid {
         Some(c)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fill_box_takes_cells_whose_centres_are_inside() {
+        let mut g = FluidGrid::new([10, 4, 4], 0.1, [1.0, 0.0, 0.0], [false; 3]).unwrap();
+        // Centres at x = 1.05, 1.15, ...: the box [1.1, 1.35] holds 1.15, 1.25, 1.35 (closed box).
+        let n = g.fill_box(
+            [1.1, 0.0, 0.0],
+            [1.35, 0.4, 0.4],
+            CellLabel::Outflow,
+            [0.0; 3],
+        );
+        assert_eq!(n, 3 * 16);
+        assert_eq!(g.label([0, 0, 0]), Some(CellLabel::Fluid));
+        assert_eq!(g.label([1, 0, 0]), Some(CellLabel::Outflow));
+        assert_eq!(g.label([3, 3, 3]), Some(CellLabel::Outflow));
+        assert_eq!(g.label([4, 0, 0]), Some(CellLabel::Fluid));
+        // Boxes outside the grid or inverted touch nothing.
+        assert_eq!(
+            g.fill_box([5.0; 3], [6.0; 3], CellLabel::Solid, [0.0; 3]),
+            0
+        );
+        assert_eq!(
+            g.fill_box([1.5, 0.0, 0.0], [1.2, 0.4, 0.4], CellLabel::Solid, [0.0; 3]),
+            0
+        );
+        assert!(g.set_label([10, 0, 0], CellLabel::Solid).is_err());
+        assert!(FluidGrid::new([0, 1, 1], 0.1, [0.0; 3], [false; 3]).is_err());
+        assert!(FluidGrid::new([1, 1, 1], f64::NAN, [0.0; 3], [false; 3]).is_err());
+    }
+}

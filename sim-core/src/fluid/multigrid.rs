@@ -294,3 +294,125 @@ impl Multigrid {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An irregular label grid: a ball of fluid with an open cap and a solid inclusion.
+    fn ball(n: usize) -> Level {
+        let mut l = Level {
+            dims: [n, n, n],
+            periodic: [false; 3],
+            ..Default::default()
+        };
+        let c = (n as f64 - 1.0) / 2.0;
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    let r2 = [i, j, k]
+                        .iter()
+                        .map(|&v| (v as f64 - c).powi(2))
+                        .sum::<f64>();
+                    let label = if r2 > c * c {
+                        L_SOLID
+                    } else if k + 2 >= n {
+                        L_OPEN
+                    } else if (i as f64 - c).abs() < 1.5 && (j as f64 - c).abs() < 1.5 && k < n / 2
+                    {
+                        L_SOLID
+                    } else {
+                        L_FLUID
+                    };
+                    l.label.push(label);
+                }
+            }
+        }
+        l.build_rows();
+        l
+    }
+
+    fn mg(n: usize) -> Multigrid {
+        let mut m = Multigrid {
+            coarse_scale: 0.5,
+            sweeps: 2,
+            coarsest_sweeps: 16,
+            ..Default::default()
+        };
+        m.levels.push(ball(n));
+        m.build_hierarchy();
+        m
+    }
+
+    fn apply(m: &mut Multigrid, b: &[f32]) -> Vec<f32> {
+        let n = m.levels[0].rows();
+        m.levels[0].b[..n].copy_from_slice(b);
+        m.vcycle();
+        m.levels[0].x[..n].to_vec()
+    }
+
+    #[test]
+    fn vcycle_is_a_symmetric_positive_operator() {
+        let mut m = mg(17);
+        assert!(m.used >= 3, "levels {}", m.used);
+        let n = m.levels[0].rows();
+        let a: Vec<f32> = (0..n)
+            .map(|i| ((i * 7919) % 101) as f32 / 50.0 - 1.0)
+            .collect();
+        let b: Vec<f32> = (0..n)
+            .map(|i| ((i * 104729) % 97) as f32 / 48.0 - 1.0)
+            .collect();
+        let ma = apply(&mut m, &a);
+        let mb = apply(&mut m, &b);
+        let dot = |x: &[f32], y: &[f32]| {
+            x.iter()
+                .zip(y)
+                .map(|(p, q)| *p as f64 * *q as f64)
+                .sum::<f64>()
+        };
+        let (ab, ba) = (dot(&ma, &b), dot(&a, &mb));
+        assert!(
+            (ab - ba).abs() <= 1e-4 * ab.abs().max(ba.abs()),
+            "<Ma,b> = {ab}, <a,Mb> = {ba}"
+        );
+        assert!(dot(&ma, &a) > 0.0 && dot(&mb, &b) > 0.0);
+    }
+
+    #[test]
+    fn vcycle_reduces_the_error_of_the_poisson_problem() {
+        // As a stationary iteration x <- x + M (b - A x), one V-cycle must contract the error well.
+        let mut m = mg(17);
+        let n = m.levels[0].rows();
+        let l0 = &m.levels[0];
+        let exact: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
+        let matvec = |l: &Level, x: &[f32]| -> Vec<f32> {
+            (0..l.rows())
+                .map(|r| {
+                    let mut s = l.diag[r] * x[r];
+                    for &nb in &l.nbr[r] {
+                        if (nb as usize) < l.rows() {
+                            s -= x[nb as usize];
+                        }
+                    }
+                    s
+                })
+                .collect()
+        };
+        let b = matvec(l0, &exact);
+        let mut x = vec![0.0f32; n];
+        for _ in 0..2 {
+            let ax = matvec(&m.levels[0], &x);
+            let r: Vec<f32> = b.iter().zip(&ax).map(|(p, q)| p - q).collect();
+            let z = apply(&mut m, &r);
+            for (xi, zi) in x.iter_mut().zip(&z) {
+                *xi += zi;
+            }
+        }
+        let err = x
+            .iter()
+            .zip(&exact)
+            .map(|(p, q)| (p - q).abs())
+            .fold(0.0f32, f32::max);
+        assert!(err < 0.1, "error after two V-cycles: {err}");
+    }
+}

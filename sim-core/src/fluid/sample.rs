@@ -174,3 +174,32 @@ impl Layout {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn linear_fields_are_reproduced_exactly_inside_and_wrap_on_periodic_axes() {
+        let layout = Layout::new([5, 4, 3], [false, true, false]);
+        // u (component 0) = 2 x + 0.5 z at its faces, in grid units.
+        let field: Vec<f32> = (0..layout.face_count(0))
+            .map(|i| {
+                let p = Layout::face_position(0, layout.face_coords(0, i));
+                2.0 * p[0] + 0.5 * p[2]
+            })
+            .collect();
+        for p in [[0.3, 1.7, 1.1], [4.9, 0.9, 2.4], [2.0, 3.0, 0.5]] {
+            let v = layout.sample(0, &field, p);
+            assert!((v - (2.0 * p[0] + 0.5 * p[2])).abs() < 1e-5, "{p:?}: {v}");
+        }
+        // Periodic in y: sampling at y and y + 4 is the same.
+        let a = layout.sample(0, &field, [1.3, 0.2, 1.0]);
+        let b = layout.sample(0, &field, [1.3, 4.2, 1.0]);
+        let c = layout.sample(0, &field, [1.3, -3.8, 1.0]);
+        assert!((a - b).abs() < 1e-6 && (a - c).abs() < 1e-6);
+        // Outside a non-periodic axis the sample clamps to the last face.
+        let edge = layout.sample(0, &field, [5.0, 1.5, 1.5]);
+        assert_eq!(layout.sample(0, &field, [9.0, 1.5, 1.5]), edge);
+    }
+}
