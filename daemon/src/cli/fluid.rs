@@ -304,7 +304,13 @@ fn validate(a: ValidateArgs) -> Result<()> {
     for r in &rows {
         println!(
             "| {} | {} | {:.4e} | {} | {} | {:.2} | {} |",
-            r.case, r.cells_across, r.error, r.metric, r.steps, r.wall_s, r.all_converged
+            r.case,
+            r.cells_across,
+            r.error,
+            r.metric.replace('|', "\\|"),
+            r.steps,
+            r.wall_s,
+            r.all_converged
         );
     }
     Ok(())
