@@ -48,7 +48,11 @@ fn trace(layout: &Layout, vc: &Centred, c: usize, f: [usize; 3], dt_cells: f32) 
     }
     let at = |g: [usize; 3]| vc.v[g[0] + vc.dims[0] * (g[1] + vc.dims[1] * g[2])];
     let (a, b) = (at(lo), at(hi));
-    let v0 = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.5 * (a[2] + b[2])];
+    let v0 = [
+        0.5 * (a[0] + b[0]),
+        0.5 * (a[1] + b[1]),
+        0.5 * (a[2] + b[2]),
+    ];
     let xm: [f32; 3] = std::array::from_fn(|a| x0[a] - 0.5 * dt_cells * v0[a]);
     let vm = layout.sample_centred(vc.dims, vc.v, xm);
     std::array::from_fn(|a| x0[a] - dt_cells * vm[a])
@@ -128,7 +132,13 @@ pub(crate) fn maccormack_correct(
     parallel: bool,
 ) {
     let one = |idx: u32, fwd_val: f32, l: f32, h: f32| {
-        let xf = trace(layout, vc, c, layout.face_coords(c, idx as usize), -dt_cells);
+        let xf = trace(
+            layout,
+            vc,
+            c,
+            layout.face_coords(c, idx as usize),
+            -dt_cells,
+        );
         let back = layout.sample(c, hat, xf);
         let v = fwd_val + 0.5 * (orig[idx as usize] - back);
         if v.is_finite() {

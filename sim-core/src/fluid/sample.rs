@@ -44,20 +44,27 @@ impl Layout {
         self.fdims[c].iter().product()
     }
 
-    /// Two sample indices and the weight of the second along one axis.
+    /// Two sample indices and the weight of the second along one axis. (i32 conversions: they
+    /// compile to one instruction, where `as usize` on a float needs saturation code.)
     #[inline]
     fn axis(s: f32, npts: usize, periodic: bool) -> (usize, usize, f32) {
         if periodic {
             let fl = s.floor();
             let t = s - fl;
-            let i0 = (fl as i64).rem_euclid(npts as i64) as usize;
+            let n = npts as i32;
+            let mut i0 = (fl as i32) % n;
+            if i0 < 0 {
+                i0 += n;
+            }
+            let i0 = i0 as usize;
             let i1 = if i0 + 1 == npts { 0 } else { i0 + 1 };
             (i0, i1, t)
         } else if npts == 1 {
             (0, 0, 0.0)
         } else {
-            let s = s.clamp(0.0, (npts - 1) as f32);
-            let i0 = (s as usize).min(npts - 2);
+            // max/min (not clamp) so a NaN position lands on sample 0 instead of panicking.
+            let s = s.max(0.0).min((npts - 1) as f32);
+            let i0 = (s as i32 as usize).min(npts - 2);
             (i0, i0 + 1, s - i0 as f32)
         }
     }
