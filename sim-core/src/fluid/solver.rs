@@ -231,7 +231,7 @@ impl FluidSolver {
     pub fn time_s(&self) -> f64 {
         self.time_s
     }
-    /// Face velocities of component `c` (layout: see [`FluidSolver::face_position_m`]).
+    /// Face velocities of component `c` (0, 1 or 2; layout: see [`FluidSolver::face_position_m`]).
     pub fn face_velocities(&self, c: usize) -> &[f32] {
         &self.u[c]
     }
@@ -758,6 +758,7 @@ impl FluidSolver {
 
     /// Pressure (Pa) of a fluid cell; `None` for other cells.
     pub fn cell_pressure_pa(&self, cell: [usize; 3]) -> Option<f64> {
+        self.grid.label(cell)?; // out of range: None
         let idx = self.grid.index(cell);
         let r = *self.pressure.mg.levels[0].row_of_cell.get(idx)?;
         (r != NONE).then(|| self.pressure_pa[r as usize])
