@@ -259,7 +259,11 @@ fn paper_class_gauss_seidel_leaves_divergence() {
 fn cfl_substepping_splits_the_step_and_keeps_uniform_flow_uniform() {
     let (h, u_in) = (1e-3, 0.2f32);
     let grid = FluidGrid::new([8, 4, 4], h, [0.0; 3], [true; 3]).unwrap();
-    let params = FluidParams { max_cfl: Some(1.0), max_substeps: 8, ..water() };
+    let params = FluidParams {
+        max_cfl: Some(1.0),
+        max_substeps: 8,
+        ..water()
+    };
     let mut s = FluidSolver::new(grid, params).unwrap();
     s.set_velocity_field(|c, _| if c == 0 { u_in as f64 } else { 0.0 });
     let st = s.step(3.5 * h / u_in as f64).unwrap();
@@ -283,7 +287,8 @@ fn cells_turning_from_solid_to_fluid_get_extrapolated_velocities() {
     for _ in 0..3 {
         s.step(0.01).unwrap();
     }
-    s.grid_mut().fill_box(block.0, block.1, CellLabel::Fluid, [0.0; 3]);
+    s.grid_mut()
+        .fill_box(block.0, block.1, CellLabel::Fluid, [0.0; 3]);
     let st = s.step(0.01).unwrap();
     assert!(st.topology_rebuilt);
     assert_eq!(s.fluid_cells(), 512);
