@@ -8,7 +8,11 @@
 //! forward before and reversed after the coarse correction, so the V-cycle is a symmetric operator and
 //! CG preconditioned by it stays valid.
 
+use rayon::prelude::*;
+
 use super::topology::NONE;
+
+const CHUNK: usize = 2048;
 
 /// Label codes of a level.
 pub(crate) const L_SOLID: u8 = 0;
@@ -29,8 +33,12 @@ pub(crate) struct Level {
     /// Number of fluid or open neighbours.
     pub diag: Vec<f32>,
     pub inv_diag: Vec<f32>,
-    pub red: Vec<u32>,
-    pub black: Vec<u32>,
+    /// Rows `0..red_rows` are red (even i+j+k), the rest black.
+    pub red_rows: usize,
+    /// True when no row has a neighbour of its own colour (parallel sweeps are then exact).
+    pub exact_colouring: bool,
+    /// Scratch for parallel sweeps.
+    pub scratch: Vec<f32>,
     /// Coarse row of each row's parent cell (NONE when the parent is open).
     pub parent: Vec<u32>,
     pub x: Vec<f32>,
@@ -73,17 +81,24 @@ impl Level {
         self.row_of_cell.clear();
         self.row_of_cell.resize(ncell, NONE);
         self.cell_of_row.clear();
-        for (i, &l) in self.label.iter().enumerate() {
-            if l == L_FLUID {
-                self.row_of_cell[i] = self.cell_of_row.len() as u32;
-                self.cell_of_row.push(i as u32);
+        // Red cells (even i+j+k) first, then black: each colour is a contiguous range of rows, so a
+        // colour can be relaxed in parallel into a scratch buffer and copied back in one piece.
+        let parity = |i: usize| (i % nx + (i / nx) % ny + i / (nx * ny)) % 2;
+        for colour in 0..2 {
+            for (i, &l) in self.label.iter().enumerate() {
+                if l == L_FLUID && parity(i) == colour {
+                    self.row_of_cell[i] = self.cell_of_row.len() as u32;
+                    self.cell_of_row.push(i as u32);
+                }
+            }
+            if colour == 0 {
+                self.red_rows = self.cell_of_row.len();
             }
         }
         self.nbr.clear();
         self.diag.clear();
         self.inv_diag.clear();
-        self.red.clear();
-        self.black.clear();
+        self.exact_colouring = true;
         let zero_slot = self.cell_of_row.len() as u32;
         for row in 0..self.cell_of_row.len() {
             let ci = self.cell_of_row[row] as usize;
@@ -108,14 +123,18 @@ impl Level {
             self.diag.push(diag);
             self.inv_diag
                 .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
-            if (c[0] + c[1] + c[2]).is_multiple_of(2) {
-                self.red.push(row as u32);
-            } else {
-                self.black.push(row as u32);
+            // Odd periodic axes make some neighbours share a colour: then only serial sweeps are
+            // Gauss-Seidel.
+            let red = row < self.red_rows;
+            if nb
+                .iter()
+                .any(|&m| m != zero_slot && ((m as usize) < self.red_rows) == red)
+            {
+                self.exact_colouring = false;
             }
         }
         let n = self.cell_of_row.len() + 1;
-        for v in [&mut self.x, &mut self.b, &mut self.r] {
+        for v in [&mut self.x, &mut self.b, &mut self.r, &mut self.scratch] {
             v.clear();
             v.resize(n, 0.0);
         }
@@ -175,28 +194,58 @@ impl Level {
         self.x[row] = s * self.inv_diag[row];
     }
 
-    /// Red then black Gauss-Seidel sweep.
-    pub fn smooth_forward(&mut self) {
-        for n in 0..self.red.len() {
-            let r = self.red[n] as usize;
-            self.relax(r);
-        }
-        for n in 0..self.black.len() {
-            let r = self.black[n] as usize;
-            self.relax(r);
+    /// Relaxes rows `range` (one colour): in parallel through the scratch buffer when `parallel` and
+    /// the colouring is exact, else in order (`reverse`: backwards).
+    fn relax_range(&mut self, range: std::ops::Range<usize>, reverse: bool, parallel: bool) {
+        if parallel && self.exact_colouring {
+            let start = range.start;
+            let Level {
+                x,
+                b,
+                nbr,
+                inv_diag,
+                scratch,
+                ..
+            } = self;
+            let x_read: &[f32] = x;
+            scratch[range.clone()]
+                .par_chunks_mut(CHUNK)
+                .enumerate()
+                .for_each(|(ci, out)| {
+                    for (o, v) in out.iter_mut().enumerate() {
+                        let row = start + ci * CHUNK + o;
+                        let nb = nbr[row];
+                        let s = b[row]
+                            + (x_read[nb[0] as usize] + x_read[nb[1] as usize])
+                            + (x_read[nb[2] as usize] + x_read[nb[3] as usize])
+                            + (x_read[nb[4] as usize] + x_read[nb[5] as usize]);
+                        *v = s * inv_diag[row];
+                    }
+                });
+            x[range.clone()].copy_from_slice(&scratch[range]);
+        } else if reverse {
+            for row in range.rev() {
+                self.relax(row);
+            }
+        } else {
+            for row in range {
+                self.relax(row);
+            }
         }
     }
 
+    /// Red then black Gauss-Seidel sweep.
+    pub fn smooth_forward(&mut self, parallel: bool) {
+        let (red, n) = (self.red_rows, self.rows());
+        self.relax_range(0..red, false, parallel);
+        self.relax_range(red..n, false, parallel);
+    }
+
     /// The adjoint of `smooth_forward`: black then red, each in reverse order.
-    pub fn smooth_backward(&mut self) {
-        for n in (0..self.black.len()).rev() {
-            let r = self.black[n] as usize;
-            self.relax(r);
-        }
-        for n in (0..self.red.len()).rev() {
-            let r = self.red[n] as usize;
-            self.relax(r);
-        }
+    pub fn smooth_backward(&mut self, parallel: bool) {
+        let (red, n) = (self.red_rows, self.rows());
+        self.relax_range(red..n, true, parallel);
+        self.relax_range(0..red, true, parallel);
     }
 
     fn residual(&mut self) {
@@ -223,6 +272,8 @@ pub(crate) struct Multigrid {
     pub sweeps: usize,
     /// Symmetric sweeps on the coarsest level.
     pub coarsest_sweeps: usize,
+    /// Levels with at least this many rows smooth in parallel (rayon).
+    pub parallel_rows: usize,
 }
 
 impl Multigrid {
@@ -260,8 +311,9 @@ impl Multigrid {
             let fine = &mut fine[l];
             let coarse = &mut coarse[0];
             fine.x.fill(0.0);
+            let par = fine.rows() >= self.parallel_rows;
             for _ in 0..self.sweeps {
-                fine.smooth_forward();
+                fine.smooth_forward(par);
             }
             fine.residual();
             coarse.b.fill(0.0);
@@ -275,8 +327,8 @@ impl Multigrid {
         let last = &mut self.levels[n - 1];
         last.x.fill(0.0);
         for _ in 0..self.coarsest_sweeps {
-            last.smooth_forward();
-            last.smooth_backward();
+            last.smooth_forward(false);
+            last.smooth_backward(false);
         }
         for l in (0..n - 1).rev() {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
@@ -288,8 +340,9 @@ impl Multigrid {
                     fine.x[row] += coarse.x[p as usize];
                 }
             }
+            let par = fine.rows() >= self.parallel_rows;
             for _ in 0..self.sweeps {
-                fine.smooth_backward();
+                fine.smooth_backward(par);
             }
         }
     }
@@ -376,6 +429,17 @@ mod tests {
             "<Ma,b> = {ab}, <a,Mb> = {ba}"
         );
         assert!(dot(&ma, &a) > 0.0 && dot(&mb, &b) > 0.0);
+    }
+
+    #[test]
+    fn parallel_sweeps_equal_serial_sweeps() {
+        let mut serial = mg(17);
+        let mut parallel = mg(17);
+        parallel.parallel_rows = 0;
+        assert!(parallel.levels[0].exact_colouring);
+        let n = serial.levels[0].rows();
+        let b: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
+        assert_eq!(apply(&mut serial, &b), apply(&mut parallel, &b));
     }
 
     #[test]

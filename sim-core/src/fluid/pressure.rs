@@ -11,6 +11,7 @@ use rayon::prelude::*;
 
 use super::multigrid::{Level, Multigrid};
 use super::regions::Regions;
+use super::topology::NONE;
 use serde::{Deserialize, Serialize};
 
 /// How the pressure is solved.
@@ -145,6 +146,7 @@ impl PressureSolver {
             return self.gauss_seidel(sweeps, tol_abs);
         }
         let parallel = n >= self.parallel_rows;
+        self.mg.parallel_rows = self.parallel_rows;
         self.regions.remove_closed_means(&mut self.q);
         matvec(&self.mg.levels[0], &self.q, &mut self.r, parallel);
         for (r, &b) in self.r.iter_mut().zip(&self.b) {
@@ -206,7 +208,12 @@ impl PressureSolver {
         let l = &self.mg.levels[0];
         let n_rows = self.q.len();
         for _ in 0..sweeps {
-            for row in 0..n_rows {
+            // Lexicographic (cell) order, as in the classic solver; rows are numbered by colour.
+            for &row in &l.row_of_cell {
+                if row == NONE {
+                    continue;
+                }
+                let row = row as usize;
                 let mut s = self.b[row];
                 for &nb in &l.nbr[row] {
                     if (nb as usize) < n_rows {
