@@ -5,5 +5,6 @@
 #![warn(missing_docs)]
 
 pub mod hydraulics;
+pub mod fluid;
 pub mod mesh;
 pub mod units;

@@ -26,6 +26,9 @@ enum Command {
     /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
     #[command(subcommand)]
     Rig(hydrometra_daemon::cli::rig::RigCommand),
+    /// Fluid solver: run case files, benchmark, soak.
+    #[command(subcommand)]
+    Fluid(hydrometra_daemon::cli::fluid::FluidCommand),
 }
 
 fn main() -> Result<()> {
@@ -46,5 +49,6 @@ fn main() -> Result<()> {
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
         Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
         Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
+        Command::Fluid(cmd) => hydrometra_daemon::cli::fluid::run(cmd),
     }
 }

@@ -3,3 +3,4 @@ pub mod hydraulics;
 pub mod monitor;
 pub mod procedure;
 pub mod rig;
+pub mod fluid;

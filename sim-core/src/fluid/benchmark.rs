@@ -1,0 +1,101 @@
+//! The paper's Table 1 operating points on the benchmark cavity ([`super::cavity`]): our solver and the
+//! paper-class baseline side by side.
+
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::cavity::ellipsoid_cavity;
+use super::{FluidError, FluidParams, FluidSolver, ProjectionMethod};
+
+/// The paper's voxel sizes (m).
+pub const PAPER_VOXELS_M: [f64; 5] = [0.0006, 0.0009, 0.0012, 0.0015, 0.0018];
+/// The paper's fluid-voxel counts at those sizes.
+pub const PAPER_FLUID_VOXELS: [usize; 5] = [35179, 9528, 3813, 1818, 969];
+/// The paper's CPU time per step (ms, no vortices, 3 GHz PC, 2005).
+pub const PAPER_MS: [f64; 5] = [100.0, 26.0, 10.0, 5.0, 3.0];
+
+/// One row: one voxel size, one projection method.
+#[derive(Clone, Debug, Serialize)]
+pub struct BenchRow {
+    /// Voxel edge (m).
+    pub voxel_m: f64,
+    /// Projection method.
+    pub method: ProjectionMethod,
+    /// Voxels in the grid.
+    pub voxels_total: usize,
+    /// Fluid voxels.
+    pub fluid_voxels: usize,
+    /// Steps timed.
+    pub steps: usize,
+    /// Wall time per step (ms): mean, and standard error of the mean.
+    pub ms_mean: f64,
+    /// Standard error of the mean (ms).
+    pub ms_sem: f64,
+    /// 99th percentile (ms).
+    pub ms_p99: f64,
+    /// Projection share of the mean (ms).
+    pub project_ms_mean: f64,
+    /// Advection share of the mean (ms).
+    pub advect_ms_mean: f64,
+    /// Projection iterations per step (mean).
+    pub iterations_mean: f64,
+    /// Mean over steps of `max |div u| h / U` after projection.
+    pub div_rel_mean: f64,
+    /// Worst `max |div u| h / U` after projection.
+    pub div_rel_max: f64,
+}
+
+/// Runs `warmup + steps` steps of the cavity at `voxel_m` with the jet at `jet_m_s` and `dt_s`.
+pub fn bench_cavity(
+    voxel_m: f64,
+    jet_m_s: f32,
+    dt_s: f64,
+    warmup: usize,
+    steps: usize,
+    params: FluidParams,
+) -> Result<BenchRow, FluidError> {
+    let grid = ellipsoid_cavity(voxel_m, jet_m_s)?;
+    let voxels_total = grid.cell_count();
+    let method = params.projection;
+    let mut s = FluidSolver::new(grid, params)?;
+    for _ in 0..warmup {
+        s.step(dt_s)?;
+    }
+    let mut ms = Vec::with_capacity(steps);
+    let (mut proj, mut adv, mut its, mut div, mut divmax) = (0.0, 0.0, 0usize, 0.0, 0.0f64);
+    for _ in 0..steps {
+        let t = Instant::now();
+        let st = s.step(dt_s)?;
+        ms.push(t.elapsed().as_secs_f64() * 1e3);
+        proj += st.project_ms;
+        adv += st.advect_ms;
+        its += st.projection_iterations;
+        div += st.max_div_rel;
+        divmax = divmax.max(st.max_div_rel);
+    }
+    let n = steps.max(1) as f64;
+    let mean = ms.iter().sum::<f64>() / n;
+    let var = ms.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    let mut sorted = ms.clone();
+    sorted.sort_by(|a, b| a.total_cmp(b));
+    let p99 = sorted
+        .get(((n * 0.99).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(0.0);
+    Ok(BenchRow {
+        voxel_m,
+        method,
+        voxels_total,
+        fluid_voxels: s.fluid_cells(),
+        steps,
+        ms_mean: mean,
+        ms_sem: (var / n).sqrt(),
+        ms_p99: p99,
+        project_ms_mean: proj / n,
+        advect_ms_mean: adv / n,
+        iterations_mean: its as f64 / n,
+        div_rel_mean: div / n,
+        div_rel_max: divmax,
+    })
+}

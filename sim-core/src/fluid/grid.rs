@@ -1,0 +1,271 @@
+//! The MAC (staggered) grid: geometry, cell labels and the velocities of `Velocity` cells.
+//!
+//! Cell `(i, j, k)` spans `origin + h * [i, i+1) x [j, j+1) x [k, k+1)`. The x-velocity lives on the
+//! faces normal to x at `origin + h * (i, j + 1/2, k + 1/2)`, and likewise for y and z. Cells outside
+//! the grid are solid walls unless the axis is periodic.
+
+use super::{CellLabel, FluidError};
+
+/// Geometry and labels of a box-shaped MAC grid.
+#[derive(Clone, Debug)]
+pub struct FluidGrid {
+    dims: [usize; 3],
+    spacing_m: f64,
+    origin_m: [f64; 3],
+    periodic: [bool; 3],
+    labels: Vec<CellLabel>,
+    velocity_m_s: Vec<[f32; 3]>,
+    revision: u64,
+}
+
+impl FluidGrid {
+    /// A grid of `dims` cells of edge `spacing_m`, all fluid.
+    pub fn new(
+        dims: [usize; 3],
+        spacing_m: f64,
+        origin_m: [f64; 3],
+        periodic: [bool; 3],
+    ) -> Result<Self, FluidError> {
+        if dims.contains(&0) {
+            return Err(FluidError::InvalidGrid(format!(
+                "cells = {dims:?}: every axis needs at least one cell"
+            )));
+        }
+        let n = dims[0]
+            .checked_mul(dims[1])
+            .and_then(|v| v.checked_mul(dims[2]))
+            .filter(|&n| n < u32::MAX as usize / 4)
+            .ok_or_else(|| FluidError::InvalidGrid(format!("cells = {dims:?}: too many cells")))?;
+        if !(spacing_m.is_finite() && spacing_m > 0.0) {
+            return Err(FluidError::InvalidGrid(format!(
+                "spacing_m = {spacing_m}: expected a finite length > 0"
+            )));
+        }
+        if origin_m.iter().any(|o| !o.is_finite()) {
+            return Err(FluidError::InvalidGrid(format!(
+                "origin_m = {origin_m:?}: expected finite coordinates"
+            )));
+        }
+        Ok(Self {
+            dims,
+            spacing_m,
+            origin_m,
+            periodic,
+            labels: vec![CellLabel::Fluid; n],
+            velocity_m_s: vec![[0.0; 3]; n],
+            revision: 1,
+        })
+    }
+
+    /// Cells per axis.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    /// Cell edge length.
+    pub fn spacing_m(&self) -> f64 {
+        self.spacing_m
+    }
+    /// Position of the grid's lower corner.
+    pub fn origin_m(&self) -> [f64; 3] {
+        self.origin_m
+    }
+    /// Periodic axes.
+    pub fn periodic(&self) -> [bool; 3] {
+        self.periodic
+    }
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.labels.len()
+    }
+    /// Changes whenever a label changes (the solver rebuilds its topology then).
+    pub fn revision(&self) -> u64 {
+        self.revision
+    }
+    /// Linear index of a cell (x fastest).
+    #[inline]
+    pub fn index(&self, cell: [usize; 3]) -> usize {
+        cell[0] + self.dims[0] * (cell[1] + self.dims[1] * cell[2])
+    }
+    /// Cell coordinates of a linear index.
+    #[inline]
+    pub fn coords(&self, index: usize) -> [usize; 3] {
+        let i = index % self.dims[0];
+        let r = index / self.dims[0];
+        [i, r % self.dims[1], r / self.dims[1]]
+    }
+    /// Centre of a cell.
+    pub fn cell_centre_m(&self, cell: [usize; 3]) -> [f64; 3] {
+        std::array::from_fn(|a| self.origin_m[a] + (cell[a] as f64 + 0.5) * self.spacing_m)
+    }
+    /// Label of a cell (by linear index).
+    #[inline]
+    pub fn label_at(&self, index: usize) -> CellLabel {
+        self.labels[index]
+    }
+    /// All labels, x fastest.
+    pub fn labels(&self) -> &[CellLabel] {
+        &self.labels
+    }
+    /// Prescribed velocity of a cell (meaningful for `Velocity` cells).
+    #[inline]
+    pub fn velocity_at(&self, index: usize) -> [f32; 3] {
+        self.velocity_m_s[index]
+    }
+
+    /// Label of a cell; `None` when the coordinates are outside the grid.
+    pub fn label(&self, cell: [usize; 3]) -> Option<CellLabel> {
+        self.in_range(cell).then(|| self.labels[self.index(cell)])
+    }
+
+    fn in_range(&self, cell: [usize; 3]) -> bool {
+        (0..3).all(|a| cell[a] < self.dims[a])
+    }
+
+    /// Sets one cell's label. Out-of-range cells are an error.
+    pub fn set_label(&mut self, cell: [usize; 3], label: CellLabel) -> Result<(), FluidError> {
+        if !self.in_range(cell) {
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
+        }
+        let idx = self.index(cell);
+        if self.labels[idx] != label {
+            self.labels[idx] = label;
+            self.revision += 1;
+        }
+        Ok(())
+    }
+
+    /// Sets a cell's prescribed velocity (used where the label is `Velocity`). Changing a velocity
+    /// does not change the topology.
+    pub fn set_velocity(
+        &mut self,
+        cell: [usize; 3],
+        velocity_m_s: [f32; 3],
+    ) -> Result<(), FluidError> {
+        if !self.in_range(cell) {
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
+        }
+        let idx = self.index(cell);
+        self.velocity_m_s[idx] = velocity_m_s;
+        Ok(())
+    }
+
+    /// Labels every cell whose centre lies inside the closed box `[min_m, max_m]`, and gives it
+    /// `velocity_m_s`. Returns the number of cells changed.
+    pub fn fill_box(
+        &mut self,
+        min_m: [f64; 3],
+        max_m: [f64; 3],
+        label: CellLabel,
+        velocity_m_s: [f32; 3],
+    ) -> usize {
+        let mut count = 0;
+        let (lo, hi) = (
+            self.cell_range(min_m, max_m, 0),
+            self.cell_range(min_m, max_m, 1),
+        );
+        let (lo2, hi2) = (
+            self.cell_range(min_m, max_m, 2),
+            self.cell_range(min_m, max_m, 3),
+        );
+        let (lo3, hi3) = (
+            self.cell_range(min_m, max_m, 4),
+            self.cell_range(min_m, max_m, 5),
+        );
+        for k in lo3..hi3 {
+            for j in lo2..hi2 {
+                for i in lo..hi {
+                    let idx = self.index([i, j, k]);
+                    if self.labels[idx] != label {
+                        self.labels[idx] = label;
+                        self.revision += 1;
+                    }
+                    self.velocity_m_s[idx] = velocity_m_s;
+                    count += 1;
+                }
+            }
+        }
+        count
+    }
+
+    /// `which` = 2*axis + (0 for the first cell index, 1 for one past the last) of the cells whose
+    /// centres lie in `[min_m, max_m]` along `axis`.
+    fn cell_range(&self, min_m: [f64; 3], max_m: [f64; 3], which: usize) -> usize {
+        let a = which / 2;
+        let h = self.spacing_m;
+        // Centre i lies inside when min <= o + (i+0.5)h <= max.
+        let first = ((min_m[a] - self.origin_m[a]) / h - 0.5).ceil().max(0.0);
+        let last = ((max_m[a] - self.origin_m[a]) / h - 0.5).floor();
+        let n = self.dims[a] as f64;
+        if which.is_multiple_of(2) || last < first {
+            first.min(n) as usize
+        } else {
+            (last + 1.0).clamp(0.0, n) as usize
+        }
+    }
+
+    /// Neighbour of a cell along `axis` in direction `dir` (-1 or +1), wrapping on periodic axes;
+    /// `None` outside the grid.
+    #[inline]
+    pub fn neighbour(&self, cell: [usize; 3], axis: usize, dir: i32) -> Option<[usize; 3]> {
+        let n = self.dims[axis];
+        let mut c = cell;
+        if dir < 0 {
+            if cell[axis] == 0 {
+                if !self.periodic[axis] {
+                    return None;
+                }
+                c[axis] = n - 1;
+            } else {
+                c[axis] -= 1;
+            }
+        } else if cell[axis] + 1 == n {
+            if !self.periodic[axis] {
+                return None;
+            }
+            c[axis] = 0;
+        } else {
+            c[axis] += 1;
+        }
+        Some(c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fill_box_takes_cells_whose_centres_are_inside() {
+        let mut g = FluidGrid::new([10, 4, 4], 0.1, [1.0, 0.0, 0.0], [false; 3]).unwrap();
+        // Centres at x = 1.05, 1.15, ...: the box [1.1, 1.35] holds 1.15, 1.25, 1.35 (closed box).
+        let n = g.fill_box(
+            [1.1, 0.0, 0.0],
+            [1.35, 0.4, 0.4],
+            CellLabel::Outflow,
+            [0.0; 3],
+        );
+        assert_eq!(n, 3 * 16);
+        assert_eq!(g.label([0, 0, 0]), Some(CellLabel::Fluid));
+        assert_eq!(g.label([1, 0, 0]), Some(CellLabel::Outflow));
+        assert_eq!(g.label([3, 3, 3]), Some(CellLabel::Outflow));
+        assert_eq!(g.label([4, 0, 0]), Some(CellLabel::Fluid));
+        // Boxes outside the grid or inverted touch nothing.
+        assert_eq!(
+            g.fill_box([5.0; 3], [6.0; 3], CellLabel::Solid, [0.0; 3]),
+            0
+        );
+        assert_eq!(
+            g.fill_box([1.5, 0.0, 0.0], [1.2, 0.4, 0.4], CellLabel::Solid, [0.0; 3]),
+            0
+        );
+        assert!(g.set_label([10, 0, 0], CellLabel::Solid).is_err());
+        assert!(FluidGrid::new([0, 1, 1], 0.1, [0.0; 3], [false; 3]).is_err());
+        assert!(FluidGrid::new([1, 1, 1], f64::NAN, [0.0; 3], [false; 3]).is_err());
+    }
+}

@@ -1,0 +1,98 @@
+//! Connected fluid regions and the per-region compatibility of the pressure problem.
+//!
+//! A region that touches no open (outflow) cell has a Neumann-only Poisson problem: it is singular
+//! (pressure defined up to a constant) and solvable only if its right-hand side sums to zero. We
+//! subtract the region mean from the right-hand side (the part of the divergence no pressure can
+//! remove, e.g. a flux mismatch of its ports) and keep iterates mean-free in that region.
+
+use super::multigrid::Level;
+use super::topology::NONE;
+
+/// Fluid regions of the finest level.
+#[derive(Default, Debug)]
+pub(crate) struct Regions {
+    /// Region id of each pressure row.
+    pub of_row: Vec<u32>,
+    /// Whether each region is closed (no open neighbour).
+    pub closed: Vec<bool>,
+    /// Rows per region.
+    pub size: Vec<u32>,
+    /// Scratch accumulators, one per region.
+    sum: Vec<f64>,
+    queue: Vec<u32>,
+}
+
+impl Regions {
+    pub fn build(&mut self, level: &Level) {
+        let n = level.rows();
+        self.of_row.clear();
+        self.of_row.resize(n, NONE);
+        self.closed.clear();
+        self.size.clear();
+        for seed in 0..n {
+            if self.of_row[seed] != NONE {
+                continue;
+            }
+            let id = self.closed.len() as u32;
+            let mut closed = true;
+            let mut size = 0u32;
+            self.queue.clear();
+            self.queue.push(seed as u32);
+            self.of_row[seed] = id;
+            while let Some(r) = self.queue.pop() {
+                size += 1;
+                let nb = level.nbr[r as usize];
+                let fluid_nb = nb.iter().filter(|&&x| (x as usize) < n).count() as f32;
+                // Fluid neighbours through a periodic self-wrap count too; diag counts open ones.
+                if level.diag[r as usize] > fluid_nb {
+                    closed = false;
+                }
+                for &x in &nb {
+                    if (x as usize) < n && self.of_row[x as usize] == NONE {
+                        self.of_row[x as usize] = id;
+                        self.queue.push(x);
+                    }
+                }
+            }
+            self.closed.push(closed);
+            self.size.push(size);
+        }
+        self.sum.clear();
+        self.sum.resize(self.closed.len(), 0.0);
+    }
+
+    /// Number of regions.
+    pub fn count(&self) -> usize {
+        self.closed.len()
+    }
+
+    /// True if any region is closed.
+    pub fn any_closed(&self) -> bool {
+        self.closed.iter().any(|&c| c)
+    }
+
+    /// Subtracts its region's mean from every row of a closed region. Returns the largest absolute
+    /// mean removed.
+    pub fn remove_closed_means(&mut self, v: &mut [f64]) -> f64 {
+        if !self.any_closed() {
+            return 0.0;
+        }
+        self.sum.fill(0.0);
+        for (r, &x) in v.iter().enumerate() {
+            self.sum[self.of_row[r] as usize] += x;
+        }
+        let mut worst = 0.0f64;
+        for (id, s) in self.sum.iter_mut().enumerate() {
+            *s = if self.closed[id] {
+                *s / self.size[id] as f64
+            } else {
+                0.0
+            };
+            worst = worst.max(s.abs());
+        }
+        for (r, x) in v.iter_mut().enumerate() {
+            *x -= self.sum[self.of_row[r] as usize];
+        }
+        worst
+    }
+}

@@ -1,0 +1,271 @@
+//! Face classification derived from the cell labels: which faces the solver updates (active), which
+//! carry a prescribed normal velocity (fixed), which are extrapolated for sampling, and the viscous
+//! stencil of every active face. Rebuilt only when a label changes, into reused buffers.
+
+use super::grid::FluidGrid;
+use super::sample::Layout;
+use super::CellLabel;
+
+/// "No such index".
+pub(crate) const NONE: u32 = u32::MAX;
+/// Stencil entry flag: the neighbour is a fixed face read from the full array, not a variable.
+pub(crate) const CONST_BIT: u32 = 1 << 31;
+
+/// Face classes.
+pub(crate) const OTHER: u8 = 0;
+pub(crate) const ACTIVE: u8 = 1;
+pub(crate) const FIXED: u8 = 2;
+pub(crate) const EXT1: u8 = 3;
+pub(crate) const EXT2: u8 = 4;
+
+/// Everything the solver needs to know about the faces of one velocity component.
+#[derive(Default, Debug)]
+pub(crate) struct FaceSet {
+    /// Class of every face (full array).
+    pub class: Vec<u8>,
+    /// Full index of each active face.
+    pub active: Vec<u32>,
+    /// Compact index of each face (NONE unless active).
+    pub compact: Vec<u32>,
+    /// Pressure rows of the lower and upper cell of each active face (NONE for outflow cells).
+    pub rows: Vec<[u32; 2]>,
+    /// Viscous stencil: compact index of an active neighbour, `CONST_BIT | full` for a fixed one,
+    /// NONE when the neighbour is a ghost or a zero-gradient (outflow) one.
+    pub stencil: Vec<[u32; 6]>,
+    /// Diagonal of the negative Laplacian (6, plus one per wall ghost, minus one per outflow side).
+    pub diag: Vec<f32>,
+    /// Wall ghosts: (compact face, cell a, cell b, opposite face): the wall velocity is the mean of the
+    /// prescribed velocities of `Velocity` cells among a and b (zero for solids and outside); the
+    /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
+    /// quadratic wall extrapolation.
+    pub ghosts: Vec<[u32; 4]>,
+    /// Fixed faces: (full face, cell a, cell b) as for ghosts.
+    pub fixed: Vec<[u32; 3]>,
+    /// Extrapolation layers: faces next to active faces, and next to those.
+    pub ext1: Vec<u32>,
+    pub ext2: Vec<u32>,
+    /// Sources of the extrapolated faces (ext1 then ext2): `ext_src[ext_start[n]..ext_start[n+1]]`.
+    pub ext_start: Vec<u32>,
+    pub ext_src: Vec<u32>,
+}
+
+fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
+    match cell {
+        Some(c) => {
+            let idx = grid.index(c);
+            (grid.label_at(idx), idx as u32)
+        }
+        None => (CellLabel::Solid, NONE),
+    }
+}
+
+/// The two cells beside face `f` of component `c` (None = outside).
+pub(crate) fn face_cells(
+    grid: &FluidGrid,
+    c: usize,
+    f: [usize; 3],
+) -> (Option<[usize; 3]>, Option<[usize; 3]>) {
+    let dims = grid.dims();
+    let upper = (f[c] < dims[c]).then_some(f);
+    let lower = if f[c] == 0 {
+        grid.neighbour(f, c, -1)
+    } else {
+        let mut l = f;
+        l[c] -= 1;
+        Some(l)
+    };
+    // Periodic: face 0's upper is cell 0 (f itself), lower is cell n-1.
+    (lower, upper)
+}
+
+/// Neighbour face of face `f` (component c) along axis `d`, direction `dir`.
+pub(crate) fn face_neighbour(
+    layout: &Layout,
+    c: usize,
+    f: [usize; 3],
+    d: usize,
+    dir: i32,
+) -> Option<[usize; 3]> {
+    let n = layout.fdims[c][d];
+    let mut g = f;
+    if dir < 0 {
+        if f[d] == 0 {
+            if !layout.periodic[d] {
+                return None;
+            }
+            g[d] = n - 1;
+        } else {
+            g[d] -= 1;
+        }
+    } else if f[d] + 1 >= n {
+        if !layout.periodic[d] {
+            return None;
+        }
+        g[d] = 0;
+    } else {
+        g[d] += 1;
+    }
+    Some(g)
+}
+
+/// Wall velocity component `c` of a pair of non-fluid cells (mean over `Velocity` cells).
+pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
+    let mut sum = 0.0;
+    let mut n = 0;
+    for cell in [a, b] {
+        if cell != NONE && grid.label_at(cell as usize) == CellLabel::Velocity {
+            sum += grid.velocity_at(cell as usize)[c];
+            n += 1;
+        }
+    }
+    if n == 0 {
+        0.0
+    } else {
+        sum / n as f32
+    }
+}
+
+impl FaceSet {
+    /// Rebuilds this component's face set from the labels. `row_of_cell` maps fluid cells to
+    /// pressure rows.
+    pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize, row_of_cell: &[u32]) {
+        let nf = layout.face_count(c);
+        self.class.clear();
+        self.class.resize(nf, OTHER);
+        self.compact.clear();
+        self.compact.resize(nf, NONE);
+        self.active.clear();
+        self.rows.clear();
+        self.fixed.clear();
+        self.stencil.clear();
+        self.diag.clear();
+        self.ghosts.clear();
+        self.ext1.clear();
+        self.ext2.clear();
+        self.ext_start.clear();
+        self.ext_src.clear();
+
+        for idx in 0..nf {
+            let f = layout.face_coords(c, idx);
+            let (lo, up) = face_cells(grid, c, f);
+            let (ll, li) = label_of(grid, lo);
+            let (ul, ui) = label_of(grid, up);
+            let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
+            let class = if ll.is_wall() || ul.is_wall() {
+                if open(ll) || open(ul) {
+                    FIXED
+                } else {
+                    OTHER
+                }
+            } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
+                ACTIVE
+            } else {
+                OTHER
+            };
+            self.class[idx] = class;
+            match class {
+                FIXED => self.fixed.push([idx as u32, li, ui]),
+                ACTIVE => {
+                    self.compact[idx] = self.active.len() as u32;
+                    self.active.push(idx as u32);
+                    let row = |i: u32| {
+                        if i == NONE {
+                            NONE
+                        } else {
+                            row_of_cell[i as usize]
+                        }
+                    };
+                    self.rows.push([row(li), row(ui)]);
+                }
+                _ => {}
+            }
+        }
+
+        // Viscous stencils.
+        for n in 0..self.active.len() {
+            let idx = self.active[n] as usize;
+            let f = layout.face_coords(c, idx);
+            let mut st = [NONE; 6];
+            let mut diag = 6.0f32;
+            for d in 0..3 {
+                for (s, dir) in [-1i32, 1].into_iter().enumerate() {
+                    let slot = 2 * d + s;
+                    let g = face_neighbour(layout, c, f, d, dir);
+                    let opposite = || {
+                        face_neighbour(layout, c, f, d, -dir)
+                            .map(|o| layout.face_index(c, o))
+                            .filter(|&o| matches!(self.class[o], ACTIVE | FIXED))
+                            .map_or(NONE, |o| o as u32)
+                    };
+                    let Some(g) = g else {
+                        // Beyond a non-periodic tangential boundary: wall at rest.
+                        diag += 1.0;
+                        self.ghosts.push([n as u32, NONE, NONE, opposite()]);
+                        continue;
+                    };
+                    let gi = layout.face_index(c, g);
+                    if d == c {
+                        match self.class[gi] {
+                            ACTIVE => st[slot] = self.compact[gi],
+                            FIXED => st[slot] = CONST_BIT | gi as u32,
+                            _ => diag -= 1.0, // outflow-outflow: zero gradient
+                        }
+                        continue;
+                    }
+                    let (lo, up) = face_cells(grid, c, g);
+                    let (ll, li) = label_of(grid, lo);
+                    let (ul, ui) = label_of(grid, up);
+                    if ll.is_wall() && ul.is_wall() {
+                        diag += 1.0;
+                        self.ghosts.push([n as u32, li, ui, opposite()]);
+                    } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
+                        st[slot] = match self.class[gi] {
+                            ACTIVE => self.compact[gi],
+                            _ => CONST_BIT | gi as u32,
+                        };
+                    } else {
+                        diag -= 1.0;
+                    }
+                }
+            }
+            self.stencil.push(st);
+            self.diag.push(diag);
+        }
+
+        // Extrapolation layers.
+        for (layer, from) in [(EXT1, ACTIVE), (EXT2, EXT1)] {
+            for idx in 0..nf {
+                if self.class[idx] != OTHER {
+                    continue;
+                }
+                let f = layout.face_coords(c, idx);
+                let near = (0..6).any(|slot| {
+                    face_neighbour(layout, c, f, slot / 2, if slot % 2 == 0 { -1 } else { 1 })
+                        .is_some_and(|g| self.class[layout.face_index(c, g)] == from)
+                });
+                if near {
+                    if self.ext_start.is_empty() {
+                        self.ext_start.push(0);
+                    }
+                    for slot in 0..6 {
+                        let dir = if slot % 2 == 0 { -1 } else { 1 };
+                        if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
+                            let gi = layout.face_index(c, g);
+                            let cl = self.class[gi];
+                            if cl == from || (from == ACTIVE && cl == FIXED) {
+                                self.ext_src.push(gi as u32);
+                            }
+                        }
+                    }
+                    self.ext_start.push(self.ext_src.len() as u32);
+                    self.class[idx] = layer;
+                    if layer == EXT1 {
+                        self.ext1.push(idx as u32);
+                    } else {
+                        self.ext2.push(idx as u32);
+                    }
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,227 @@
+//! Analytic validation cases (references.md section 2), shared by the tests and by
+//! `hydrometra fluid validate`, which prints their error against run time.
+
+use std::f64::consts::PI;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use super::{AdvectionScheme, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver};
+
+/// Error of one validation run and what it cost.
+#[derive(Clone, Debug, Serialize)]
+pub struct ValidationResult {
+    /// Case name.
+    pub case: String,
+    /// Cells across the domain.
+    pub cells_across: usize,
+    /// The error figure (meaning per case, see `metric`).
+    pub error: f64,
+    /// What `error` measures.
+    pub metric: String,
+    /// Steps run.
+    pub steps: usize,
+    /// Wall time of the run (s).
+    pub wall_s: f64,
+    /// Whether every projection reached its tolerance.
+    pub all_converged: bool,
+}
+
+/// Square-duct velocity `u / (a^2 G / mu)` at `(y/a, z/a)`, from the series in references.md.
+pub fn duct_series(y: f64, z: f64) -> f64 {
+    let mut sum = 0.0;
+    for m in 0..200 {
+        let n = (2 * m + 1) as f64;
+        let sign = if m % 2 == 0 { 1.0 } else { -1.0 };
+        // cosh(n pi z / 2) / cosh(n pi / 2), written to avoid overflow.
+        let ratio = ((n * PI * z / 2.0).abs() - n * PI / 2.0).exp()
+            * (1.0 + (-n * PI * z.abs()).exp())
+            / (1.0 + (-n * PI).exp());
+        sum += sign * (1.0 - ratio) * (n * PI * y / 2.0).cos() / n.powi(3);
+    }
+    16.0 / PI.powi(3) * sum
+}
+
+/// Steady Poiseuille flow in a periodic square duct of `n` cells across (walls = the grid's outside),
+/// driven by a body force, from rest to t = 2 L^2 / nu (the slowest mode has decayed by e^-39) with
+/// `dt = dt_factor h^2 / nu`. Returns the relative flow-rate error and the largest face error over
+/// the cross-section relative to the centre speed.
+pub fn square_duct(n: usize, dt_factor: f64) -> Result<(ValidationResult, f64), FluidError> {
+    let steps = (2.0 * (n * n) as f64 / dt_factor).ceil() as usize;
+    let t0 = Instant::now();
+    let h = 1e-3;
+    let l = n as f64 * h;
+    let a = l / 2.0;
+    let (nu, rho) = (1e-6, 1000.0);
+    let mu = rho * nu;
+    // G such that the centre speed is 1 mm/s.
+    let g = 1e-3 / (0.2946854 * a * a) * mu;
+    let grid = FluidGrid::new([4, n, n], h, [0.0, -a, -a], [true, false, false])?;
+    let params = FluidParams {
+        density_kg_m3: rho,
+        viscosity_m2_s: nu,
+        body_force_m_s2: [g / rho, 0.0, 0.0],
+        tolerance: 1e-7,
+        ..Default::default()
+    };
+    let mut s = FluidSolver::new(grid, params)?;
+    let dt = dt_factor * h * h / nu;
+    let mut ok = true;
+    for _ in 0..steps {
+        ok &= s.step(dt)?.projection_converged;
+    }
+    let u = s.face_velocities(0);
+    let u_max = 0.2946854 * a * a * g / mu;
+    let (mut q, mut worst) = (0.0, 0.0f64);
+    for k in 0..n {
+        for j in 0..n {
+            let v = u[4 * (j + n * k)] as f64;
+            q += v * h * h;
+            let y = (j as f64 + 0.5) * h - a;
+            let z = (k as f64 + 0.5) * h - a;
+            worst = worst.max((v - duct_series(y / a, z / a) * a * a * g / mu).abs() / u_max);
+        }
+    }
+    let q_exact = 0.0351443 * l.powi(4) * g / mu;
+    Ok((
+        ValidationResult {
+            case: "square duct (Poiseuille)".into(),
+            cells_across: n,
+            error: (q - q_exact).abs() / q_exact,
+            metric: "|Q - Q_exact| / Q_exact".into(),
+            steps,
+            wall_s: t0.elapsed().as_secs_f64(),
+            all_converged: ok,
+        },
+        worst,
+    ))
+}
+
+/// 2D Taylor-Green vortex (Re = 100, CFL 0.5) on an `n x n x 1` periodic grid to t = 0.5; the error
+/// figure is `nu_eff / nu` (1 is exact; numerical dissipation adds).
+pub fn taylor_green(n: usize, scheme: AdvectionScheme) -> Result<ValidationResult, FluidError> {
+    let t0 = Instant::now();
+    let (l, u0, nu) = (1.0, 1.0, 0.01);
+    let h = l / n as f64;
+    let k = 2.0 * PI / l;
+    let grid = FluidGrid::new([n, n, 1], h, [0.0; 3], [true; 3])?;
+    let params = FluidParams {
+        density_kg_m3: 1.0,
+        viscosity_m2_s: nu,
+        advection: scheme,
+        ..Default::default()
+    };
+    let mut s = FluidSolver::new(grid, params)?;
+    s.set_velocity_field(|c, x| match c {
+        0 => u0 * (k * x[0]).sin() * (k * x[1]).cos(),
+        1 => -u0 * (k * x[0]).cos() * (k * x[1]).sin(),
+        _ => 0.0,
+    });
+    let e0 = s.kinetic_energy_j();
+    let dt = 0.5 * h / u0;
+    let steps = (0.5 / dt).round() as usize;
+    let mut ok = true;
+    for _ in 0..steps {
+        let st = s.step(dt)?;
+        ok &= st.projection_converged && st.max_div_rel <= 1e-5;
+    }
+    let nu_eff = -(s.kinetic_energy_j() / e0).ln() / (4.0 * k * k * s.time_s());
+    Ok(ValidationResult {
+        case: format!("Taylor-Green 2D ({scheme:?})"),
+        cells_across: n,
+        error: nu_eff / nu,
+        metric: "nu_eff / nu".into(),
+        steps,
+        wall_s: t0.elapsed().as_secs_f64(),
+        all_converged: ok,
+    })
+}
+
+/// Ethier-Steinman exact velocity.
+pub fn ethier_steinman_velocity(x: [f64; 3], t: f64, nu: f64) -> [f64; 3] {
+    let (a, d) = (PI / 4.0, PI / 2.0);
+    let f = (-nu * d * d * t).exp();
+    let [x, y, z] = x;
+    [
+        -a * ((a * x).exp() * (a * y + d * z).sin() + (a * z).exp() * (a * x + d * y).cos()) * f,
+        -a * ((a * y).exp() * (a * z + d * x).sin() + (a * x).exp() * (a * y + d * z).cos()) * f,
+        -a * ((a * z).exp() * (a * x + d * y).sin() + (a * y).exp() * (a * z + d * x).cos()) * f,
+    ]
+}
+
+/// Ethier-Steinman on [-1,1]^3 (nu = 1, t = 0.05, dt = h^2/4) with `n` cells across and the exact
+/// velocity prescribed on every face (a layer of `Velocity` cells). Error: the largest face-velocity
+/// error over the interior relative to the largest exact speed.
+pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
+    let t0 = Instant::now();
+    let nu = 1.0;
+    let h = 2.0 / n as f64;
+    let m = n + 2;
+    let mut grid = FluidGrid::new([m; 3], h, [-1.0 - h; 3], [false; 3])?;
+    let boundary = |c: [usize; 3]| c.iter().any(|&v| v == 0 || v == m - 1);
+    for k in 0..m {
+        for j in 0..m {
+            for i in 0..m {
+                if boundary([i, j, k]) {
+                    grid.set_label([i, j, k], CellLabel::Velocity)?;
+                }
+            }
+        }
+    }
+    let params = FluidParams {
+        density_kg_m3: 1.0,
+        viscosity_m2_s: nu,
+        tolerance: 1e-7,
+        ..Default::default()
+    };
+    let mut s = FluidSolver::new(grid, params)?;
+    let set_boundary = |s: &mut FluidSolver, t: f64| -> Result<(), FluidError> {
+        for k in 0..m {
+            for j in 0..m {
+                for i in 0..m {
+                    if boundary([i, j, k]) {
+                        // The point of the boundary this cell borders.
+                        let x = s
+                            .grid()
+                            .cell_centre_m([i, j, k])
+                            .map(|v| v.clamp(-1.0, 1.0));
+                        let u = ethier_steinman_velocity(x, t, nu).map(|v| v as f32);
+                        s.grid_mut().set_velocity([i, j, k], u)?;
+                    }
+                }
+            }
+        }
+        Ok(())
+    };
+    set_boundary(&mut s, 0.0)?;
+    s.set_velocity_field(|c, x| ethier_steinman_velocity(x, 0.0, nu)[c]);
+    let mut ok = s.project_now(1.0).projection_converged;
+    let dt = 0.25 * h * h;
+    let steps = (0.05 / dt).round() as usize;
+    for _ in 0..steps {
+        let t_next = s.time_s() + dt;
+        set_boundary(&mut s, t_next)?;
+        ok &= s.step(dt)?.projection_converged;
+    }
+    let t = s.time_s();
+    let (mut err, mut umax) = (0.0f64, 0.0f64);
+    for c in 0..3 {
+        for (idx, &v) in s.face_velocities(c).iter().enumerate() {
+            let x = s.face_position_m(c, idx);
+            if x.iter().all(|&v| v > -1.0 + 0.5 * h && v < 1.0 - 0.5 * h) {
+                let e = ethier_steinman_velocity(x, t, nu)[c];
+                err = err.max((v as f64 - e).abs());
+                umax = umax.max(e.abs());
+            }
+        }
+    }
+    Ok(ValidationResult {
+        case: "Ethier-Steinman 3D".into(),
+        cells_across: n,
+        error: err / umax,
+        metric: "max |u - u_exact| / max |u_exact|".into(),
+        steps,
+        wall_s: t0.elapsed().as_secs_f64(),
+        all_converged: ok,
+    })
+}

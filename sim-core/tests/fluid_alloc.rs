@@ -1,0 +1,66 @@
+//! A step allocates nothing on the heap once the topology is built (serial path), with either
+//! advection scheme, explicit or implicit viscosity, and body forces. Steps right after a label change
+//! rebuild the topology and may allocate (only when buffers must grow).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use hydrometra_sim::fluid::{cavity::ellipsoid_cavity, AdvectionScheme, FluidParams, FluidSolver};
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn steady_steps_do_not_allocate() {
+    for (scheme, nu) in [
+        (AdvectionScheme::SemiLagrangian, 1e-6),
+        (AdvectionScheme::MacCormack, 1e-3),
+    ] {
+        let grid = ellipsoid_cavity(0.0018, 1.0).unwrap();
+        let params = FluidParams {
+            advection: scheme,
+            viscosity_m2_s: nu,
+            body_force_m_s2: [0.0, 0.0, -9.81],
+            parallel_threshold_cells: usize::MAX,
+            ..Default::default()
+        };
+        let mut s = FluidSolver::new(grid, params).unwrap();
+        for _ in 0..3 {
+            s.step(1.0 / 60.0).unwrap();
+        }
+        let before = ALLOCS.load(Ordering::Relaxed);
+        let mut stats = Vec::with_capacity(20);
+        let after_reserve = ALLOCS.load(Ordering::Relaxed);
+        for _ in 0..20 {
+            stats.push(s.step(1.0 / 60.0).unwrap());
+        }
+        let after = ALLOCS.load(Ordering::Relaxed);
+        assert_eq!(
+            after,
+            after_reserve,
+            "{scheme:?}: {} allocations in 20 steps",
+            after - after_reserve
+        );
+        assert!(after_reserve > before);
+        assert!(stats
+            .iter()
+            .all(|s| s.projection_converged && s.projection_iterations > 0));
+    }
+}

@@ -1,0 +1,301 @@
+//! Validation of the fluid solver against analytic flows (references.md section 2).
+
+use hydrometra_sim::fluid::validation::{duct_series, ethier_steinman, square_duct, taylor_green};
+use hydrometra_sim::fluid::{
+    AdvectionScheme, CellLabel, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
+};
+
+fn duct(n: usize, dt_factor: f64) -> (f64, f64) {
+    let (r, worst) = square_duct(n, dt_factor).unwrap();
+    assert!(r.all_converged);
+    (r.error, worst)
+}
+
+fn tg(n: usize, scheme: AdvectionScheme) -> f64 {
+    let r = taylor_green(n, scheme).unwrap();
+    assert!(r.all_converged, "{r:?}");
+    r.error
+}
+
+fn water() -> FluidParams {
+    FluidParams {
+        density_kg_m3: 1000.0,
+        viscosity_m2_s: 1e-6,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn duct_series_matches_the_reference_profile() {
+    let csv = include_str!("data/square_duct_poiseuille_profile.csv");
+    for line in csv
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with('y'))
+    {
+        let v: Vec<f64> = line.split(',').map(|v| v.trim().parse().unwrap()).collect();
+        assert!((duct_series(v[0], 0.0) - v[1]).abs() < 2e-6, "{line}");
+    }
+}
+
+#[test]
+fn poiseuille_square_duct_flow_rate_within_one_percent_at_16_cells() {
+    // Implicit viscosity (nu dt / h^2 = 2), run to steady state.
+    let (q_err, prof) = duct(16, 2.0);
+    println!(
+        "square duct 16 cells: flow-rate error {:.3} %, max face error {:.3} % of u_max",
+        q_err * 100.0,
+        prof * 100.0
+    );
+    assert!(q_err < 0.01, "flow rate error {q_err}");
+    assert!(prof < 0.01, "profile error {prof}");
+    // Second order: the error at 8 cells is about four times larger.
+    let (q8, _) = duct(8, 2.0);
+    println!(
+        "square duct 8 cells: flow-rate error {:.3} %, observed order {:.2}",
+        q8 * 100.0,
+        (q8 / q_err).log2()
+    );
+    assert!(q8 > 2.5 * q_err);
+}
+
+#[test]
+fn poiseuille_steady_state_is_independent_of_time_step_and_viscosity_mode() {
+    // Explicit viscosity (nu dt / h^2 = 0.07) against implicit (nu dt / h^2 = 2).
+    let (q_exp, _) = duct(8, 0.07);
+    let (q_imp, _) = duct(8, 2.0);
+    println!(
+        "square duct 8 cells: flow-rate error explicit {:.4} %, implicit {:.4} %",
+        q_exp * 100.0,
+        q_imp * 100.0
+    );
+    // The split step's steady state must not depend on dt or on the viscosity mode.
+    assert!(
+        (q_exp - q_imp).abs() < 1e-4,
+        "explicit {q_exp} vs implicit {q_imp}"
+    );
+}
+
+#[test]
+fn taylor_green_effective_viscosity_converges_with_resolution() {
+    let r16 = tg(16, AdvectionScheme::SemiLagrangian);
+    let r32 = tg(32, AdvectionScheme::SemiLagrangian);
+    let r64 = tg(64, AdvectionScheme::SemiLagrangian);
+    let m32 = tg(32, AdvectionScheme::MacCormack);
+    let m64 = tg(64, AdvectionScheme::MacCormack);
+    println!("Taylor-Green nu_eff/nu at CFL 0.5, Re 100: SL 16/32/64 = {r16:.3} {r32:.3} {r64:.3}; MacCormack 32/64 = {m32:.3} {m64:.3}");
+    // Numerical dissipation only adds: nu_eff >= nu (within 2 %), and the excess shrinks with h.
+    for r in [r16, r32, r64, m32, m64] {
+        assert!(r > 0.98, "nu_eff/nu = {r}");
+    }
+    assert!(r32 - 1.0 < 0.7 * (r16 - 1.0));
+    assert!(r64 - 1.0 < 0.7 * (r32 - 1.0));
+    assert!(m32 < r32 && m64 < r64, "MacCormack must dissipate less");
+    assert!((m64 - 1.0).abs() < 0.1);
+}
+
+#[test]
+fn ethier_steinman_converges() {
+    let e8 = ethier_steinman(8).unwrap().error;
+    let e16 = ethier_steinman(16).unwrap().error;
+    let order = (e8 / e16).log2();
+    println!("Ethier-Steinman max velocity error: n=8 {e8:.3e}, n=16 {e16:.3e}, observed order {order:.2}");
+    assert!(e16 < 0.02, "error {e16}");
+    assert!(order > 1.0, "observed order {order}");
+}
+
+#[test]
+fn fluid_at_rest_stays_at_rest_under_gravity_with_hydrostatic_pressure() {
+    let h = 1e-3;
+    let n = 12;
+    let mut grid = FluidGrid::new([n, n, n], h, [0.0; 3], [false; 3]).unwrap();
+    // An obstacle and a sealed pocket make it a closed, irregular, disconnected domain.
+    grid.fill_box(
+        [0.004, 0.004, 0.0],
+        [0.006, 0.006, 0.006],
+        CellLabel::Solid,
+        [0.0; 3],
+    );
+    grid.fill_box(
+        [0.0, 0.0, 0.0095],
+        [0.012, 0.012, 0.0105],
+        CellLabel::Solid,
+        [0.0; 3],
+    );
+    let g = 9.81;
+    let params = FluidParams {
+        body_force_m_s2: [0.0, 0.0, -g],
+        ..water()
+    };
+    let mut s = FluidSolver::new(grid, params).unwrap();
+    assert_eq!(s.regions(), (2, 2));
+    let dt = 1e-2;
+    for _ in 0..200 {
+        let st = s.step(dt).unwrap();
+        assert!(st.projection_converged);
+    }
+    assert!(
+        s.max_speed_m_s() < 1e-5 * g * dt,
+        "max speed {}",
+        s.max_speed_m_s()
+    );
+    // Hydrostatic: p(z) - p(z + h) = rho g h between vertically adjacent fluid cells.
+    let dp = s.cell_pressure_pa([1, 1, 2]).unwrap() - s.cell_pressure_pa([1, 1, 3]).unwrap();
+    assert!(
+        (dp - 1000.0 * g * h).abs() < 1e-4 * 1000.0 * g * h,
+        "dp = {dp}"
+    );
+}
+
+#[test]
+fn fluid_at_rest_without_forces_stays_exactly_at_rest() {
+    let grid = FluidGrid::new([8, 8, 8], 1e-3, [0.0; 3], [false; 3]).unwrap();
+    let mut s = FluidSolver::new(grid, water()).unwrap();
+    for _ in 0..10 {
+        let st = s.step(0.1).unwrap();
+        assert_eq!(st.projection_iterations, 0);
+    }
+    assert_eq!(s.max_speed_m_s(), 0.0);
+}
+
+#[test]
+fn uniform_flow_through_ports_stays_uniform_at_cfl_3() {
+    // Inflow layer at x = 0, outflow layer at the end, periodic in y and z.
+    let (n, h, u_in) = (16, 1e-3, 0.2f32);
+    let mut grid = FluidGrid::new([n, 6, 6], h, [0.0; 3], [false, true, true]).unwrap();
+    grid.fill_box(
+        [0.0, 0.0, 0.0],
+        [0.001, 0.006, 0.006],
+        CellLabel::Velocity,
+        [u_in, 0.0, 0.0],
+    );
+    grid.fill_box(
+        [0.015, 0.0, 0.0],
+        [0.016, 0.006, 0.006],
+        CellLabel::Outflow,
+        [0.0; 3],
+    );
+    for scheme in [AdvectionScheme::SemiLagrangian, AdvectionScheme::MacCormack] {
+        let params = FluidParams {
+            advection: scheme,
+            ..water()
+        };
+        let mut s = FluidSolver::new(grid.clone(), params).unwrap();
+        s.set_velocity_field(|c, _| if c == 0 { u_in as f64 } else { 0.0 });
+        let dt = 3.0 * h / u_in as f64;
+        for _ in 0..100 {
+            s.step(dt).unwrap();
+        }
+        for c in 0..3 {
+            for (idx, &v) in s.face_velocities(c).iter().enumerate() {
+                let x = s.face_position_m(c, idx);
+                if x[0] > 0.0011 && x[0] < 0.0149 {
+                    let want = if c == 0 { u_in } else { 0.0 };
+                    assert!(
+                        (v - want).abs() <= 1e-5 * u_in,
+                        "{scheme:?} c={c} x={x:?} v={v}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// A rough, random (deterministic) velocity field on the benchmark cavity.
+fn rough_cavity(voxel_m: f64, method: ProjectionMethod) -> FluidSolver {
+    let grid = hydrometra_sim::fluid::cavity::ellipsoid_cavity(voxel_m, 1.0).unwrap();
+    let params = FluidParams {
+        projection: method,
+        tolerance: 1e-6,
+        ..water()
+    };
+    let mut s = FluidSolver::new(grid, params).unwrap();
+    let mut state = 12345u64;
+    s.set_velocity_field(move |_, _| {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((state >> 33) as f64 / (1u64 << 31) as f64) - 0.5
+    });
+    s
+}
+
+#[test]
+fn projection_reaches_divergence_tolerance_and_matches_the_reference_solver() {
+    let mut mg = rough_cavity(0.0015, ProjectionMethod::MultigridPcg);
+    let mut jac = rough_cavity(0.0015, ProjectionMethod::JacobiPcg);
+    let smg = mg.project_now(1e-2);
+    let sj = jac.project_now(1e-2);
+    println!(
+        "rough field, 1.5 mm cavity: MGPCG {} iterations, Jacobi-PCG {} iterations; div {:.1e} / {:.1e}",
+        smg.projection_iterations, sj.projection_iterations, smg.max_div_rel, sj.max_div_rel
+    );
+    assert!(smg.projection_converged && sj.projection_converged);
+    assert!(smg.max_div_rel <= 1e-5 && sj.max_div_rel <= 1e-5);
+    assert!(mg.max_divergence_rel() <= 1e-5);
+    assert!(smg.projection_iterations * 4 < sj.projection_iterations);
+    // Same projected field within the tolerance.
+    let mut worst = 0.0f32;
+    for c in 0..3 {
+        for (a, b) in mg.face_velocities(c).iter().zip(jac.face_velocities(c)) {
+            worst = worst.max((a - b).abs());
+        }
+    }
+    assert!(worst < 1e-4, "MGPCG vs Jacobi-PCG differ by {worst}");
+}
+
+#[test]
+fn paper_class_gauss_seidel_leaves_divergence() {
+    let mut gs = rough_cavity(0.0015, ProjectionMethod::GaussSeidel { sweeps: 20 });
+    let st = gs.project_now(1e-2);
+    println!(
+        "Gauss-Seidel 20 sweeps: max div h/U = {:.2e}",
+        st.max_div_rel
+    );
+    assert!(!st.projection_converged);
+    assert!(st.max_div_rel > 1e-3);
+}
+
+#[test]
+fn cfl_substepping_splits_the_step_and_keeps_uniform_flow_uniform() {
+    let (h, u_in) = (1e-3, 0.2f32);
+    let grid = FluidGrid::new([8, 4, 4], h, [0.0; 3], [true; 3]).unwrap();
+    let params = FluidParams {
+        max_cfl: Some(1.0),
+        max_substeps: 8,
+        ..water()
+    };
+    let mut s = FluidSolver::new(grid, params).unwrap();
+    s.set_velocity_field(|c, _| if c == 0 { u_in as f64 } else { 0.0 });
+    let st = s.step(3.5 * h / u_in as f64).unwrap();
+    assert_eq!(st.substeps, 4);
+    assert!((s.time_s() - 3.5 * h / u_in as f64).abs() < 1e-12);
+    for &v in s.face_velocities(0) {
+        assert!((v - u_in).abs() <= 1e-6 * u_in);
+    }
+}
+
+#[test]
+fn cells_turning_from_solid_to_fluid_get_extrapolated_velocities() {
+    // Uniform flow through a periodic box carrying a block that moves with it; when the block turns
+    // into fluid, its faces take the surrounding velocity and the flow stays uniform.
+    let (h, u_in) = (1e-3, 0.1f32);
+    let mut grid = FluidGrid::new([8, 8, 8], h, [0.0; 3], [true; 3]).unwrap();
+    let block = ([0.003, 0.003, 0.003], [0.0045, 0.0045, 0.0045]);
+    grid.fill_box(block.0, block.1, CellLabel::Velocity, [u_in, 0.0, 0.0]);
+    let mut s = FluidSolver::new(grid, water()).unwrap();
+    s.set_velocity_field(|c, _| if c == 0 { u_in as f64 } else { 0.0 });
+    for _ in 0..3 {
+        s.step(0.01).unwrap();
+    }
+    s.grid_mut()
+        .fill_box(block.0, block.1, CellLabel::Fluid, [0.0; 3]);
+    let st = s.step(0.01).unwrap();
+    assert!(st.topology_rebuilt);
+    assert_eq!(s.fluid_cells(), 512);
+    for c in 0..3 {
+        let want = if c == 0 { u_in } else { 0.0 };
+        for &v in s.face_velocities(c) {
+            assert!((v - want).abs() <= 1e-5 * u_in, "component {c}: {v}");
+        }
+    }
+}
