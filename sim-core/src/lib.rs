@@ -4,5 +4,7 @@
 //! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
 #![warn(missing_docs)]
 
+pub mod atlas;
+pub mod fem;
 pub mod mesh;
 pub mod units;

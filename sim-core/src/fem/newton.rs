@@ -1,0 +1,365 @@
+//! Newton's method for the quasi-static equilibrium, with line search, a tangent predictor,
+//! adaptive load steps, a cavity-volume-controlled mode (bordered system) and an inversion guard.
+
+use super::linear::LdltSolver;
+use super::model::FemModel;
+use super::system::{Evaluation, System};
+use super::FemError;
+use std::time::{Duration, Instant};
+
+/// Solver settings.
+#[derive(Debug, Clone)]
+pub struct SolverOptions {
+    /// Converged when `|R| <= tolerance * |p dV/dx|` (2-norms).
+    pub tolerance: f64,
+    /// Newton iterations per load step before the step is cut.
+    pub max_iterations: usize,
+    /// Line-search halvings before the step is cut.
+    pub max_line_search: usize,
+    /// Smallest load step as a fraction of the requested increment.
+    pub min_step_fraction: f64,
+}
+
+impl Default for SolverOptions {
+    fn default() -> Self {
+        Self { tolerance: 1e-8, max_iterations: 12, max_line_search: 8, min_step_fraction: 1.0 / 1024.0 }
+    }
+}
+
+/// Work and time spent, for benchmarks and logs.
+#[derive(Debug, Clone, Default)]
+pub struct SolverCounters {
+    /// Newton iterations (each one assembly and one factorization).
+    pub newton_iterations: usize,
+    /// Numeric factorizations.
+    pub factorizations: usize,
+    /// Load steps that were cut and retried.
+    pub step_cuts: usize,
+    /// Time in assembly.
+    pub assembly: Duration,
+    /// Time in factorization and solves.
+    pub linear: Duration,
+}
+
+/// A converged equilibrium state.
+#[derive(Debug, Clone)]
+pub struct Equilibrium {
+    /// Positions in metres.
+    pub positions_m: Vec<[f64; 3]>,
+    /// Cavity pressure in Pa.
+    pub pressure_pa: f64,
+    /// Cavity volume in m^3.
+    pub cavity_volume_m3: f64,
+    /// `dx/dp` in m/Pa (pressure-controlled tangent at this state).
+    pub dxdp_m_per_pa: Vec<[f64; 3]>,
+    /// Newton iterations spent reaching this state from the previous one.
+    pub newton_iterations: usize,
+    /// Smallest `v/V0` over the tetrahedra.
+    pub min_volume_ratio: f64,
+}
+
+/// The nonlinear solver for one model; keeps the symbolic factorization for all solves.
+pub struct Solver<'m> {
+    model: &'m FemModel,
+    system: System,
+    linear: LdltSolver,
+    values: Vec<f64>,
+    options: SolverOptions,
+    /// Work counters.
+    pub counters: SolverCounters,
+    force_floor: f64,
+}
+
+fn norm(v: &[f64]) -> f64 {
+    v.iter().map(|a| a * a).sum::<f64>().sqrt()
+}
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+fn axpy(x: &[[f64; 3]], alpha: f64, d: &[f64]) -> Vec<[f64; 3]> {
+    x.iter()
+        .enumerate()
+        .map(|(i, p)| [p[0] + alpha * d[3 * i], p[1] + alpha * d[3 * i + 1], p[2] + alpha * d[3 * i + 2]])
+        .collect()
+}
+fn flatten(v: &[[f64; 3]]) -> Vec<f64> {
+    v.iter().flatten().copied().collect()
+}
+fn unflatten(v: &[f64]) -> Vec<[f64; 3]> {
+    v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+enum Control {
+    Pressure(f64),
+    Volume(f64),
+}
+
+impl<'m> Solver<'m> {
+    /// Builds the sparsity pattern and the symbolic factorization.
+    pub fn new(model: &'m FemModel, options: SolverOptions) -> Result<Self, FemError> {
+        let system = System::new(model)?;
+        let n = system.n_dofs();
+        let linear = LdltSolver::new(n, system.col_ptr.clone(), system.row_idx.clone())?;
+        let values = vec![0.0; system.nnz()];
+        let mu_max = model.materials.iter().map(|m| m.shear_modulus_pa()).fold(0.0, f64::max);
+        let vol: f64 = system.rest_volumes().sum();
+        let force_floor = 1e-9 * mu_max * vol.abs().powf(2.0 / 3.0);
+        Ok(Self { model, system, linear, values, options, counters: SolverCounters::default(), force_floor })
+    }
+
+    /// The assembled system (pattern and nodal data).
+    pub fn system(&self) -> &System {
+        &self.system
+    }
+
+    /// Stored entries in the tangent and in its factor.
+    pub fn sizes(&self) -> (usize, usize) {
+        (self.system.nnz(), self.linear.factor_nnz())
+    }
+
+    /// The unloaded state.
+    pub fn rest_state(&self) -> Equilibrium {
+        let x = self.model.rest_positions_m.clone();
+        Equilibrium {
+            cavity_volume_m3: self.model.cavity.volume(&x),
+            dxdp_m_per_pa: vec![[0.0; 3]; x.len()],
+            positions_m: x,
+            pressure_pa: 0.0,
+            newton_iterations: 0,
+            min_volume_ratio: 1.0,
+        }
+    }
+
+    fn evaluate(&mut self, x: &[[f64; 3]], p: f64, tangent: bool) -> Result<Evaluation, FemError> {
+        let t0 = Instant::now();
+        let r = if tangent {
+            self.system.evaluate(self.model, x, p, Some(&mut self.values))
+        } else {
+            self.system.evaluate(self.model, x, p, None)
+        };
+        self.counters.assembly += t0.elapsed();
+        r
+    }
+
+    fn factorize(&mut self) -> Result<(), FemError> {
+        let t0 = Instant::now();
+        let r = self.linear.factorize(&self.values);
+        self.counters.factorizations += 1;
+        self.counters.linear += t0.elapsed();
+        r
+    }
+
+    fn solve(&mut self, rhs: &mut [f64]) -> Result<(), FemError> {
+        let t0 = Instant::now();
+        let r = self.linear.solve_in_place(rhs);
+        self.counters.linear += t0.elapsed();
+        r
+    }
+
+    /// Factorizes the tangent at a converged state and fills its `dx/dp`.
+    fn finish_state(&mut self, eq: &mut Equilibrium) -> Result<(), FemError> {
+        let ev = self.evaluate(&eq.positions_m, eq.pressure_pa, true)?;
+        self.factorize()?;
+        let mut g = self.system.volume_gradient(self.model, &eq.positions_m);
+        self.solve(&mut g)?;
+        eq.dxdp_m_per_pa = unflatten(&g);
+        eq.cavity_volume_m3 = self.model.cavity.volume(&eq.positions_m);
+        eq.min_volume_ratio = ev.min_volume_ratio;
+        Ok(())
+    }
+
+    /// Newton iterations from `x` (and `p`) towards equilibrium under `control`.
+    /// Returns the converged positions, pressure, iteration count and residual history.
+    fn newton(&mut self, mut x: Vec<[f64; 3]>, mut p: f64, control: &Control) -> Result<(Vec<[f64; 3]>, f64, usize), (FemError, Vec<f64>)> {
+        let mut history = Vec::new();
+        for it in 0..self.options.max_iterations {
+            if let Control::Pressure(pt) = control {
+                p = *pt;
+            }
+            let ev = self.evaluate(&x, p, true).map_err(|e| (e, history.clone()))?;
+            let g = self.system.volume_gradient(self.model, &x);
+            let scale = (p.abs() * norm(&g)).max(self.force_floor);
+            let rnorm = norm(&ev.residual);
+            let cres = match control {
+                Control::Volume(vt) => self.model.cavity.volume(&x) - vt,
+                Control::Pressure(_) => 0.0,
+            };
+            // Volume residual measured as the force it would take to close it.
+            let v_scale = self.model.cavity.volume(&x).abs().max(1e-30);
+            let rel = (rnorm / scale).max(cres.abs() / v_scale);
+            history.push(rel);
+            if !rel.is_finite() {
+                return Err((FemError::Diverged { reason: "residual is not finite".into() }, history));
+            }
+            if rel <= self.options.tolerance {
+                return Ok((x, p, it));
+            }
+            self.factorize().map_err(|e| (e, history.clone()))?;
+            let mut a: Vec<f64> = ev.residual.iter().map(|r| -r).collect();
+            self.solve(&mut a).map_err(|e| (e, history.clone()))?;
+            let (dx, dp) = match control {
+                Control::Pressure(_) => (a, 0.0),
+                Control::Volume(_) => {
+                    let mut b = g.clone();
+                    self.solve(&mut b).map_err(|e| (e, history.clone()))?;
+                    let gb = dot(&g, &b);
+                    if gb.abs() < 1e-300 {
+                        return Err((FemError::Diverged { reason: "bordered system is singular (g . K^-1 g = 0)".into() }, history));
+                    }
+                    let dp = (-cres - dot(&g, &a)) / gb;
+                    let dx: Vec<f64> = a.iter().zip(&b).map(|(ai, bi)| ai + dp * bi).collect();
+                    (dx, dp)
+                }
+            };
+            // Line search with the inversion guard: shorten until no element inverts and the
+            // residual or the energy decreases.
+            let mut alpha = 1.0;
+            let mut accepted = false;
+            for _ in 0..=self.options.max_line_search {
+                let xt = axpy(&x, alpha, &dx);
+                let pt = p + alpha * dp;
+                match self.evaluate(&xt, pt, false) {
+                    Ok(evt) => {
+                        let better = norm(&evt.residual) < rnorm || evt.energy_j < ev.energy_j || matches!(control, Control::Volume(_));
+                        if better || alpha < 0.3 {
+                            x = xt;
+                            p = pt;
+                            accepted = true;
+                            break;
+                        }
+                    }
+                    Err(FemError::Inverted { .. }) => {}
+                    Err(e) => return Err((e, history)),
+                }
+                alpha *= 0.5;
+            }
+            if !accepted {
+                return Err((FemError::Diverged { reason: "line search found no step without inverted elements".into() }, history));
+            }
+        }
+        Err((FemError::Diverged { reason: format!("no convergence in {} iterations", self.options.max_iterations) }, history))
+    }
+
+    /// Advances a converged state to `target_pressure_pa` with adaptive steps; the returned state
+    /// carries `dx/dp`.
+    pub fn solve_to_pressure(&mut self, from: &Equilibrium, target_pressure_pa: f64) -> Result<Equilibrium, FemError> {
+        self.continuation(from, target_pressure_pa, false)
+    }
+
+    /// Advances a converged state to the cavity volume `target_volume_m3` (pressure is an
+    /// unknown, so limit points are passed); the returned state carries `dx/dp`.
+    pub fn solve_to_volume(&mut self, from: &Equilibrium, target_volume_m3: f64) -> Result<Equilibrium, FemError> {
+        self.continuation(from, target_volume_m3, true)
+    }
+
+    fn continuation(&mut self, from: &Equilibrium, target: f64, volume_control: bool) -> Result<Equilibrium, FemError> {
+        let mut cur = from.clone();
+        if cur.pressure_pa == 0.0 && cur.dxdp_m_per_pa.iter().all(|d| *d == [0.0; 3]) {
+            self.finish_state(&mut cur)?;
+        }
+        let start = if volume_control { cur.cavity_volume_m3 } else { cur.pressure_pa };
+        let total = target - start;
+        let min_step = (total.abs() * self.options.min_step_fraction).max(1e-300);
+        let mut step = total;
+        let mut iterations = 0;
+        let mut last_history = Vec::new();
+        loop {
+            let now = if volume_control { cur.cavity_volume_m3 } else { cur.pressure_pa };
+            let remaining = target - now;
+            if remaining.abs() <= 1e-12 * total.abs().max(1e-300) {
+                break;
+            }
+            if step.abs() > remaining.abs() {
+                step = remaining;
+            }
+            // Tangent predictor from the converged state's dx/dp.
+            let (dp, control) = if volume_control {
+                let gd = dot(&self.system.volume_gradient(self.model, &cur.positions_m), &flatten(&cur.dxdp_m_per_pa));
+                let dp = if gd.abs() > 1e-300 { step / gd } else { 0.0 };
+                (dp, Control::Volume(now + step))
+            } else {
+                (step, Control::Pressure(now + step))
+            };
+            let x0 = axpy(&cur.positions_m, dp, &flatten(&cur.dxdp_m_per_pa));
+            let x0 = if x0.iter().all(|p| p.iter().all(|v| v.is_finite())) { x0 } else { cur.positions_m.clone() };
+            match self.newton(x0, cur.pressure_pa + dp, &control) {
+                Ok((x, p, its)) => {
+                    iterations += its;
+                    self.counters.newton_iterations += its;
+                    let mut next = Equilibrium {
+                        positions_m: x,
+                        pressure_pa: p,
+                        cavity_volume_m3: 0.0,
+                        dxdp_m_per_pa: Vec::new(),
+                        newton_iterations: 0,
+                        min_volume_ratio: 0.0,
+                    };
+                    self.finish_state(&mut next)?;
+                    if volume_control {
+                        // Land exactly on the target volume's bookkeeping despite round-off.
+                        if let Control::Volume(vt) = control {
+                            if (next.cavity_volume_m3 - vt).abs() <= 1e-7 * vt.abs() {
+                                next.cavity_volume_m3 = vt;
+                            }
+                        }
+                    }
+                    cur = next;
+                    if its <= 4 {
+                        step *= 1.5;
+                    }
+                }
+                Err((e, history)) => {
+                    self.counters.newton_iterations += history.len();
+                    iterations += history.len();
+                    self.counters.step_cuts += 1;
+                    tracing::debug!(step, error = %e, ?history, "load step cut");
+                    last_history = history;
+                    step *= 0.5;
+                    if step.abs() < min_step {
+                        return Err(FemError::NoConvergence {
+                            control: if volume_control { "cavity volume m^3" } else { "pressure Pa" },
+                            reached: now,
+                            target,
+                            residual_history: last_history,
+                            cause: e.to_string(),
+                        });
+                    }
+                }
+            }
+        }
+        let _ = last_history;
+        cur.newton_iterations = iterations;
+        if volume_control {
+            cur.cavity_volume_m3 = target;
+        } else {
+            cur.pressure_pa = target;
+        }
+        Ok(cur)
+    }
+
+    /// A pressure sweep through the increasing `pressures_pa` (first may be 0); `on_level` is
+    /// called after each level (for progress reporting).
+    pub fn sweep(&mut self, pressures_pa: &[f64], mut on_level: impl FnMut(usize, &Equilibrium)) -> Result<Vec<Equilibrium>, FemError> {
+        let mut out = Vec::with_capacity(pressures_pa.len());
+        let mut cur = self.rest_state();
+        self.finish_state(&mut cur)?;
+        for (k, &p) in pressures_pa.iter().enumerate() {
+            let next = if p == cur.pressure_pa {
+                cur.clone()
+            } else {
+                self.solve_to_pressure(&cur, p).map_err(|e| match e {
+                    FemError::NoConvergence { control, reached, target, residual_history, cause } => FemError::LevelFailed {
+                        level: k,
+                        pressure_pa: p,
+                        inner: Box::new(FemError::NoConvergence { control, reached, target, residual_history, cause }),
+                    },
+                    other => FemError::LevelFailed { level: k, pressure_pa: p, inner: Box::new(other) },
+                })?
+            };
+            on_level(k, &next);
+            out.push(next.clone());
+            cur = next;
+        }
+        Ok(out)
+    }
+}
