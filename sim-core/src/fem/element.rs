@@ -198,10 +198,20 @@ mod tests {
     use super::*;
 
     fn rest() -> [[f64; 3]; 4] {
-        [[0.0, 0.0, 0.0], [1.0, 0.1, 0.0], [0.2, 0.9, 0.1], [0.1, 0.2, 1.1]]
+        [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.1, 0.0],
+            [0.2, 0.9, 0.1],
+            [0.1, 0.2, 1.1],
+        ]
     }
     fn moved() -> [[f64; 3]; 4] {
-        [[0.05, -0.02, 0.01], [1.2, 0.1, 0.05], [0.1, 1.0, 0.2], [0.15, 0.1, 1.3]]
+        [
+            [0.05, -0.02, 0.01],
+            [1.2, 0.1, 0.05],
+            [0.1, 1.0, 0.2],
+            [0.15, 0.1, 1.3],
+        ]
     }
     fn perturbed(x: &[[f64; 3]; 4], dof: usize, eps: f64) -> [[f64; 3]; 4] {
         let mut y = *x;
@@ -211,7 +221,10 @@ mod tests {
 
     #[test]
     fn element_force_and_stiffness_match_finite_differences() {
-        let mat = Material { mu_pa: vec![1.0, 0.5], kappa_pa: 10.0 };
+        let mat = Material {
+            mu_pa: vec![1.0, 0.5],
+            kappa_pa: 10.0,
+        };
         let r = TetReference::new(&rest()).unwrap();
         let x = moved();
         let mut f = [0.0; 12];
@@ -223,12 +236,23 @@ mod tests {
         for d in 0..12 {
             let mut fp = [0.0; 12];
             let mut fm = [0.0; 12];
-            let wp = r.deviatoric(&mat, &perturbed(&x, d, eps), &mut fp, None).unwrap();
-            let wm = r.deviatoric(&mat, &perturbed(&x, d, -eps), &mut fm, None).unwrap();
-            assert!(((wp - wm) / (2.0 * eps) - f[d]).abs() < 1e-7 * fscale, "force dof {d}");
+            let wp = r
+                .deviatoric(&mat, &perturbed(&x, d, eps), &mut fp, None)
+                .unwrap();
+            let wm = r
+                .deviatoric(&mat, &perturbed(&x, d, -eps), &mut fm, None)
+                .unwrap();
+            assert!(
+                ((wp - wm) / (2.0 * eps) - f[d]).abs() < 1e-7 * fscale,
+                "force dof {d}"
+            );
             for c in 0..12 {
                 let fd = (fp[c] - fm[c]) / (2.0 * eps);
-                assert!((fd - k[c][d]).abs() < 1e-7 * kscale, "stiffness ({c},{d}): {fd} vs {}", k[c][d]);
+                assert!(
+                    (fd - k[c][d]).abs() < 1e-7 * kscale,
+                    "stiffness ({c},{d}): {fd} vs {}",
+                    k[c][d]
+                );
             }
         }
     }
@@ -241,12 +265,16 @@ mod tests {
         add_tet_volume_hessian(&x, 1.0, &mut h);
         let eps = 1e-6;
         for d in 0..12 {
-            let fd = (tet_volume(&perturbed(&x, d, eps)) - tet_volume(&perturbed(&x, d, -eps))) / (2.0 * eps);
+            let fd = (tet_volume(&perturbed(&x, d, eps)) - tet_volume(&perturbed(&x, d, -eps)))
+                / (2.0 * eps);
             assert!((fd - g[d]).abs() < 1e-9, "gradient {d}");
             let gp = tet_volume_gradient(&perturbed(&x, d, eps));
             let gm = tet_volume_gradient(&perturbed(&x, d, -eps));
             for c in 0..12 {
-                assert!(((gp[c] - gm[c]) / (2.0 * eps) - h[c][d]).abs() < 1e-9, "hessian ({c},{d})");
+                assert!(
+                    ((gp[c] - gm[c]) / (2.0 * eps) - h[c][d]).abs() < 1e-9,
+                    "hessian ({c},{d})"
+                );
             }
         }
     }

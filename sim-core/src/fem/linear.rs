@@ -3,10 +3,10 @@
 
 use super::FemError;
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, LdltRef, SymbolicCholesky, SymmetricOrdering,
 };
-use faer::linalg::cholesky::ldlt::factor::LdltRegularization;
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Par, Side};
 
@@ -41,10 +41,19 @@ impl LdltSolver {
         let req = symbolic
             .factorize_numeric_ldlt_scratch::<f64>(par, Default::default())
             .or(symbolic.solve_in_place_scratch::<f64>(2, par));
-        let mem = MemBuffer::try_new(req)
-            .map_err(|_| FemError::LinearSolver("out of memory for the factorization workspace".into()))?;
+        let mem = MemBuffer::try_new(req).map_err(|_| {
+            FemError::LinearSolver("out of memory for the factorization workspace".into())
+        })?;
         let l_values = vec![0.0; symbolic.len_val()];
-        Ok(Self { pattern, symbolic, l_values, mem, par, factored: false, factorizations: 0 })
+        Ok(Self {
+            pattern,
+            symbolic,
+            l_values,
+            mem,
+            par,
+            factored: false,
+            factorizations: 0,
+        })
     }
 
     /// Number of stored entries of the factor L.
@@ -76,16 +85,25 @@ impl LdltSolver {
     /// Solves `A x = rhs` in place with the last factorization.
     pub fn solve_in_place(&mut self, rhs: &mut [f64]) -> Result<(), FemError> {
         if !self.factored {
-            return Err(FemError::LinearSolver("solve before a successful factorization".into()));
+            return Err(FemError::LinearSolver(
+                "solve before a successful factorization".into(),
+            ));
         }
         let n = rhs.len();
         let ldlt = LdltRef::new(&self.symbolic, &self.l_values);
         let stack = MemStack::new(&mut self.mem);
-        ldlt.solve_in_place_with_conj(Conj::No, MatMut::from_column_major_slice_mut(rhs, n, 1), self.par, stack);
+        ldlt.solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(rhs, n, 1),
+            self.par,
+            stack,
+        );
         if rhs.iter().all(|v| v.is_finite()) {
             Ok(())
         } else {
-            Err(FemError::LinearSolver("solution is not finite (singular tangent?)".into()))
+            Err(FemError::LinearSolver(
+                "solution is not finite (singular tangent?)".into(),
+            ))
         }
     }
 }

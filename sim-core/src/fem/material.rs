@@ -49,7 +49,10 @@ impl Material {
             return bad(format!("mu_pa[0] = {}; expected > 0", self.mu_pa[0]));
         }
         if !self.kappa_pa.is_finite() || self.kappa_pa <= 0.0 {
-            return bad(format!("kappa_pa = {}; expected a finite value > 0", self.kappa_pa));
+            return bad(format!(
+                "kappa_pa = {}; expected a finite value > 0",
+                self.kappa_pa
+            ));
         }
         Ok(())
     }
@@ -83,7 +86,10 @@ impl Material {
 /// deformation gradient `f` (row-major 3x3, `f[i][J]`). Returns `None` when `det F <= 0`.
 ///
 /// The tangent is `a[i][J][k][L] = d P_iJ / d F_kL`, flattened as `a[3 i + J][3 k + L]`.
-pub fn deviatoric_stress(material: &Material, f: &[[f64; 3]; 3]) -> Option<(f64, [f64; 9], [[f64; 9]; 9])> {
+pub fn deviatoric_stress(
+    material: &Material,
+    f: &[[f64; 3]; 3],
+) -> Option<(f64, [f64; 9], [[f64; 9]; 9])> {
     let j = det3(f);
     if j <= 0.0 || !j.is_finite() {
         return None;
@@ -140,7 +146,8 @@ pub fn deviatoric_stress(material: &Material, f: &[[f64; 3]; 3]) -> Option<(f64,
 
 /// Determinant of a 3x3 matrix.
 pub fn det3(m: &[[f64; 3]; 3]) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
@@ -205,9 +212,10 @@ impl MaterialSet {
 
     /// Parses and validates a material TOML; `origin` names the file in errors.
     pub fn from_toml_str(text: &str, origin: &str) -> Result<Self, FemError> {
-        let set: MaterialSet = toml::from_str(text)
-            .map_err(|e| FemError::Material(format!("{origin}: {e}")))?;
-        set.myometrium.validate(&format!("{origin}: [myometrium]"))?;
+        let set: MaterialSet =
+            toml::from_str(text).map_err(|e| FemError::Material(format!("{origin}: {e}")))?;
+        set.myometrium
+            .validate(&format!("{origin}: [myometrium]"))?;
         if let Some(m) = &set.fibroid {
             m.validate(&format!("{origin}: [fibroid]"))?;
         }
@@ -284,10 +292,14 @@ mod tests {
 
     #[test]
     fn material_toml_errors_name_the_region_and_key() {
-        let err = MaterialSet::from_toml_str("[myometrium]\nmu_pa = [1.0]\nkappa_pa = -3.0\n", "m.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(err.contains("m.toml") && err.contains("[myometrium]") && err.contains("kappa_pa"), "{err}");
+        let err =
+            MaterialSet::from_toml_str("[myometrium]\nmu_pa = [1.0]\nkappa_pa = -3.0\n", "m.toml")
+                .unwrap_err()
+                .to_string();
+        assert!(
+            err.contains("m.toml") && err.contains("[myometrium]") && err.contains("kappa_pa"),
+            "{err}"
+        );
         let err = MaterialSet::from_toml_str("[myometrium]\nmu_pa = [1.0]\n", "m.toml")
             .unwrap_err()
             .to_string();

@@ -36,7 +36,10 @@ impl FemModel {
             )));
         }
         if mesh.vertex_labels.len() != n {
-            return Err(FemError::Mesh(format!("vertex_labels has {} entries for {n} vertices", mesh.vertex_labels.len())));
+            return Err(FemError::Mesh(format!(
+                "vertex_labels has {} entries for {n} vertices",
+                mesh.vertex_labels.len()
+            )));
         }
         let mut mats: Vec<Material> = Vec::new();
         let mut tet_material = Vec::with_capacity(mesh.tets.len());
@@ -73,14 +76,22 @@ impl FemModel {
     pub fn validate(&self) -> Result<(), FemError> {
         let n = self.rest_positions_m.len() as u32;
         if self.fixed_dofs.len() != 3 * n as usize {
-            return Err(FemError::Mesh(format!("fixed_dofs has {} entries, expected {}", self.fixed_dofs.len(), 3 * n)));
+            return Err(FemError::Mesh(format!(
+                "fixed_dofs has {} entries, expected {}",
+                self.fixed_dofs.len(),
+                3 * n
+            )));
         }
         if self.tet_material.len() != self.tets.len() {
-            return Err(FemError::Mesh("tet_material length differs from the tetrahedron count".into()));
+            return Err(FemError::Mesh(
+                "tet_material length differs from the tetrahedron count".into(),
+            ));
         }
         for (t, tet) in self.tets.iter().enumerate() {
             if let Some(&bad) = tet.iter().find(|&&i| i >= n) {
-                return Err(FemError::Mesh(format!("tetrahedron {t} refers to vertex {bad}, but there are {n} vertices")));
+                return Err(FemError::Mesh(format!(
+                    "tetrahedron {t} refers to vertex {bad}, but there are {n} vertices"
+                )));
             }
             if self.tet_material[t] as usize >= self.materials.len() {
                 return Err(FemError::Mesh(format!("tetrahedron {t} has no material")));
@@ -88,14 +99,20 @@ impl FemModel {
         }
         for (k, tri) in self.cavity.triangles.iter().enumerate() {
             if let Some(&bad) = tri.iter().find(|&&i| i >= n) {
-                return Err(FemError::Mesh(format!("cavity triangle {k} refers to vertex {bad}, but there are {n} vertices")));
+                return Err(FemError::Mesh(format!(
+                    "cavity triangle {k} refers to vertex {bad}, but there are {n} vertices"
+                )));
             }
         }
         if self.cavity.triangles.is_empty() {
-            return Err(FemError::Mesh("the mesh has no cavity triangles to load".into()));
+            return Err(FemError::Mesh(
+                "the mesh has no cavity triangles to load".into(),
+            ));
         }
         if !self.fixed_dofs.iter().any(|&f| f) {
-            return Err(FemError::Mesh("no fixed vertices: rigid motions are unconstrained".into()));
+            return Err(FemError::Mesh(
+                "no fixed vertices: rigid motions are unconstrained".into(),
+            ));
         }
         Ok(())
     }

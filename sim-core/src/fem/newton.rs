@@ -18,11 +18,23 @@ pub struct SolverOptions {
     pub max_line_search: usize,
     /// Smallest load step as a fraction of the requested increment.
     pub min_step_fraction: f64,
+    /// First load step as a fraction of the requested increment (grows after easy steps).
+    pub initial_step_fraction: f64,
+    /// Reuse the factorization of the last converged state (modified Newton) while the residual
+    /// falls fast enough; refactorize when it does not.
+    pub reuse_factorization: bool,
 }
 
 impl Default for SolverOptions {
     fn default() -> Self {
-        Self { tolerance: 1e-8, max_iterations: 12, max_line_search: 8, min_step_fraction: 1.0 / 1024.0 }
+        Self {
+            tolerance: 1e-8,
+            max_iterations: 25,
+            max_line_search: 8,
+            min_step_fraction: 1.0 / 1024.0,
+            initial_step_fraction: 0.25,
+            reuse_factorization: true,
+        }
     }
 }
 
@@ -56,6 +68,8 @@ pub struct Equilibrium {
     pub newton_iterations: usize,
     /// Smallest `v/V0` over the tetrahedra.
     pub min_volume_ratio: f64,
+    /// Which factorization of the solver belongs to this state (0: none).
+    factor_tag: u64,
 }
 
 /// The nonlinear solver for one model; keeps the symbolic factorization for all solves.
@@ -68,6 +82,8 @@ pub struct Solver<'m> {
     /// Work counters.
     pub counters: SolverCounters,
     force_floor: f64,
+    factor_tag: u64,
+    length_scale: f64,
 }
 
 fn norm(v: &[f64]) -> f64 {
@@ -79,7 +95,13 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
 fn axpy(x: &[[f64; 3]], alpha: f64, d: &[f64]) -> Vec<[f64; 3]> {
     x.iter()
         .enumerate()
-        .map(|(i, p)| [p[0] + alpha * d[3 * i], p[1] + alpha * d[3 * i + 1], p[2] + alpha * d[3 * i + 2]])
+        .map(|(i, p)| {
+            [
+                p[0] + alpha * d[3 * i],
+                p[1] + alpha * d[3 * i + 1],
+                p[2] + alpha * d[3 * i + 2],
+            ]
+        })
         .collect()
 }
 fn flatten(v: &[[f64; 3]]) -> Vec<f64> {
@@ -101,10 +123,32 @@ impl<'m> Solver<'m> {
         let n = system.n_dofs();
         let linear = LdltSolver::new(n, system.col_ptr.clone(), system.row_idx.clone())?;
         let values = vec![0.0; system.nnz()];
-        let mu_max = model.materials.iter().map(|m| m.shear_modulus_pa()).fold(0.0, f64::max);
+        let mu_max = model
+            .materials
+            .iter()
+            .map(|m| m.shear_modulus_pa())
+            .fold(0.0, f64::max);
         let vol: f64 = system.rest_volumes().sum();
         let force_floor = 1e-9 * mu_max * vol.abs().powf(2.0 / 3.0);
-        Ok(Self { model, system, linear, values, options, counters: SolverCounters::default(), force_floor })
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in &model.rest_positions_m {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let length_scale = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+        Ok(Self {
+            model,
+            system,
+            linear,
+            values,
+            options,
+            counters: SolverCounters::default(),
+            force_floor,
+            factor_tag: 0,
+            length_scale,
+        })
     }
 
     /// The assembled system (pattern and nodal data).
@@ -127,13 +171,15 @@ impl<'m> Solver<'m> {
             pressure_pa: 0.0,
             newton_iterations: 0,
             min_volume_ratio: 1.0,
+            factor_tag: 0,
         }
     }
 
     fn evaluate(&mut self, x: &[[f64; 3]], p: f64, tangent: bool) -> Result<Evaluation, FemError> {
         let t0 = Instant::now();
         let r = if tangent {
-            self.system.evaluate(self.model, x, p, Some(&mut self.values))
+            self.system
+                .evaluate(self.model, x, p, Some(&mut self.values))
         } else {
             self.system.evaluate(self.model, x, p, None)
         };
@@ -145,6 +191,7 @@ impl<'m> Solver<'m> {
         let t0 = Instant::now();
         let r = self.linear.factorize(&self.values);
         self.counters.factorizations += 1;
+        self.factor_tag += 1;
         self.counters.linear += t0.elapsed();
         r
     }
@@ -165,18 +212,35 @@ impl<'m> Solver<'m> {
         eq.dxdp_m_per_pa = unflatten(&g);
         eq.cavity_volume_m3 = self.model.cavity.volume(&eq.positions_m);
         eq.min_volume_ratio = ev.min_volume_ratio;
+        eq.factor_tag = self.factor_tag;
         Ok(())
     }
 
     /// Newton iterations from `x` (and `p`) towards equilibrium under `control`.
     /// Returns the converged positions, pressure, iteration count and residual history.
-    fn newton(&mut self, mut x: Vec<[f64; 3]>, mut p: f64, control: &Control) -> Result<(Vec<[f64; 3]>, f64, usize), (FemError, Vec<f64>)> {
-        let mut history = Vec::new();
+    fn newton(
+        &mut self,
+        mut x: Vec<[f64; 3]>,
+        mut p: f64,
+        control: &Control,
+        factor_tag: u64,
+    ) -> Result<(Vec<[f64; 3]>, f64, usize), (FemError, Vec<f64>)> {
+        let mut history: Vec<f64> = Vec::new();
+        let mut fresh =
+            !self.options.reuse_factorization || factor_tag != self.factor_tag || factor_tag == 0;
         for it in 0..self.options.max_iterations {
             if let Control::Pressure(pt) = control {
                 p = *pt;
             }
-            let ev = self.evaluate(&x, p, true).map_err(|e| (e, history.clone()))?;
+            // Modified Newton: refactorize only when the old factor stops converging fast.
+            if let [.., a, b] = history[..] {
+                if b > 0.2 * a {
+                    fresh = true;
+                }
+            }
+            let ev = self
+                .evaluate(&x, p, fresh)
+                .map_err(|e| (e, history.clone()))?;
             let g = self.system.volume_gradient(self.model, &x);
             let scale = (p.abs() * norm(&g)).max(self.force_floor);
             let rnorm = norm(&ev.residual);
@@ -189,12 +253,22 @@ impl<'m> Solver<'m> {
             let rel = (rnorm / scale).max(cres.abs() / v_scale);
             history.push(rel);
             if !rel.is_finite() {
-                return Err((FemError::Diverged { reason: "residual is not finite".into() }, history));
+                return Err((
+                    FemError::Diverged {
+                        reason: "residual is not finite".into(),
+                    },
+                    history,
+                ));
             }
+            tracing::trace!(it, rel, fresh, "newton");
             if rel <= self.options.tolerance {
                 return Ok((x, p, it));
             }
-            self.factorize().map_err(|e| (e, history.clone()))?;
+            let stale = !fresh;
+            if fresh {
+                self.factorize().map_err(|e| (e, history.clone()))?;
+                fresh = !self.options.reuse_factorization;
+            }
             let mut a: Vec<f64> = ev.residual.iter().map(|r| -r).collect();
             self.solve(&mut a).map_err(|e| (e, history.clone()))?;
             let (dx, dp) = match control {
@@ -204,15 +278,23 @@ impl<'m> Solver<'m> {
                     self.solve(&mut b).map_err(|e| (e, history.clone()))?;
                     let gb = dot(&g, &b);
                     if gb.abs() < 1e-300 {
-                        return Err((FemError::Diverged { reason: "bordered system is singular (g . K^-1 g = 0)".into() }, history));
+                        return Err((
+                            FemError::Diverged {
+                                reason: "bordered system is singular (g . K^-1 g = 0)".into(),
+                            },
+                            history,
+                        ));
                     }
                     let dp = (-cres - dot(&g, &a)) / gb;
                     let dx: Vec<f64> = a.iter().zip(&b).map(|(ai, bi)| ai + dp * bi).collect();
                     (dx, dp)
                 }
             };
-            // Line search with the inversion guard: shorten until no element inverts and the
-            // residual or the energy decreases.
+            // Line search with the inversion guard. Under pressure control the potential is the
+            // merit (sufficient decrease along the descent direction), or else the residual norm;
+            // under volume control (a saddle point) only inversions shorten the step.
+            let slope = dot(&dx, &ev.residual);
+            let fresh_step = !stale;
             let mut alpha = 1.0;
             let mut accepted = false;
             for _ in 0..=self.options.max_line_search {
@@ -220,8 +302,18 @@ impl<'m> Solver<'m> {
                 let pt = p + alpha * dp;
                 match self.evaluate(&xt, pt, false) {
                     Ok(evt) => {
-                        let better = norm(&evt.residual) < rnorm || evt.energy_j < ev.energy_j || matches!(control, Control::Volume(_));
-                        if better || alpha < 0.3 {
+                        let ok = match control {
+                            Control::Volume(_) => true,
+                            Control::Pressure(_) => {
+                                evt.energy_j
+                                    <= ev.energy_j
+                                        + 1e-4 * alpha * slope.min(0.0)
+                                        + 1e-13 * ev.energy_j.abs()
+                                    || norm(&evt.residual) <= (1.0 - 1e-4 * alpha) * rnorm
+                                    || (fresh_step && alpha < 0.2)
+                            }
+                        };
+                        if ok {
                             x = xt;
                             p = pt;
                             accepted = true;
@@ -233,38 +325,83 @@ impl<'m> Solver<'m> {
                 }
                 alpha *= 0.5;
             }
+            // Round-off floor: a fresh Newton correction this small means the residual is noise.
+            let dx_max = dx.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            if accepted
+                && !stale
+                && alpha == 1.0
+                && dx_max <= 1e-12 * self.length_scale
+                && rel < 1e-4
+            {
+                return Ok((x, p, it + 1));
+            }
             if !accepted {
-                return Err((FemError::Diverged { reason: "line search found no step without inverted elements".into() }, history));
+                if stale {
+                    // A stale factor gave a poor direction: retry with the current tangent.
+                    fresh = true;
+                    history.pop();
+                    continue;
+                }
+                return Err((FemError::Diverged { reason: "line search found no acceptable step (inverted elements or no decrease)".into() }, history));
             }
         }
-        Err((FemError::Diverged { reason: format!("no convergence in {} iterations", self.options.max_iterations) }, history))
+        Err((
+            FemError::Diverged {
+                reason: format!(
+                    "no convergence in {} iterations",
+                    self.options.max_iterations
+                ),
+            },
+            history,
+        ))
     }
 
     /// Advances a converged state to `target_pressure_pa` with adaptive steps; the returned state
     /// carries `dx/dp`.
-    pub fn solve_to_pressure(&mut self, from: &Equilibrium, target_pressure_pa: f64) -> Result<Equilibrium, FemError> {
+    pub fn solve_to_pressure(
+        &mut self,
+        from: &Equilibrium,
+        target_pressure_pa: f64,
+    ) -> Result<Equilibrium, FemError> {
         self.continuation(from, target_pressure_pa, false)
     }
 
     /// Advances a converged state to the cavity volume `target_volume_m3` (pressure is an
     /// unknown, so limit points are passed); the returned state carries `dx/dp`.
-    pub fn solve_to_volume(&mut self, from: &Equilibrium, target_volume_m3: f64) -> Result<Equilibrium, FemError> {
+    pub fn solve_to_volume(
+        &mut self,
+        from: &Equilibrium,
+        target_volume_m3: f64,
+    ) -> Result<Equilibrium, FemError> {
         self.continuation(from, target_volume_m3, true)
     }
 
-    fn continuation(&mut self, from: &Equilibrium, target: f64, volume_control: bool) -> Result<Equilibrium, FemError> {
+    fn continuation(
+        &mut self,
+        from: &Equilibrium,
+        target: f64,
+        volume_control: bool,
+    ) -> Result<Equilibrium, FemError> {
         let mut cur = from.clone();
-        if cur.pressure_pa == 0.0 && cur.dxdp_m_per_pa.iter().all(|d| *d == [0.0; 3]) {
+        if cur.factor_tag != self.factor_tag || cur.factor_tag == 0 {
             self.finish_state(&mut cur)?;
         }
-        let start = if volume_control { cur.cavity_volume_m3 } else { cur.pressure_pa };
+        let start = if volume_control {
+            cur.cavity_volume_m3
+        } else {
+            cur.pressure_pa
+        };
         let total = target - start;
         let min_step = (total.abs() * self.options.min_step_fraction).max(1e-300);
-        let mut step = total;
+        let mut step = total * self.options.initial_step_fraction.clamp(1e-6, 1.0);
         let mut iterations = 0;
         let mut last_history = Vec::new();
         loop {
-            let now = if volume_control { cur.cavity_volume_m3 } else { cur.pressure_pa };
+            let now = if volume_control {
+                cur.cavity_volume_m3
+            } else {
+                cur.pressure_pa
+            };
             let remaining = target - now;
             if remaining.abs() <= 1e-12 * total.abs().max(1e-300) {
                 break;
@@ -274,15 +411,22 @@ impl<'m> Solver<'m> {
             }
             // Tangent predictor from the converged state's dx/dp.
             let (dp, control) = if volume_control {
-                let gd = dot(&self.system.volume_gradient(self.model, &cur.positions_m), &flatten(&cur.dxdp_m_per_pa));
+                let gd = dot(
+                    &self.system.volume_gradient(self.model, &cur.positions_m),
+                    &flatten(&cur.dxdp_m_per_pa),
+                );
                 let dp = if gd.abs() > 1e-300 { step / gd } else { 0.0 };
                 (dp, Control::Volume(now + step))
             } else {
                 (step, Control::Pressure(now + step))
             };
             let x0 = axpy(&cur.positions_m, dp, &flatten(&cur.dxdp_m_per_pa));
-            let x0 = if x0.iter().all(|p| p.iter().all(|v| v.is_finite())) { x0 } else { cur.positions_m.clone() };
-            match self.newton(x0, cur.pressure_pa + dp, &control) {
+            let x0 = if x0.iter().all(|p| p.iter().all(|v| v.is_finite())) {
+                x0
+            } else {
+                cur.positions_m.clone()
+            };
+            match self.newton(x0, cur.pressure_pa + dp, &control, cur.factor_tag) {
                 Ok((x, p, its)) => {
                     iterations += its;
                     self.counters.newton_iterations += its;
@@ -293,6 +437,7 @@ impl<'m> Solver<'m> {
                         dxdp_m_per_pa: Vec::new(),
                         newton_iterations: 0,
                         min_volume_ratio: 0.0,
+                        factor_tag: 0,
                     };
                     self.finish_state(&mut next)?;
                     if volume_control {
@@ -304,7 +449,7 @@ impl<'m> Solver<'m> {
                         }
                     }
                     cur = next;
-                    if its <= 4 {
+                    if its <= 6 {
                         step *= 1.5;
                     }
                 }
@@ -317,7 +462,11 @@ impl<'m> Solver<'m> {
                     step *= 0.5;
                     if step.abs() < min_step {
                         return Err(FemError::NoConvergence {
-                            control: if volume_control { "cavity volume m^3" } else { "pressure Pa" },
+                            control: if volume_control {
+                                "cavity volume m^3"
+                            } else {
+                                "pressure Pa"
+                            },
                             reached: now,
                             target,
                             residual_history: last_history,
@@ -339,7 +488,11 @@ impl<'m> Solver<'m> {
 
     /// A pressure sweep through the increasing `pressures_pa` (first may be 0); `on_level` is
     /// called after each level (for progress reporting).
-    pub fn sweep(&mut self, pressures_pa: &[f64], mut on_level: impl FnMut(usize, &Equilibrium)) -> Result<Vec<Equilibrium>, FemError> {
+    pub fn sweep(
+        &mut self,
+        pressures_pa: &[f64],
+        mut on_level: impl FnMut(usize, &Equilibrium),
+    ) -> Result<Vec<Equilibrium>, FemError> {
         let mut out = Vec::with_capacity(pressures_pa.len());
         let mut cur = self.rest_state();
         self.finish_state(&mut cur)?;
@@ -348,12 +501,28 @@ impl<'m> Solver<'m> {
                 cur.clone()
             } else {
                 self.solve_to_pressure(&cur, p).map_err(|e| match e {
-                    FemError::NoConvergence { control, reached, target, residual_history, cause } => FemError::LevelFailed {
+                    FemError::NoConvergence {
+                        control,
+                        reached,
+                        target,
+                        residual_history,
+                        cause,
+                    } => FemError::LevelFailed {
                         level: k,
                         pressure_pa: p,
-                        inner: Box::new(FemError::NoConvergence { control, reached, target, residual_history, cause }),
+                        inner: Box::new(FemError::NoConvergence {
+                            control,
+                            reached,
+                            target,
+                            residual_history,
+                            cause,
+                        }),
                     },
-                    other => FemError::LevelFailed { level: k, pressure_pa: p, inner: Box::new(other) },
+                    other => FemError::LevelFailed {
+                        level: k,
+                        pressure_pa: p,
+                        inner: Box::new(other),
+                    },
                 })?
             };
             on_level(k, &next);

@@ -82,7 +82,11 @@ fn boundary_half_edges(triangles: &[[u32; 3]]) -> Vec<(u32, u32)> {
             set.insert((t[k], t[(k + 1) % 3]));
         }
     }
-    let mut out: Vec<(u32, u32)> = set.iter().copied().filter(|&(a, b)| !set.contains(&(b, a))).collect();
+    let mut out: Vec<(u32, u32)> = set
+        .iter()
+        .copied()
+        .filter(|&(a, b)| !set.contains(&(b, a)))
+        .collect();
     out.sort_unstable();
     out
 }
@@ -95,17 +99,33 @@ impl CavitySurface {
         let caps = if edges.is_empty() {
             Vec::new()
         } else if mesh.cavity_opening_loop.is_empty() {
-            vec![Cap { centre: CapCentre::Fixed([0.0; 3]), edges }]
+            vec![Cap {
+                centre: CapCentre::Fixed([0.0; 3]),
+                edges,
+            }]
         } else {
-            vec![Cap { centre: CapCentre::Centroid(mesh.cavity_opening_loop.clone()), edges }]
+            vec![Cap {
+                centre: CapCentre::Centroid(mesh.cavity_opening_loop.clone()),
+                edges,
+            }]
         };
-        Self { triangles: mesh.cavity_triangles.clone(), caps }
+        Self {
+            triangles: mesh.cavity_triangles.clone(),
+            caps,
+        }
     }
 
     /// Triangles closed by one fan from the fixed point `centre` over all boundary edges.
     pub fn with_fixed_cap(triangles: Vec<[u32; 3]>, centre: [f64; 3]) -> Self {
         let edges = boundary_half_edges(&triangles);
-        let caps = if edges.is_empty() { Vec::new() } else { vec![Cap { centre: CapCentre::Fixed(centre), edges }] };
+        let caps = if edges.is_empty() {
+            Vec::new()
+        } else {
+            vec![Cap {
+                centre: CapCentre::Fixed(centre),
+                edges,
+            }]
+        };
         Self { triangles, caps }
     }
 
@@ -147,7 +167,10 @@ impl CavitySurface {
             .map(|(mut nodes, edges)| {
                 nodes.sort_unstable();
                 nodes.dedup();
-                Cap { centre: CapCentre::Centroid(nodes), edges }
+                Cap {
+                    centre: CapCentre::Centroid(nodes),
+                    edges,
+                }
             })
             .collect();
         caps.sort_by_key(|c| c.edges.first().copied());
@@ -156,7 +179,11 @@ impl CavitySurface {
 
     fn for_each_term(&self, mut f: impl FnMut(Operand<'_>, Operand<'_>, Operand<'_>)) {
         for t in &self.triangles {
-            f(Operand::Node(t[0]), Operand::Node(t[1]), Operand::Node(t[2]));
+            f(
+                Operand::Node(t[0]),
+                Operand::Node(t[1]),
+                Operand::Node(t[2]),
+            );
         }
         for cap in &self.caps {
             let c = match &cap.centre {
@@ -196,7 +223,12 @@ impl CavitySurface {
     }
 
     /// Calls `add(i, j, block)` with `scale * d2V/dx_i dx_j` for every coupled vertex pair.
-    pub fn for_each_hessian_block(&self, x: &[[f64; 3]], scale: f64, mut add: impl FnMut(u32, u32, [[f64; 3]; 3])) {
+    pub fn for_each_hessian_block(
+        &self,
+        x: &[[f64; 3]],
+        scale: f64,
+        mut add: impl FnMut(u32, u32, [[f64; 3]; 3]),
+    ) {
         let s = -scale / 6.0;
         self.for_each_term(|u, v, w| {
             let vals = [u.value(x), v.value(x), w.value(x)];
@@ -260,7 +292,13 @@ mod tests {
             p[1] += 0.02 * (1.7 * i as f64).cos();
             p[2] += 0.025 * (0.3 * i as f64).sin();
         }
-        let outward: [[u32; 4]; 5] = [[0, 2, 3, 1], [0, 1, 5, 4], [2, 6, 7, 3], [0, 4, 6, 2], [1, 3, 7, 5]];
+        let outward: [[u32; 4]; 5] = [
+            [0, 2, 3, 1],
+            [0, 1, 5, 4],
+            [2, 6, 7, 3],
+            [0, 4, 6, 2],
+            [1, 3, 7, 5],
+        ];
         let mut tris = Vec::new();
         for q in outward {
             tris.push([q[0], q[2], q[1]]);
@@ -275,7 +313,9 @@ mod tests {
         let loop_ = vec![4, 5, 7, 6];
         let v_mesh = crate::mesh::cavity_volume_m3(&x, &s.triangles, &loop_);
         assert!((s.volume(&x) - v_mesh).abs() < 1e-14);
-        let unit: Vec<[f64; 3]> = (0..8).map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64]).collect();
+        let unit: Vec<[f64; 3]> = (0..8)
+            .map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64])
+            .collect();
         assert!((s.volume(&unit) - 1.0).abs() < 1e-14);
     }
 
@@ -301,16 +341,26 @@ mod tests {
             xp[d / 3][d % 3] += eps;
             xm[d / 3][d % 3] -= eps;
             let fd = (s.volume(&xp) - s.volume(&xm)) / (2.0 * eps);
-            assert!((fd - g[d]).abs() < 1e-9, "gradient dof {d}: {fd} vs {}", g[d]);
+            assert!(
+                (fd - g[d]).abs() < 1e-9,
+                "gradient dof {d}: {fd} vs {}",
+                g[d]
+            );
             let mut gp = vec![0.0; 3 * n];
             let mut gm = vec![0.0; 3 * n];
             s.add_gradient(&xp, 1.0, &mut gp);
             s.add_gradient(&xm, 1.0, &mut gm);
             for c in 0..3 * n {
                 let fdh = (gp[c] - gm[c]) / (2.0 * eps);
-                assert!((fdh - h[c][d]).abs() < 1e-8, "hessian ({c},{d}): {fdh} vs {}", h[c][d]);
+                assert!(
+                    (fdh - h[c][d]).abs() < 1e-8,
+                    "hessian ({c},{d}): {fdh} vs {}",
+                    h[c][d]
+                );
                 if fdh.abs() > 1e-8 {
-                    assert!(pairs.binary_search(&((c / 3) as u32, (d / 3) as u32)).is_ok());
+                    assert!(pairs
+                        .binary_search(&((c / 3) as u32, (d / 3) as u32))
+                        .is_ok());
                 }
             }
         }

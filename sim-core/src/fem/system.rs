@@ -211,12 +211,18 @@ impl System {
         let n = self.n_nodes;
         let nt = model.tets.len();
         let gather = |t: usize| model.tets[t].map(|i| x[i as usize]);
-        let vols: Vec<f64> = (0..nt).into_par_iter().map(|t| tet_volume(&gather(t))).collect();
+        let vols: Vec<f64> = (0..nt)
+            .into_par_iter()
+            .map(|t| tet_volume(&gather(t)))
+            .collect();
         let mut min_ratio = f64::INFINITY;
         for (t, &v) in vols.iter().enumerate() {
             let r = v / self.refs[t].volume0;
             if !(r > 0.0) {
-                return Err(FemError::Inverted { tet: t, volume_ratio: r });
+                return Err(FemError::Inverted {
+                    tet: t,
+                    volume_ratio: r,
+                });
             }
             min_ratio = min_ratio.min(r);
         }
@@ -251,10 +257,17 @@ impl System {
                     let xs = gather(t);
                     let mat = &model.materials[model.tet_material[t] as usize];
                     let mut f = [0.0; 12];
-                    let mut kk = if want_k { Some(Box::new([[0.0; 12]; 12])) } else { None };
+                    let mut kk = if want_k {
+                        Some(Box::new([[0.0; 12]; 12]))
+                    } else {
+                        None
+                    };
                     let w = self.refs[t]
                         .deviatoric(mat, &xs, &mut f, kk.as_deref_mut())
-                        .ok_or(FemError::Inverted { tet: t, volume_ratio: 0.0 })?;
+                        .ok_or(FemError::Inverted {
+                            tet: t,
+                            volume_ratio: 0.0,
+                        })?;
                     let tet = model.tets[t];
                     let pbar = tet.iter().map(|&i| p_node[i as usize]).sum::<f64>() / 4.0;
                     let gv = tet_volume_gradient(&xs);
@@ -331,7 +344,11 @@ impl System {
             energy -= pressure_pa * model.cavity.volume(x);
             model.cavity.add_gradient(x, -pressure_pa, &mut residual);
             if let Some(k) = tangent.as_deref_mut() {
-                model.cavity.for_each_hessian_block(x, -pressure_pa, |i, j, blk| self.add_block(k, i, j, &blk));
+                model
+                    .cavity
+                    .for_each_hessian_block(x, -pressure_pa, |i, j, blk| {
+                        self.add_block(k, i, j, &blk)
+                    });
             }
         }
         for (r, &f) in residual.iter_mut().zip(&self.fixed) {
@@ -342,12 +359,24 @@ impl System {
         if let Some(k) = tangent {
             self.apply_fixed(k);
         }
-        Ok(Evaluation { energy_j: energy, residual, min_volume_ratio: min_ratio, min_nodal_j: min_j })
+        Ok(Evaluation {
+            energy_j: energy,
+            residual,
+            min_volume_ratio: min_ratio,
+            min_nodal_j: min_j,
+        })
     }
 
     fn apply_fixed(&self, k: &mut [f64]) {
-        let free_diag: Vec<f64> = (0..self.n_dofs()).filter(|&d| !self.fixed[d]).map(|d| k[self.diag_pos[d]].abs()).collect();
-        let scale = if free_diag.is_empty() { 1.0 } else { free_diag.iter().sum::<f64>() / free_diag.len() as f64 };
+        let free_diag: Vec<f64> = (0..self.n_dofs())
+            .filter(|&d| !self.fixed[d])
+            .map(|d| k[self.diag_pos[d]].abs())
+            .collect();
+        let scale = if free_diag.is_empty() {
+            1.0
+        } else {
+            free_diag.iter().sum::<f64>() / free_diag.len() as f64
+        };
         for j in 0..self.n_dofs() {
             let fj = self.fixed[j];
             for p in self.col_ptr[j]..self.col_ptr[j + 1] {
