@@ -4,5 +4,6 @@
 //! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
 #![warn(missing_docs)]
 
+pub mod anatomy;
 pub mod mesh;
 pub mod units;
