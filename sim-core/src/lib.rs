@@ -4,6 +4,7 @@
 //! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
 #![warn(missing_docs)]
 
+pub mod anatomy;
 pub mod atlas;
 pub mod fem;
 pub mod mesh;
