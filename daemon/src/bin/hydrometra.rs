@@ -15,6 +15,12 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Run the FEM pressure sweep of an anatomy and write the deformation atlas, VTU/PVD series
+    /// and P-V curve.
+    Precompute(hydrometra_daemon::cli::precompute::PrecomputeArgs),
+    /// FEM verification cases (thick sphere).
+    #[command(subcommand)]
+    Fem(hydrometra_daemon::cli::fem::FemCommand),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +37,7 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Precompute(args) => hydrometra_daemon::cli::precompute::run(&args),
+        Command::Fem(cmd) => hydrometra_daemon::cli::fem::run(&cmd),
     }
 }

@@ -1,1 +1,4 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
+
+pub mod fem;
+pub mod precompute;
