@@ -120,7 +120,7 @@ impl<'m> Solver<'m> {
     /// Builds the sparsity pattern and the symbolic factorization.
     pub fn new(model: &'m FemModel, options: SolverOptions) -> Result<Self, FemError> {
         let system = System::new(model)?;
-        let n = system.n_dofs();
+        let n = system.n_linear();
         let linear = LdltSolver::new(n, system.col_ptr.clone(), system.row_idx.clone())?;
         let values = vec![0.0; system.nnz()];
         let mu_max = model
@@ -196,9 +196,13 @@ impl<'m> Solver<'m> {
         r
     }
 
+    /// Solves the condensed system for a displacement right-hand side through the expanded one.
     fn solve(&mut self, rhs: &mut [f64]) -> Result<(), FemError> {
         let t0 = Instant::now();
-        let r = self.linear.solve_in_place(rhs);
+        let mut full = rhs.to_vec();
+        full.resize(self.system.n_linear(), 0.0);
+        let r = self.linear.solve_in_place(&mut full);
+        rhs.copy_from_slice(&full[..rhs.len()]);
         self.counters.linear += t0.elapsed();
         r
     }

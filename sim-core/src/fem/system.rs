@@ -5,7 +5,14 @@
 //! `J_n = (sum of current volumes of the adjacent tets / 4) / (same in the reference)` and
 //! `U_vol = sum_n V0_n kappa_n / 2 (J_n - 1)^2` (the "average nodal pressure" family). The
 //! deviatoric energy stays per element. The energy is a function of `x`, so the tangent is exactly
-//! symmetric; the price is a wider stencil: vertices two edges apart are coupled.
+//! symmetric.
+//!
+//! Condensed, that tangent couples vertices two edges apart (`(kappa/V0) dv_n dv_n^T` spans the
+//! star of `n`), which fills the factor badly. The linear system is therefore assembled in the
+//! equivalent expanded form with one scaled nodal pressure unknown per vertex,
+//! `[K_xx  B; B^T  -I] [dx; dq] = [r; 0]`, `B = dv_n/dx sqrt(kappa_n / V0_n)`, whose pattern is
+//! the 1-ring; eliminating `dq` gives back exactly `K_xx + B B^T`. The matrix is quasi-definite
+//! while `K_xx` is positive definite, so LDL^T needs no pivoting.
 
 use super::element::{add_tet_volume_hessian, tet_volume, tet_volume_gradient, TetReference};
 use super::model::FemModel;
@@ -24,7 +31,8 @@ pub struct System {
     kappa_node: Vec<f64>,
     nbr_ptr: Vec<usize>,
     nbr_idx: Vec<u32>,
-    /// Column pointers of the full symmetric tangent (3 scalar columns per vertex).
+    /// Column pointers of the full symmetric expanded matrix: 3 displacement columns per vertex,
+    /// then one pressure column per vertex.
     pub col_ptr: Vec<usize>,
     /// Row indices of the tangent, sorted within each column.
     pub row_idx: Vec<usize>,
@@ -110,7 +118,7 @@ impl System {
                 kappa_node[i] /= v0_node[i];
             }
         }
-        // Pattern: 2-ring (vertices sharing a star) plus the pressure-load couplings.
+        // Displacement-displacement pattern: the 1-ring (stars) plus the pressure-load couplings.
         let mut extra: Vec<Vec<u32>> = vec![Vec::new(); n];
         for (i, j) in model.cavity.coupled_pairs() {
             extra[j as usize].push(i);
@@ -120,18 +128,16 @@ impl System {
         let mut buf = Vec::new();
         for v in 0..n {
             buf.clear();
-            for &m in &star_idx[star_ptr[v]..star_ptr[v + 1]] {
-                buf.extend_from_slice(&star_idx[star_ptr[m as usize]..star_ptr[m as usize + 1]]);
-            }
+            buf.extend_from_slice(&star_idx[star_ptr[v]..star_ptr[v + 1]]);
             buf.extend_from_slice(&extra[v]);
             buf.sort_unstable();
             buf.dedup();
             nbr_idx.extend_from_slice(&buf);
             nbr_ptr[v + 1] = nbr_idx.len();
         }
-        let mut col_ptr = Vec::with_capacity(3 * n + 1);
-        let mut row_idx = Vec::with_capacity(9 * nbr_idx.len());
-        let mut diag_pos = vec![0usize; 3 * n];
+        let mut col_ptr = Vec::with_capacity(4 * n + 1);
+        let mut row_idx = Vec::new();
+        let mut diag_pos = vec![0usize; 4 * n];
         col_ptr.push(0);
         for j in 0..n {
             for dj in 0..3 {
@@ -143,8 +149,22 @@ impl System {
                         row_idx.push(3 * i as usize + di);
                     }
                 }
+                // Pressure rows: the vertices whose star contains j (= the star of j).
+                for &m in &star_idx[star_ptr[j]..star_ptr[j + 1]] {
+                    row_idx.push(3 * n + m as usize);
+                }
                 col_ptr.push(row_idx.len());
             }
+        }
+        for m in 0..n {
+            for &i in &star_idx[star_ptr[m]..star_ptr[m + 1]] {
+                for di in 0..3 {
+                    row_idx.push(3 * i as usize + di);
+                }
+            }
+            diag_pos[3 * n + m] = row_idx.len();
+            row_idx.push(3 * n + m);
+            col_ptr.push(row_idx.len());
         }
         Ok(Self {
             n_nodes: n,
@@ -164,12 +184,17 @@ impl System {
         })
     }
 
-    /// Number of scalar unknowns (3 per vertex, fixed ones included as identity rows).
+    /// Number of displacement unknowns (3 per vertex, fixed ones included as identity rows).
     pub fn n_dofs(&self) -> usize {
         3 * self.n_nodes
     }
 
-    /// Number of stored tangent entries.
+    /// Size of the expanded linear system (displacements and nodal pressures).
+    pub fn n_linear(&self) -> usize {
+        4 * self.n_nodes
+    }
+
+    /// Number of stored entries of the expanded matrix.
     pub fn nnz(&self) -> usize {
         self.row_idx.len()
     }
@@ -188,13 +213,25 @@ impl System {
     fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
         let nb = &self.nbr_idx[self.nbr_ptr[j as usize]..self.nbr_ptr[j as usize + 1]];
         if let Ok(k) = nb.binary_search(&i) {
-            let stride = 3 * nb.len();
-            let base = self.col_ptr[3 * j as usize] + 3 * k;
-            for (dj, col) in (0..3).map(|dj| (dj, base + dj * stride)) {
+            for dj in 0..3 {
+                let col = self.col_ptr[3 * j as usize + dj] + 3 * k;
                 for di in 0..3 {
                     values[col + di] += blk[di][dj];
                 }
             }
+        }
+    }
+
+    /// Adds `b` to the coupling of displacement `(i, d)` with pressure `m`, in both triangles.
+    #[inline]
+    fn add_coupling(&self, values: &mut [f64], i: u32, d: usize, m: usize, b: f64) {
+        let star_m = &self.star_idx[self.star_ptr[m]..self.star_ptr[m + 1]];
+        let star_i = &self.star_idx[self.star_ptr[i as usize]..self.star_ptr[i as usize + 1]];
+        if let (Ok(a), Ok(c)) = (star_m.binary_search(&i), star_i.binary_search(&(m as u32))) {
+            let n = self.n_nodes;
+            values[self.col_ptr[3 * n + m] + 3 * a + d] += b;
+            let deg = self.nbr_ptr[i as usize + 1] - self.nbr_ptr[i as usize];
+            values[self.col_ptr[3 * i as usize + d] + 3 * deg + c] += b;
         }
     }
 
@@ -304,10 +341,12 @@ impl System {
                 }
             }
         }
-        // Nodal volumetric stiffness: (kappa_n / V0_n) (dv_n/dx)(dv_n/dx)^T over the star of n.
+        // Nodal volumetric stiffness in expanded form: B = sqrt(kappa_n / V0_n) dv_n/dx, -1 on
+        // the pressure diagonal (eliminating it restores (kappa_n / V0_n) dv_n dv_n^T).
         if let Some(k) = tangent.as_deref_mut() {
             let mut g: Vec<[f64; 3]> = Vec::new();
             for v in 0..n {
+                k[self.diag_pos[3 * n + v]] = -1.0;
                 if self.v0_node[v] <= 0.0 {
                     continue;
                 }
@@ -325,16 +364,10 @@ impl System {
                         }
                     }
                 }
-                let c = self.kappa_node[v] / self.v0_node[v];
+                let c = (self.kappa_node[v] / self.v0_node[v]).sqrt();
                 for (a, &ia) in star.iter().enumerate() {
-                    for (b, &ib) in star.iter().enumerate() {
-                        let mut blk = [[0.0; 3]; 3];
-                        for i in 0..3 {
-                            for j in 0..3 {
-                                blk[i][j] = c * g[a][i] * g[b][j];
-                            }
-                        }
-                        self.add_block(k, ia, ib, &blk);
+                    for d in 0..3 {
+                        self.add_coupling(k, ia, d, v, c * g[a][d]);
                     }
                 }
             }
@@ -377,11 +410,13 @@ impl System {
         } else {
             free_diag.iter().sum::<f64>() / free_diag.len() as f64
         };
-        for j in 0..self.n_dofs() {
-            let fj = self.fixed[j];
+        let nx = self.n_dofs();
+        let is_fixed = |d: usize| d < nx && self.fixed[d];
+        for j in 0..self.n_linear() {
+            let fj = is_fixed(j);
             for p in self.col_ptr[j]..self.col_ptr[j + 1] {
                 let r = self.row_idx[p];
-                if fj || self.fixed[r] {
+                if fj || is_fixed(r) {
                     k[p] = if r == j { scale } else { 0.0 };
                 }
             }
@@ -400,14 +435,26 @@ impl System {
         g
     }
 
-    /// `y = K x` with the assembled tangent values (for tests and diagnostics).
-    pub fn multiply(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+    fn multiply_expanded(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
         let mut y = vec![0.0; x.len()];
-        for j in 0..self.n_dofs() {
+        for j in 0..self.n_linear() {
             for p in self.col_ptr[j]..self.col_ptr[j + 1] {
                 y[self.row_idx[p]] += values[p] * x[j];
             }
         }
         y
+    }
+
+    /// `y = (K_xx + B B^T) x`: the condensed tangent (the Hessian of the potential) applied to a
+    /// displacement vector, from the assembled expanded values (for tests and diagnostics).
+    pub fn multiply(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+        let nx = self.n_dofs();
+        let mut v = x.to_vec();
+        v.resize(self.n_linear(), 0.0);
+        let y1 = self.multiply_expanded(values, &v);
+        let mut w = vec![0.0; self.n_linear()];
+        w[nx..].copy_from_slice(&y1[nx..]);
+        let y2 = self.multiply_expanded(values, &w);
+        (0..nx).map(|i| y1[i] + y2[i]).collect()
     }
 }
