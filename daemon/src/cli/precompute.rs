@@ -36,6 +36,56 @@ pub struct PrecomputeArgs {
     /// Skip the VTU/PVD series.
     #[arg(long)]
     pub no_vtu: bool,
+    /// Also solve the midpoint of every level interval (twice the work) and report the replay
+    /// error (Hermite and linear) against these held-out states in summary.json.
+    #[arg(long)]
+    pub holdout: bool,
+}
+
+/// Replay error of the atlas against held-out FEM states.
+fn holdout_errors(atlas: &Atlas, mesh: &TetMesh, held: &[&hydrometra_sim::fem::Equilibrium]) -> Result<serde_json::Value> {
+    let n = atlas.vertex_count();
+    let mut out = vec![[0.0f32; 3]; n];
+    let max_disp_m = held
+        .iter()
+        .flat_map(|s| s.positions_m.iter().zip(&mesh.positions_m).map(|(x, x0)| dist(*x, *x0)))
+        .fold(0.0, f64::max);
+    let mut report = serde_json::Map::new();
+    for (name, hermite) in [("hermite", true), ("linear", false)] {
+        let (mut max_err, mut sum_sq, mut count, mut max_vol_err) = (0.0f64, 0.0f64, 0usize, 0.0f64);
+        for s in held {
+            if hermite {
+                atlas.positions_at(s.pressure_pa, &mut out)?;
+            } else {
+                atlas.positions_at_linear(s.pressure_pa, &mut out)?;
+            }
+            let replayed: Vec<[f64; 3]> = out.iter().map(|p| p.map(f64::from)).collect();
+            for (a, b) in replayed.iter().zip(&s.positions_m) {
+                let e = dist(*a, *b);
+                max_err = max_err.max(e);
+                sum_sq += e * e;
+                count += 1;
+            }
+            let v = hydrometra_sim::mesh::cavity_volume_m3(&replayed, &mesh.cavity_triangles, &mesh.cavity_opening_loop);
+            max_vol_err = max_vol_err.max((v / s.cavity_volume_m3 - 1.0).abs());
+        }
+        report.insert(
+            name.to_string(),
+            serde_json::json!({
+                "max_vertex_error_mm": max_err * 1e3,
+                "rms_vertex_error_mm": (sum_sq / count.max(1) as f64).sqrt() * 1e3,
+                "max_vertex_error_percent_of_max_displacement": 100.0 * max_err / max_disp_m.max(1e-30),
+                "max_cavity_volume_error_percent": 100.0 * max_vol_err,
+            }),
+        );
+    }
+    report.insert("held_out_states".into(), serde_json::json!(held.len()));
+    report.insert("max_displacement_mm".into(), serde_json::json!(max_disp_m * 1e3));
+    Ok(serde_json::Value::Object(report))
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 fn load_mesh(path: Option<&Path>) -> Result<(TetMesh, serde_json::Value)> {
@@ -101,10 +151,14 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
     let mut solver = Solver::new(&model, options.clone())?;
     let (nnz, factor_nnz) = solver.sizes();
     tracing::info!(dofs = 3 * mesh.positions_m.len(), nnz, factor_nnz, "symbolic factorization done");
-    let pressures: Vec<f64> = (0..args.levels).map(|k| mmhg_to_pa(args.max_mmhg) * k as f64 / (args.levels - 1) as f64).collect();
-    let n_levels = pressures.len();
-    let states = solver.sweep(&pressures, |k, eq| progress(k + 1, n_levels, eq.pressure_pa, eq.cavity_volume_m3, t0))?;
+    let solved_levels = if args.holdout { 2 * args.levels - 1 } else { args.levels };
+    let pressures: Vec<f64> = (0..solved_levels).map(|k| mmhg_to_pa(args.max_mmhg) * k as f64 / (solved_levels - 1) as f64).collect();
+    let all_states = solver.sweep(&pressures, |k, eq| progress(k + 1, solved_levels, eq.pressure_pa, eq.cavity_volume_m3, t0))?;
     let sweep_s = t0.elapsed().as_secs_f64();
+    let step = if args.holdout { 2 } else { 1 };
+    let states: Vec<hydrometra_sim::fem::Equilibrium> = all_states.iter().step_by(step).cloned().collect();
+    let held: Vec<&hydrometra_sim::fem::Equilibrium> = if args.holdout { all_states.iter().skip(1).step_by(2).collect() } else { Vec::new() };
+    let n_levels = states.len();
 
     // Monotone P-V curve and no inversion are acceptance conditions of the atlas.
     for w in states.windows(2) {
@@ -174,11 +228,20 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
     }
 
     let last = states.last().context("no levels")?;
-    let min_ratio = states.iter().map(|s| s.min_volume_ratio).fold(f64::INFINITY, f64::min);
+    let min_ratio = all_states.iter().map(|s| s.min_volume_ratio).fold(f64::INFINITY, f64::min);
+    let monotone = states.windows(2).all(|w| w[1].cavity_volume_m3 > w[0].cavity_volume_m3);
+    let holdout = if args.holdout { holdout_errors(&atlas, &mesh, &held)? } else { serde_json::Value::Null };
     let uterine = tissue_volume + rest_volume;
     let summary = serde_json::json!({
         "sweep_seconds": sweep_s,
+        "solved_levels": solved_levels,
         "levels": n_levels,
+        "vertices": mesh.positions_m.len(),
+        "tets": mesh.tets.len(),
+        "threads": rayon::current_num_threads(),
+        "pv_curve_monotone": monotone,
+        "krylov_iterations": solver.counters.krylov_iterations,
+        "replay_holdout": holdout,
         "newton_iterations": solver.counters.newton_iterations,
         "factorizations": solver.counters.factorizations,
         "step_cuts": solver.counters.step_cuts,

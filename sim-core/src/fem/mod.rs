@@ -26,6 +26,7 @@ pub mod linear;
 pub mod material;
 pub mod model;
 pub mod newton;
+pub mod ordering;
 pub mod pressure;
 pub mod system;
 pub mod testmesh;

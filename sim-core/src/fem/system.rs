@@ -199,6 +199,19 @@ impl System {
         self.row_idx.len()
     }
 
+    /// Fill-reducing elimination order of the expanded system: geometric nested dissection of
+    /// the vertices, each vertex's three displacements and pressure kept together.
+    pub fn elimination_order(&self, model: &FemModel) -> Vec<usize> {
+        let nodes = super::ordering::nested_dissection(&model.rest_positions_m, &self.nbr_ptr, &self.nbr_idx);
+        let n = self.n_nodes;
+        let mut order = Vec::with_capacity(4 * n);
+        for v in nodes {
+            let v = v as usize;
+            order.extend([3 * v, 3 * v + 1, 3 * v + 2, 3 * n + v]);
+        }
+        order
+    }
+
     /// Fixed degree-of-freedom flags.
     pub fn fixed(&self) -> &[bool] {
         &self.fixed
