@@ -288,3 +288,74 @@ fn affine_deformation_leaves_no_force_on_interior_vertices() {
         "interior force {interior_max:e} (boundary {boundary_max:e})"
     );
 }
+
+#[test]
+fn atlas_from_a_sweep_replays_held_out_midpoints() {
+    use hydrometra_sim::atlas::{Atlas, AtlasLevel};
+    // N = 2 sphere, 9 solved pressures: the even ones make the atlas, the odd ones are held out.
+    let mat = Material {
+        mu_pa: vec![0.5, 0.4],
+        kappa_pa: 500.0,
+    };
+    let case = testmesh::thick_sphere_octant(1.0, 2.0, 8, 4);
+    let m = model(&case, &mat);
+    let mut s = Solver::new(&m, Default::default()).unwrap();
+    let pressures: Vec<f64> = (0..9).map(|k| 0.06 * k as f64).collect();
+    let states = s.sweep(&pressures, |_, _| {}).unwrap();
+    let levels: Vec<AtlasLevel> = states
+        .iter()
+        .step_by(2)
+        .map(|e| AtlasLevel {
+            pressure_pa: e.pressure_pa,
+            cavity_volume_m3: e.cavity_volume_m3,
+            positions_m: e.positions_m.clone(),
+            dxdp_m_per_pa: e.dxdp_m_per_pa.clone(),
+        })
+        .collect();
+    let atlas = Atlas::from_bytes(
+        &Atlas::new(7, serde_json::json!({}), case.positions_m.clone(), &levels)
+            .unwrap()
+            .to_bytes(),
+        "sweep",
+    )
+    .unwrap();
+    let mut out = vec![[0.0f32; 3]; case.positions_m.len()];
+    let (mut herm, mut lin, mut max_disp) = (0.0f64, 0.0f64, 0.0f64);
+    for e in states.iter().skip(1).step_by(2) {
+        for (x, x0) in e.positions_m.iter().zip(&case.positions_m) {
+            max_disp = max_disp.max((0..3).map(|k| (x[k] - x0[k]).powi(2)).sum::<f64>().sqrt());
+        }
+        for (linear, acc) in [(false, &mut herm), (true, &mut lin)] {
+            if linear {
+                atlas.positions_at_linear(e.pressure_pa, &mut out).unwrap();
+            } else {
+                atlas.positions_at(e.pressure_pa, &mut out).unwrap();
+            }
+            for (o, x) in out.iter().zip(&e.positions_m) {
+                *acc = acc.max(
+                    (0..3)
+                        .map(|k| (o[k] as f64 - x[k]).powi(2))
+                        .sum::<f64>()
+                        .sqrt(),
+                );
+            }
+        }
+    }
+    eprintln!(
+        "replay max error / max displacement: Hermite {:.2e}, linear {:.2e}",
+        herm / max_disp,
+        lin / max_disp
+    );
+    assert!(
+        herm < 0.01 * max_disp,
+        "Hermite error {herm} vs max displacement {max_disp}"
+    );
+    assert!(
+        herm < 0.25 * lin,
+        "Hermite ({herm}) should beat linear ({lin}) clearly"
+    );
+    // The P-V curve is monotone for the stiffening material.
+    assert!(states
+        .windows(2)
+        .all(|w| w[1].cavity_volume_m3 > w[0].cavity_volume_m3));
+}

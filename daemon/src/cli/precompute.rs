@@ -43,16 +43,26 @@ pub struct PrecomputeArgs {
 }
 
 /// Replay error of the atlas against held-out FEM states.
-fn holdout_errors(atlas: &Atlas, mesh: &TetMesh, held: &[&hydrometra_sim::fem::Equilibrium]) -> Result<serde_json::Value> {
+fn holdout_errors(
+    atlas: &Atlas,
+    mesh: &TetMesh,
+    held: &[&hydrometra_sim::fem::Equilibrium],
+) -> Result<serde_json::Value> {
     let n = atlas.vertex_count();
     let mut out = vec![[0.0f32; 3]; n];
     let max_disp_m = held
         .iter()
-        .flat_map(|s| s.positions_m.iter().zip(&mesh.positions_m).map(|(x, x0)| dist(*x, *x0)))
+        .flat_map(|s| {
+            s.positions_m
+                .iter()
+                .zip(&mesh.positions_m)
+                .map(|(x, x0)| dist(*x, *x0))
+        })
         .fold(0.0, f64::max);
     let mut report = serde_json::Map::new();
     for (name, hermite) in [("hermite", true), ("linear", false)] {
-        let (mut max_err, mut sum_sq, mut count, mut max_vol_err) = (0.0f64, 0.0f64, 0usize, 0.0f64);
+        let (mut max_err, mut sum_sq, mut count, mut max_vol_err) =
+            (0.0f64, 0.0f64, 0usize, 0.0f64);
         for s in held {
             if hermite {
                 atlas.positions_at(s.pressure_pa, &mut out)?;
@@ -66,7 +76,11 @@ fn holdout_errors(atlas: &Atlas, mesh: &TetMesh, held: &[&hydrometra_sim::fem::E
                 sum_sq += e * e;
                 count += 1;
             }
-            let v = hydrometra_sim::mesh::cavity_volume_m3(&replayed, &mesh.cavity_triangles, &mesh.cavity_opening_loop);
+            let v = hydrometra_sim::mesh::cavity_volume_m3(
+                &replayed,
+                &mesh.cavity_triangles,
+                &mesh.cavity_opening_loop,
+            );
             max_vol_err = max_vol_err.max((v / s.cavity_volume_m3 - 1.0).abs());
         }
         report.insert(
@@ -80,7 +94,10 @@ fn holdout_errors(atlas: &Atlas, mesh: &TetMesh, held: &[&hydrometra_sim::fem::E
         );
     }
     report.insert("held_out_states".into(), serde_json::json!(held.len()));
-    report.insert("max_displacement_mm".into(), serde_json::json!(max_disp_m * 1e3));
+    report.insert(
+        "max_displacement_mm".into(),
+        serde_json::json!(max_disp_m * 1e3),
+    );
     Ok(serde_json::Value::Object(report))
 }
 
@@ -94,19 +111,30 @@ fn load_mesh(path: Option<&Path>) -> Result<(TetMesh, serde_json::Value)> {
             let params = AnatomyParams::default();
             let a = anatomy::generate(&params).context("generating the default anatomy")?;
             let uterine = a.summary.uterine_volume_ml;
-            Ok((a.mesh, serde_json::json!({"source": "default anatomy", "uterine_volume_ml": uterine})))
+            Ok((
+                a.mesh,
+                serde_json::json!({"source": "default anatomy", "uterine_volume_ml": uterine}),
+            ))
         }
         Some(p) if p.extension().is_some_and(|e| e == "json") => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading mesh {}", p.display()))?;
-            let mesh: TetMesh = serde_json::from_str(&text).with_context(|| format!("{}: not a TetMesh JSON", p.display()))?;
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading mesh {}", p.display()))?;
+            let mesh: TetMesh = serde_json::from_str(&text)
+                .with_context(|| format!("{}: not a TetMesh JSON", p.display()))?;
             Ok((mesh, serde_json::json!({"source": p.display().to_string()})))
         }
         Some(p) => {
-            let text = std::fs::read_to_string(p).with_context(|| format!("reading anatomy parameters {}", p.display()))?;
-            let params = AnatomyParams::from_toml_str(&text).with_context(|| format!("{}", p.display()))?;
-            let a = anatomy::generate(&params).with_context(|| format!("generating the anatomy of {}", p.display()))?;
+            let text = std::fs::read_to_string(p)
+                .with_context(|| format!("reading anatomy parameters {}", p.display()))?;
+            let params =
+                AnatomyParams::from_toml_str(&text).with_context(|| format!("{}", p.display()))?;
+            let a = anatomy::generate(&params)
+                .with_context(|| format!("generating the anatomy of {}", p.display()))?;
             let uterine = a.summary.uterine_volume_ml;
-            Ok((a.mesh, serde_json::json!({"source": p.display().to_string(), "uterine_volume_ml": uterine})))
+            Ok((
+                a.mesh,
+                serde_json::json!({"source": p.display().to_string(), "uterine_volume_ml": uterine}),
+            ))
         }
     }
 }
@@ -134,7 +162,10 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         bail!("--max-mmhg {}: expected a positive pressure", args.max_mmhg);
     }
     if args.levels < 2 {
-        bail!("--levels {}: expected at least 2 (0 and --max-mmhg)", args.levels);
+        bail!(
+            "--levels {}: expected at least 2 (0 and --max-mmhg)",
+            args.levels
+        );
     }
     let materials = match &args.material {
         Some(p) => MaterialSet::from_file(p)?,
@@ -142,28 +173,62 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
     };
     let t_mesh = Instant::now();
     let (mesh, mesh_meta) = load_mesh(args.anatomy.as_deref())?;
-    tracing::info!(vertices = mesh.positions_m.len(), tets = mesh.tets.len(), seconds = t_mesh.elapsed().as_secs_f64(), "mesh ready");
-    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    tracing::info!(
+        vertices = mesh.positions_m.len(),
+        tets = mesh.tets.len(),
+        seconds = t_mesh.elapsed().as_secs_f64(),
+        "mesh ready"
+    );
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("creating {}", args.out.display()))?;
 
     let model = FemModel::from_mesh(&mesh, &materials)?;
     let t0 = Instant::now();
     let options = SolverOptions::default();
     let mut solver = Solver::new(&model, options.clone())?;
     let (nnz, factor_nnz) = solver.sizes();
-    tracing::info!(dofs = 3 * mesh.positions_m.len(), nnz, factor_nnz, "symbolic factorization done");
-    let solved_levels = if args.holdout { 2 * args.levels - 1 } else { args.levels };
-    let pressures: Vec<f64> = (0..solved_levels).map(|k| mmhg_to_pa(args.max_mmhg) * k as f64 / (solved_levels - 1) as f64).collect();
-    let all_states = solver.sweep(&pressures, |k, eq| progress(k + 1, solved_levels, eq.pressure_pa, eq.cavity_volume_m3, t0))?;
+    tracing::info!(
+        dofs = 3 * mesh.positions_m.len(),
+        nnz,
+        factor_nnz,
+        "symbolic factorization done"
+    );
+    let solved_levels = if args.holdout {
+        2 * args.levels - 1
+    } else {
+        args.levels
+    };
+    let pressures: Vec<f64> = (0..solved_levels)
+        .map(|k| mmhg_to_pa(args.max_mmhg) * k as f64 / (solved_levels - 1) as f64)
+        .collect();
+    let all_states = solver.sweep(&pressures, |k, eq| {
+        progress(
+            k + 1,
+            solved_levels,
+            eq.pressure_pa,
+            eq.cavity_volume_m3,
+            t0,
+        )
+    })?;
     let sweep_s = t0.elapsed().as_secs_f64();
     let step = if args.holdout { 2 } else { 1 };
-    let states: Vec<hydrometra_sim::fem::Equilibrium> = all_states.iter().step_by(step).cloned().collect();
-    let held: Vec<&hydrometra_sim::fem::Equilibrium> = if args.holdout { all_states.iter().skip(1).step_by(2).collect() } else { Vec::new() };
+    let states: Vec<hydrometra_sim::fem::Equilibrium> =
+        all_states.iter().step_by(step).cloned().collect();
+    let held: Vec<&hydrometra_sim::fem::Equilibrium> = if args.holdout {
+        all_states.iter().skip(1).step_by(2).collect()
+    } else {
+        Vec::new()
+    };
     let n_levels = states.len();
 
     // Monotone P-V curve and no inversion are acceptance conditions of the atlas.
     for w in states.windows(2) {
         if w[1].cavity_volume_m3 <= w[0].cavity_volume_m3 {
-            tracing::warn!(p0 = w[0].pressure_pa, p1 = w[1].pressure_pa, "P-V curve not monotone");
+            tracing::warn!(
+                p0 = w[0].pressure_pa,
+                p1 = w[1].pressure_pa,
+                "P-V curve not monotone"
+            );
         }
     }
     let levels: Vec<AtlasLevel> = states
@@ -189,7 +254,12 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         },
         "levels": {"count": n_levels, "max_mmhg": args.max_mmhg},
     });
-    let atlas = Atlas::new(atlas::mesh_hash(&mesh), metadata, mesh.positions_m.clone(), &levels)?;
+    let atlas = Atlas::new(
+        atlas::mesh_hash(&mesh),
+        metadata,
+        mesh.positions_m.clone(),
+        &levels,
+    )?;
     let atlas_path = args.out.join("atlas.hma");
     atlas.write(&atlas_path)?;
 
@@ -220,17 +290,30 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
             deformed.positions_m.clone_from(&s.positions_m);
             let name = format!("level_{k:03}.vtu");
             anatomy::write_vtu(&deformed, &dir.join(&name))?;
-            pvd.push_str(&format!("<DataSet timestep=\"{:.4}\" group=\"\" part=\"0\" file=\"vtu/{name}\"/>\n", pa_to_mmhg(s.pressure_pa)));
+            pvd.push_str(&format!(
+                "<DataSet timestep=\"{:.4}\" group=\"\" part=\"0\" file=\"vtu/{name}\"/>\n",
+                pa_to_mmhg(s.pressure_pa)
+            ));
         }
         pvd.push_str("</Collection>\n</VTKFile>\n");
         let pvd_path = args.out.join("atlas.pvd");
-        std::fs::write(&pvd_path, pvd).with_context(|| format!("writing {}", pvd_path.display()))?;
+        std::fs::write(&pvd_path, pvd)
+            .with_context(|| format!("writing {}", pvd_path.display()))?;
     }
 
     let last = states.last().context("no levels")?;
-    let min_ratio = all_states.iter().map(|s| s.min_volume_ratio).fold(f64::INFINITY, f64::min);
-    let monotone = states.windows(2).all(|w| w[1].cavity_volume_m3 > w[0].cavity_volume_m3);
-    let holdout = if args.holdout { holdout_errors(&atlas, &mesh, &held)? } else { serde_json::Value::Null };
+    let min_ratio = all_states
+        .iter()
+        .map(|s| s.min_volume_ratio)
+        .fold(f64::INFINITY, f64::min);
+    let monotone = states
+        .windows(2)
+        .all(|w| w[1].cavity_volume_m3 > w[0].cavity_volume_m3);
+    let holdout = if args.holdout {
+        holdout_errors(&atlas, &mesh, &held)?
+    } else {
+        serde_json::Value::Null
+    };
     let uterine = tissue_volume + rest_volume;
     let summary = serde_json::json!({
         "sweep_seconds": sweep_s,
@@ -257,8 +340,21 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         "reference_ratio_at_150_mmhg": 0.069,
         "min_volume_ratio": min_ratio,
     });
-    std::fs::write(args.out.join("summary.json"), serde_json::to_string_pretty(&summary)?).context("writing summary.json")?;
+    std::fs::write(
+        args.out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?,
+    )
+    .context("writing summary.json")?;
     println!("{}", serde_json::to_string_pretty(&summary)?);
-    println!("wrote {}, {}{}", atlas_path.display(), csv_path.display(), if args.no_vtu { "" } else { ", atlas.pvd + vtu/" });
+    println!(
+        "wrote {}, {}{}",
+        atlas_path.display(),
+        csv_path.display(),
+        if args.no_vtu {
+            ""
+        } else {
+            ", atlas.pvd + vtu/"
+        }
+    );
     Ok(())
 }

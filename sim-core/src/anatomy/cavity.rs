@@ -230,7 +230,9 @@ pub(crate) fn opening_loop(triangles: &[[u32; 3]]) -> Result<Vec<u32>, AnatomyEr
         loop_.push(n);
         v = n;
         if loop_.len() > boundary.len() {
-            return Err(AnatomyError::Mesher("the cavity opening does not close".into()));
+            return Err(AnatomyError::Mesher(
+                "the cavity opening does not close".into(),
+            ));
         }
     }
     if loop_.len() != boundary.len() {

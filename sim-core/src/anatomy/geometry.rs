@@ -77,7 +77,9 @@ impl Geometry {
             ));
         }
         let cervix_r = 0.5 * p.cervix_diameter_mm * MM;
-        if p.cervix_diameter_mm > 0.8 * p.corpus_width_mm || p.cervix_diameter_mm > 0.9 * p.ap_depth_mm {
+        if p.cervix_diameter_mm > 0.8 * p.corpus_width_mm
+            || p.cervix_diameter_mm > 0.9 * p.ap_depth_mm
+        {
             return Err(AnatomyError::conflict(
                 &["cervix_diameter_mm", "corpus_width_mm", "ap_depth_mm"],
                 format!(
@@ -477,7 +479,10 @@ mod tests {
             ] {
                 let back = b.invert(b.apply(q));
                 for k in 0..3 {
-                    assert!((back[k] - q[k]).abs() < 1e-12, "flex {flex}: {q:?} -> {back:?}");
+                    assert!(
+                        (back[k] - q[k]).abs() < 1e-12,
+                        "flex {flex}: {q:?} -> {back:?}"
+                    );
                 }
             }
         }

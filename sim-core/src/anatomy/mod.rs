@@ -218,13 +218,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
     let mut chi_zero = chi_zero;
     chi_zero.resize(m.pos.len(), true);
     let chi_vals: Vec<f64> = (0..m.pos.len())
-        .map(|v| {
-            if chi_zero[v] {
-                0.0
-            } else {
-                chi.values[v]
-            }
-        })
+        .map(|v| if chi_zero[v] { 0.0 } else { chi.values[v] })
         .collect();
     let side: Vec<f64> = m
         .tets

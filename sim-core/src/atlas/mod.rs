@@ -214,7 +214,7 @@ impl Atlas {
             ));
         }
         for (k, w) in self.pressure_pa.windows(2).enumerate() {
-            if !(w[1] > w[0]) {
+            if w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater) {
                 return bad(format!(
                     "pressures must increase strictly: level {} has {} Pa after {} Pa at level {k}",
                     k + 1,

@@ -26,17 +26,27 @@ impl LdltSolver {
     /// Symbolic analysis of the pattern `col_ptr`/`row_idx` (rows sorted within each column),
     /// with the elimination order `order` (`order[k]` = the unknown eliminated k-th) or, if
     /// `None`, approximate minimum degree.
-    pub fn new(n: usize, col_ptr: Vec<usize>, row_idx: Vec<usize>, order: Option<Vec<usize>>) -> Result<Self, FemError> {
+    pub fn new(
+        n: usize,
+        col_ptr: Vec<usize>,
+        row_idx: Vec<usize>,
+        order: Option<Vec<usize>>,
+    ) -> Result<Self, FemError> {
         let pattern = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);
         let perm = match order {
             Some(fwd) => {
                 if fwd.len() != n {
-                    return Err(FemError::LinearSolver(format!("ordering has {} entries for {n} unknowns", fwd.len())));
+                    return Err(FemError::LinearSolver(format!(
+                        "ordering has {} entries for {n} unknowns",
+                        fwd.len()
+                    )));
                 }
                 let mut inv = vec![usize::MAX; n];
                 for (k, &i) in fwd.iter().enumerate() {
                     if i >= n || inv[i] != usize::MAX {
-                        return Err(FemError::LinearSolver(format!("ordering is not a permutation (entry {k} = {i})")));
+                        return Err(FemError::LinearSolver(format!(
+                            "ordering is not a permutation (entry {k} = {i})"
+                        )));
                     }
                     inv[i] = k;
                 }
@@ -45,10 +55,17 @@ impl LdltSolver {
             None => None,
         };
         let ordering = match &perm {
-            Some((fwd, inv)) => SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, n)),
+            Some((fwd, inv)) => {
+                SymmetricOrdering::Custom(faer::perm::PermRef::new_checked(fwd, inv, n))
+            }
             None => SymmetricOrdering::Amd,
         };
-        let symbolic = factorize_symbolic_cholesky(pattern.as_ref(), Side::Lower, ordering, Default::default())
+        let symbolic = factorize_symbolic_cholesky(
+            pattern.as_ref(),
+            Side::Lower,
+            ordering,
+            Default::default(),
+        )
         .map_err(|e| FemError::LinearSolver(format!("symbolic analysis failed: {e:?}")))?;
         let par = if rayon::current_num_threads() > 1 {
             Par::rayon(rayon::current_num_threads())

@@ -20,6 +20,9 @@
 //! assert!(loaded.cavity_volume_m3 > rest.cavity_volume_m3);
 //! ```
 
+// Index loops mirror the tensor notation (F_iJ, A_iJkL) of the formulas they implement.
+#![allow(clippy::needless_range_loop)]
+
 pub mod analytic;
 pub mod element;
 pub mod linear;

@@ -121,6 +121,9 @@ fn unflatten(v: &[f64]) -> Vec<[f64; 3]> {
     v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect()
 }
 
+/// Converged positions, pressure and iterations, or the failure with its residual history.
+type NewtonResult = Result<(Vec<[f64; 3]>, f64, usize), (FemError, Vec<f64>)>;
+
 enum Control {
     Pressure(f64),
     Volume(f64),
@@ -132,7 +135,12 @@ impl<'m> Solver<'m> {
         let system = System::new(model)?;
         let n = system.n_linear();
         let order = system.elimination_order(model);
-        let linear = LdltSolver::new(n, system.col_ptr.clone(), system.row_idx.clone(), Some(order))?;
+        let linear = LdltSolver::new(
+            n,
+            system.col_ptr.clone(),
+            system.row_idx.clone(),
+            Some(order),
+        )?;
         let values = vec![0.0; system.nnz()];
         let mu_max = model
             .materials
@@ -238,7 +246,7 @@ impl<'m> Solver<'m> {
             let ad = self.system.multiply(&self.values, &d);
             self.counters.linear += t0.elapsed();
             let dad = dot(&d, &ad);
-            if !(dad > 0.0) {
+            if dad.is_nan() || dad <= 0.0 {
                 return Ok(None);
             }
             let alpha = rz / dad;
@@ -263,7 +271,12 @@ impl<'m> Solver<'m> {
 
     /// Solves with the tangent assembled last: by preconditioned CG if allowed and a factor
     /// exists, else (or if CG fails) by a fresh factorization.
-    fn solve_tangent(&mut self, rhs: &mut [f64], rel_tol: f64, allow_krylov: bool) -> Result<bool, FemError> {
+    fn solve_tangent(
+        &mut self,
+        rhs: &mut [f64],
+        rel_tol: f64,
+        allow_krylov: bool,
+    ) -> Result<bool, FemError> {
         if allow_krylov && self.options.krylov && self.factor_tag > 0 {
             if let Some(x) = self.pcg(rhs, rel_tol)? {
                 rhs.copy_from_slice(&x);
@@ -295,7 +308,7 @@ impl<'m> Solver<'m> {
         mut p: f64,
         control: &Control,
         factor_tag: u64,
-    ) -> Result<(Vec<[f64; 3]>, f64, usize), (FemError, Vec<f64>)> {
+    ) -> NewtonResult {
         let mut history: Vec<f64> = Vec::new();
         let _ = factor_tag;
         let krylov = self.options.krylov && matches!(control, Control::Pressure(_));
@@ -304,11 +317,16 @@ impl<'m> Solver<'m> {
             if let Control::Pressure(pt) = control {
                 p = *pt;
             }
-            // Modified Newton: refactorize only when the old factor stops converging fast.
+            // Modified Newton: refactorize only when the old factor stops converging fast. The
+            // bordered volume-controlled step has no merit function to guard a stale tangent, so
+            // it always uses the current one.
             if let [.., a, b] = history[..] {
                 if b > 0.2 * a {
                     fresh = true;
                 }
+            }
+            if matches!(control, Control::Volume(_)) {
+                fresh = true;
             }
             let ev = self
                 .evaluate(&x, p, fresh || krylov)
@@ -345,7 +363,8 @@ impl<'m> Solver<'m> {
             } else if krylov {
                 // Inexact Newton: the current tangent solved by CG to 1e-3 (a triangular solve
                 // costs ~1/50 of a factorization, so a few CG steps beat refactorizing).
-                self.solve_tangent(&mut a, 1e-3, true).map_err(|e| (e, history.clone()))?;
+                self.solve_tangent(&mut a, 1e-3, true)
+                    .map_err(|e| (e, history.clone()))?;
                 stale = false;
             } else {
                 self.solve(&mut a).map_err(|e| (e, history.clone()))?;

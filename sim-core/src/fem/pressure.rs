@@ -155,7 +155,8 @@ impl CavitySurface {
                 parent.insert(ra, rb);
             }
         }
-        let mut groups: HashMap<u32, (Vec<u32>, Vec<(u32, u32)>)> = HashMap::new();
+        type Opening = (Vec<u32>, Vec<(u32, u32)>);
+        let mut groups: HashMap<u32, Opening> = HashMap::new();
         for &(a, b) in &edges {
             let r = find(&mut parent, a);
             let g = groups.entry(r).or_default();

@@ -202,7 +202,11 @@ impl System {
     /// Fill-reducing elimination order of the expanded system: geometric nested dissection of
     /// the vertices, each vertex's three displacements and pressure kept together.
     pub fn elimination_order(&self, model: &FemModel) -> Vec<usize> {
-        let nodes = super::ordering::nested_dissection(&model.rest_positions_m, &self.nbr_ptr, &self.nbr_idx);
+        let nodes = super::ordering::nested_dissection(
+            &model.rest_positions_m,
+            &self.nbr_ptr,
+            &self.nbr_idx,
+        );
         let n = self.n_nodes;
         let mut order = Vec::with_capacity(4 * n);
         for v in nodes {
@@ -268,7 +272,7 @@ impl System {
         let mut min_ratio = f64::INFINITY;
         for (t, &v) in vols.iter().enumerate() {
             let r = v / self.refs[t].volume0;
-            if !(r > 0.0) {
+            if r.is_nan() || r <= 0.0 {
                 return Err(FemError::Inverted {
                     tet: t,
                     volume_ratio: r,
