@@ -15,6 +15,8 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Generate a parametric uterus mesh (VTU, JSON summary, mesh JSON).
+    Anatomy(hydrometra_daemon::cli::anatomy::AnatomyArgs),
 }
 
 fn main() -> Result<()> {
@@ -31,5 +33,6 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Anatomy(args) => hydrometra_daemon::cli::anatomy::run(&args),
     }
 }

@@ -1,1 +1,3 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
+
+pub mod anatomy;

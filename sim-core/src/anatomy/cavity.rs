@@ -16,8 +16,6 @@ pub(crate) struct Cavity {
     pub triangles: Vec<[u32; 3]>,
     /// Boundary loop of the cavity surface at the external os, in order.
     pub opening_loop: Vec<u32>,
-    /// Vertices of the anterior face that were duplicated, with the id of their posterior copy.
-    pub copies: Vec<(u32, u32)>,
     /// Iterations and final relative residual of the harmonic opening solve.
     pub solve: (usize, f64),
 }
@@ -47,7 +45,9 @@ pub(crate) fn open_slit(
         }
     }
     faces.sort_unstable();
-    let mut crack: Vec<(([u32; 3], u32, usize), ([u32; 3], u32, usize))> = Vec::new();
+    // (anterior face, posterior face) of each slit face, as (vertices, tet, local opposite vertex).
+    type Face = ([u32; 3], u32, usize);
+    let mut crack: Vec<(Face, Face)> = Vec::new();
     let mut i = 0;
     while i < faces.len() {
         let mut j = i + 1;
@@ -165,7 +165,6 @@ pub(crate) fn open_slit(
     Ok(Cavity {
         triangles,
         opening_loop,
-        copies,
         solve,
     })
 }
@@ -230,7 +229,9 @@ pub(crate) fn opening_loop(triangles: &[[u32; 3]]) -> Result<Vec<u32>, AnatomyEr
         loop_.push(n);
         v = n;
         if loop_.len() > boundary.len() {
-            return Err(AnatomyError::Mesher("the cavity opening does not close".into()));
+            return Err(AnatomyError::Mesher(
+                "the cavity opening does not close".into(),
+            ));
         }
     }
     if loop_.len() != boundary.len() {
@@ -267,6 +268,7 @@ fn harmonic_extend(tets: &[[u32; 4]], fixed: &[bool], disp: &mut [[f64; 3]]) -> 
     }
     let free: Vec<usize> = (0..nv).filter(|&v| !fixed[v]).collect();
     let mut worst = (0usize, 0.0f64);
+    #[allow(clippy::needless_range_loop)] // one system per component of disp
     for comp in 0..3 {
         let apply = |x: &[f64], out: &mut [f64]| {
             for &v in &free {

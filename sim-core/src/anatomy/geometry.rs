@@ -35,8 +35,6 @@ pub(crate) struct Geometry {
     pub cervix_radius_m: f64,
     pub cervix_top_z_m: f64,
     pub blend_m: f64,
-    /// Internal os level (the cavity's lower end).
-    pub internal_os_z_m: f64,
     /// Fundal end of the cavity.
     pub cavity_top_z_m: f64,
     pub gap_m: f64,
@@ -77,7 +75,9 @@ impl Geometry {
             ));
         }
         let cervix_r = 0.5 * p.cervix_diameter_mm * MM;
-        if p.cervix_diameter_mm > 0.8 * p.corpus_width_mm || p.cervix_diameter_mm > 0.9 * p.ap_depth_mm {
+        if p.cervix_diameter_mm > 0.8 * p.corpus_width_mm
+            || p.cervix_diameter_mm > 0.9 * p.ap_depth_mm
+        {
             return Err(AnatomyError::conflict(
                 &["cervix_diameter_mm", "corpus_width_mm", "ap_depth_mm"],
                 format!(
@@ -196,7 +196,6 @@ impl Geometry {
             cervix_radius_m: cervix_r,
             cervix_top_z_m: cx + 0.5 * (z_io - cx) + 5.0 * MM,
             blend_m: 0.5 * cervix_r,
-            internal_os_z_m: z_io,
             cavity_top_z_m: z_ft,
             gap_m: gap,
             rounding_m: rounding,
@@ -258,12 +257,10 @@ impl Geometry {
         let r = self.cervix_radius_m;
         let zc = z.clamp(r, self.cervix_top_z_m);
         let cervix = (x * x + y * y + (z - zc) * (z - zc)).sqrt() - r;
-        smin(corpus, cervix, self.blend_m)
-    }
-
-    /// Outward unit normal of the serosa (numerical gradient).
-    pub fn organ_gradient(&self, p: [f64; 3]) -> [f64; 3] {
-        gradient(|q| self.organ(q), p)
+        // The blend rounds the isthmus; it fades out towards the portio so the external os stays
+        // exactly at z = 0.
+        let fade = ((z - self.portio_top_z_m * 0.5) / (self.portio_top_z_m * 0.5)).clamp(0.0, 1.0);
+        smin(corpus, cervix, self.blend_m * fade)
     }
 
     /// x of the serosa at height z in the plane y = 0 (bisection).
@@ -315,15 +312,13 @@ impl Geometry {
     pub fn side_gradient(&self, p: [f64; 3]) -> [f64; 3] {
         gradient(|q| self.side(q), p)
     }
-
-    /// Fundal cavity width as built: twice the largest half-width of the footprint.
-    pub fn fundal_cavity_width_m(&self) -> f64 {
-        2.0 * (self.polygon.iter().map(|q| q[0]).fold(0.0, f64::max) + self.rounding_m)
-    }
 }
 
 /// Polynomial smooth minimum with blend radius `k` (exact min where |a-b| >= k).
 pub(crate) fn smin(a: f64, b: f64, k: f64) -> f64 {
+    if k <= 0.0 {
+        return a.min(b);
+    }
     let h = (k - (a - b).abs()).max(0.0) / k;
     a.min(b) - h * h * k * 0.25
 }
@@ -465,9 +460,11 @@ mod tests {
     #[test]
     fn bend_inverts_exactly() {
         for flex in [-60.0, -10.0, 0.0, 25.0, 90.0] {
-            let mut p = AnatomyParams::default();
-            p.flexion_deg = flex;
-            p.version_deg = 15.0;
+            let p = AnatomyParams {
+                flexion_deg: flex,
+                version_deg: 15.0,
+                ..Default::default()
+            };
             let b = Bend::new(&p, 0.028, 0.031, 0.014);
             for q in [
                 [0.01, 0.005, 0.002],
@@ -477,7 +474,10 @@ mod tests {
             ] {
                 let back = b.invert(b.apply(q));
                 for k in 0..3 {
-                    assert!((back[k] - q[k]).abs() < 1e-12, "flex {flex}: {q:?} -> {back:?}");
+                    assert!(
+                        (back[k] - q[k]).abs() < 1e-12,
+                        "flex {flex}: {q:?} -> {back:?}"
+                    );
                 }
             }
         }

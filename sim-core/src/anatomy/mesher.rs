@@ -158,12 +158,9 @@ pub(crate) struct Insertion<'a> {
     pub edge_ok: &'a dyn Fn(u32, u32) -> bool,
 }
 
-/// Result of an insertion: the field's value at every vertex (exactly 0 on the inserted surface)
-/// and, for every new vertex (ids from the old vertex count on), the edge it split.
+/// Result of an insertion: the field's value at every vertex (exactly 0 on the inserted surface).
 pub(crate) struct Inserted {
     pub values: Vec<f64>,
-    pub parents: Vec<(u32, u32)>,
-    pub warped: usize,
 }
 
 /// Inserts the zero set of `ins.field` into `mesh` (see the module docs).
@@ -212,13 +209,11 @@ pub(crate) fn insert_surface(mesh: &mut WorkMesh, ins: &Insertion<'_>, tol: f64)
     }
     // Splits at the crossings that remain.
     let mut splits: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut parents = Vec::new();
     for &((a, b), _, p) in &crossings {
         if values[a as usize] * values[b as usize] < 0.0 {
             splits.insert((a, b), mesh.pos.len() as u32);
             mesh.pos.push(p);
             values.push(0.0);
-            parents.push((a, b));
         }
     }
     if !splits.is_empty() {
@@ -228,11 +223,7 @@ pub(crate) fn insert_surface(mesh: &mut WorkMesh, ins: &Insertion<'_>, tol: f64)
         }
         mesh.tets = out;
     }
-    Inserted {
-        values,
-        parents,
-        warped: warped.len(),
-    }
+    Inserted { values }
 }
 
 /// Splits `t` at the split edges it contains, smallest edge first, recursively.

@@ -181,10 +181,9 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
         tol,
     );
     let vals = outer.values;
-    m.tets.retain(|t| {
-        t.iter().any(|&v| vals[v as usize] < 0.0)
-            || (t.iter().all(|&v| vals[v as usize] == 0.0) && organ(tet_centroid(&m.pos, t)) < 0.0)
-    });
+    // Keep what lies inside. A tetrahedron whose four vertices were all warped onto the surface
+    // is flat (a sliver in the surface) and is dropped: its faces become surface faces.
+    m.tets.retain(|t| t.iter().any(|&v| vals[v as usize] < 0.0));
     mesher::compact(&mut m);
 
     // 2. The slit's mid-surface.
@@ -218,13 +217,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
     let mut chi_zero = chi_zero;
     chi_zero.resize(m.pos.len(), true);
     let chi_vals: Vec<f64> = (0..m.pos.len())
-        .map(|v| {
-            if chi_zero[v] {
-                0.0
-            } else {
-                chi.values[v]
-            }
-        })
+        .map(|v| if chi_zero[v] { 0.0 } else { chi.values[v] })
         .collect();
     let side: Vec<f64> = m
         .tets

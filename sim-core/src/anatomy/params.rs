@@ -260,7 +260,12 @@ impl AnatomyParams {
             ("ap_depth_mm", self.ap_depth_mm, 25.0, 80.0),
             ("fundal_wall_mm", self.fundal_wall_mm, 5.0, 25.0),
             ("cavity_length_mm", self.cavity_length_mm, 15.0, 60.0),
-            ("fundal_cavity_width_mm", self.fundal_cavity_width_mm, 15.0, 55.0),
+            (
+                "fundal_cavity_width_mm",
+                self.fundal_cavity_width_mm,
+                15.0,
+                55.0,
+            ),
             ("cornual_angle_deg", self.cornual_angle_deg, 30.0, 89.0),
             ("internal_os_width_mm", self.internal_os_width_mm, 3.0, 15.0),
             ("slit_gap_mm", self.slit_gap_mm, 0.3, 4.0),
@@ -365,13 +370,17 @@ mod tests {
 
     #[test]
     fn missing_keys_come_from_the_named_preset() {
-        let p = AnatomyParams::from_toml_str("parity = \"nulliparous\"\nslit_gap_mm = 2.5\n").unwrap();
+        let p =
+            AnatomyParams::from_toml_str("parity = \"nulliparous\"\nslit_gap_mm = 2.5\n").unwrap();
         assert_eq!(p.fundal_cavity_width_mm, 27.0);
         assert_eq!(p.slit_gap_mm, 2.5);
         let p = AnatomyParams::from_toml_str("[mesh]\ntarget_tets = 9000\n").unwrap();
         assert_eq!(p.fundal_cavity_width_mm, 32.0);
         assert_eq!(p.mesh.target_tets, 9000);
-        assert_eq!(p.mesh.smoothing_sweeps, MeshParams::default().smoothing_sweeps);
+        assert_eq!(
+            p.mesh.smoothing_sweeps,
+            MeshParams::default().smoothing_sweeps
+        );
     }
 
     #[test]

@@ -37,7 +37,11 @@ pub(crate) struct Lesion {
 /// Approximate signed distance to an axis-aligned ellipsoid (exact on the surface, distance-like
 /// near it).
 pub(crate) fn ellipsoid_sdf(p: [f64; 3], c: [f64; 3], r: [f64; 3]) -> f64 {
-    let q = [(p[0] - c[0]) / r[0], (p[1] - c[1]) / r[1], (p[2] - c[2]) / r[2]];
+    let q = [
+        (p[0] - c[0]) / r[0],
+        (p[1] - c[1]) / r[1],
+        (p[2] - c[2]) / r[2],
+    ];
     let k0 = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
     let q1 = [q[0] / r[0], q[1] / r[1], q[2] / r[2]];
     let k1 = (q1[0] * q1[0] + q1[1] * q1[1] + q1[2] * q1[2]).sqrt();
@@ -176,7 +180,9 @@ pub(crate) fn place_lesions(
                 d * MM
             }
             (None, None) => {
-                return Err(AnatomyError::Parse(format!("{key}: give `figo` or `depth_mm`")))
+                return Err(AnatomyError::Parse(format!(
+                    "{key}: give `figo` or `depth_mm`"
+                )))
             }
         };
         let figo = figo_from_depth(depth, r[1]);

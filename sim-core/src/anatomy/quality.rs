@@ -57,7 +57,11 @@ pub fn tet_quality(p: [[f64; 3]; 4]) -> TetQuality {
         min_dihedral_deg: min_d,
         max_dihedral_deg: max_d,
         mean_dihedral_deg: sum / 6.0,
-        aspect: if inr > 0.0 { circum / (3.0 * inr) } else { f64::INFINITY },
+        aspect: if inr > 0.0 {
+            circum / (3.0 * inr)
+        } else {
+            f64::INFINITY
+        },
     }
 }
 

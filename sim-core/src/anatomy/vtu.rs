@@ -31,7 +31,9 @@ pub fn vtu_string(mesh: &TetMesh) -> String {
         let _ = writeln!(s, "{}", *r as u8);
     }
     s.push_str("</DataArray>\n</CellData>\n");
-    s.push_str("<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+    s.push_str(
+        "<Points>\n<DataArray type=\"Float64\" NumberOfComponents=\"3\" format=\"ascii\">\n",
+    );
     for p in &mesh.positions_m {
         // `{:e}` prints the shortest representation that round-trips.
         let _ = writeln!(s, "{:e} {:e} {:e}", p[0], p[1], p[2]);
