@@ -156,7 +156,7 @@ pub(crate) fn open_slit(
         disp[v as usize] = n.map(|x| half * x);
         disp[c as usize] = n.map(|x| -half * x);
     }
-    let solve = harmonic_extend(&mesh.tets, &fixed, &mut disp);
+    let solve = harmonic_extend(&mesh.tets, &mesh.pos, &fixed, &mut disp);
     for (p, u) in mesh.pos.iter_mut().zip(&disp) {
         for k in 0..3 {
             p[k] += u[k];
@@ -246,25 +246,40 @@ pub(crate) fn opening_loop(triangles: &[[u32; 3]]) -> Result<Vec<u32>, AnatomyEr
 
 /// Solves the graph Laplace equation for the free vertices' displacement (conjugate gradients,
 /// one system per component); returns (iterations, relative residual).
-fn harmonic_extend(tets: &[[u32; 4]], fixed: &[bool], disp: &mut [[f64; 3]]) -> (usize, f64) {
+fn harmonic_extend(
+    tets: &[[u32; 4]],
+    pos: &[[f64; 3]],
+    fixed: &[bool],
+    disp: &mut [[f64; 3]],
+) -> (usize, f64) {
     let nv = fixed.len();
     let edges = unique_edges(tets);
-    let mut deg = vec![0usize; nv];
+    let mut count = vec![0usize; nv];
     for &(a, b) in &edges {
-        deg[a as usize] += 1;
-        deg[b as usize] += 1;
+        count[a as usize] += 1;
+        count[b as usize] += 1;
     }
     let mut start = vec![0usize; nv + 1];
     for v in 0..nv {
-        start[v + 1] = start[v] + deg[v];
+        start[v + 1] = start[v] + count[v];
     }
     let mut fill = start.clone();
     let mut adj = vec![0u32; start[nv]];
+    // Edge weights 1/length^2: short edges (split next to a surface) couple strongly, so the
+    // displacement does not drop across a thin element.
+    let mut wgt = vec![0.0f64; start[nv]];
+    let mut deg = vec![0.0f64; nv];
     for &(a, b) in &edges {
+        let d = sub(pos[a as usize], pos[b as usize]);
+        let w = 1.0 / dot(d, d);
         adj[fill[a as usize]] = b;
+        wgt[fill[a as usize]] = w;
         fill[a as usize] += 1;
         adj[fill[b as usize]] = a;
+        wgt[fill[b as usize]] = w;
         fill[b as usize] += 1;
+        deg[a as usize] += w;
+        deg[b as usize] += w;
     }
     let free: Vec<usize> = (0..nv).filter(|&v| !fixed[v]).collect();
     let mut worst = (0usize, 0.0f64);
@@ -272,10 +287,11 @@ fn harmonic_extend(tets: &[[u32; 4]], fixed: &[bool], disp: &mut [[f64; 3]]) -> 
     for comp in 0..3 {
         let apply = |x: &[f64], out: &mut [f64]| {
             for &v in &free {
-                let mut s = deg[v] as f64 * x[v];
-                for &w in &adj[start[v]..start[v + 1]] {
-                    if !fixed[w as usize] {
-                        s -= x[w as usize];
+                let mut s = deg[v] * x[v];
+                for k in start[v]..start[v + 1] {
+                    let w = adj[k] as usize;
+                    if !fixed[w] {
+                        s -= wgt[k] * x[w];
                     }
                 }
                 out[v] = s;
@@ -283,10 +299,9 @@ fn harmonic_extend(tets: &[[u32; 4]], fixed: &[bool], disp: &mut [[f64; 3]]) -> 
         };
         let mut b = vec![0.0; nv];
         for &v in &free {
-            b[v] = adj[start[v]..start[v + 1]]
-                .iter()
-                .filter(|&&w| fixed[w as usize])
-                .map(|&w| disp[w as usize][comp])
+            b[v] = (start[v]..start[v + 1])
+                .filter(|&k| fixed[adj[k] as usize])
+                .map(|k| wgt[k] * disp[adj[k] as usize][comp])
                 .sum();
         }
         let bnorm = free.iter().map(|&v| b[v] * b[v]).sum::<f64>().sqrt();

@@ -32,6 +32,9 @@ pub(crate) struct Lesion {
     pub fillet_m: f64,
     /// Whether the lesion protrudes into the cavity (so the slit wraps it).
     pub protrudes: bool,
+    /// The slit is wrapped this much outside the lesion: opening the slit moves each face by half
+    /// the gap, so the lesion ends up at its requested size.
+    pub inflate_m: f64,
 }
 
 /// Approximate signed distance to an axis-aligned ellipsoid (exact on the surface, distance-like
@@ -70,7 +73,7 @@ impl Lesion {
         if let Some((base, r)) = self.stalk {
             d = d.min(capsule_sdf(p, base, self.centre_m, r));
         }
-        Some(d)
+        Some(d - self.inflate_m)
     }
 
     /// Whether a tetrahedron with reference centroid `c` on slit side `side` (+1/-1) belongs to
@@ -80,7 +83,14 @@ impl Lesion {
             return false;
         }
         match self.kind {
-            LesionKind::Myoma { .. } => ellipsoid_sdf(c, self.centre_m, self.semi_axes_m) < 0.0,
+            LesionKind::Myoma { .. } => {
+                let grow = if self.wall_sign * c[1] < 0.0 {
+                    self.inflate_m
+                } else {
+                    0.0
+                };
+                ellipsoid_sdf(c, self.centre_m, self.semi_axes_m) < grow
+            }
             LesionKind::Polyp(_) => {
                 // Everything of the polyp's wall that lies beyond the mid-plane near the polyp.
                 self.wall_sign * c[1] < 0.0
@@ -137,7 +147,7 @@ fn depth_for_figo(figo: u8, ry: f64, stalk_len: f64, spacing: f64) -> f64 {
         1 => depth_for_fraction(0.7),
         2 => depth_for_fraction(0.3),
         3 => ry,
-        _ => ry + (5.0 * MM).max(2.5 * spacing),
+        _ => ry + (3.0 * MM).max(2.0 * spacing),
     }
 }
 
@@ -205,6 +215,7 @@ pub(crate) fn place_lesions(
             stalk,
             fillet_m: fillet,
             protrudes,
+            inflate_m: if protrudes { 0.5 * g.gap_m } else { 0.0 },
         };
         check_fit(g, &lesion, &key, spacing, depth)?;
         out.push(lesion);
@@ -243,6 +254,7 @@ pub(crate) fn place_lesions(
             stalk,
             fillet_m: (0.3 * rr).clamp(1.5 * MM, 4.0 * MM),
             protrudes: true,
+            inflate_m: 0.5 * g.gap_m,
         };
         check_fit(g, &lesion, &key, spacing, depth)?;
         out.push(lesion);
@@ -292,7 +304,7 @@ fn check_fit(
     }
     if l.protrudes {
         // The wrapped slit must stay inside the cavity's footprint, away from its rim.
-        let m = l.fillet_m + 1.5 * spacing;
+        let m = l.fillet_m + 0.5 * spacing;
         let probes = [
             [x0, z0],
             [x0 + r[0] + m, z0],
