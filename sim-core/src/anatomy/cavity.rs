@@ -58,11 +58,9 @@ pub(crate) fn open_slit(
             let (a, b) = (faces[i], faces[i + 1]);
             let (sa, sb) = (side[a.1 as usize], side[b.1 as usize]);
             let key = a.0;
+            // A face with all three vertices on the rim would have zero gap: it stays closed.
             let in_footprint = key.iter().all(|&v| psi[v as usize] <= 0.0)
-                && (key.iter().any(|&v| psi[v as usize] < 0.0) || {
-                    let c = centroid(&mesh.pos, &key);
-                    geo.footprint(c[0], c[2]) < 0.0
-                });
+                && key.iter().any(|&v| psi[v as usize] < 0.0);
             if sa * sb < 0.0 && in_footprint {
                 let (plus, minus) = if sa > 0.0 { (a, b) } else { (b, a) };
                 crack.push((plus, minus));
@@ -167,16 +165,6 @@ pub(crate) fn open_slit(
         opening_loop,
         solve,
     })
-}
-
-fn centroid(pos: &[[f64; 3]], f: &[u32; 3]) -> [f64; 3] {
-    let mut c = [0.0; 3];
-    for &v in f {
-        for k in 0..3 {
-            c[k] += pos[v as usize][k] / 3.0;
-        }
-    }
-    c
 }
 
 /// Orders the boundary half-edges of the cavity surface into its single loop.

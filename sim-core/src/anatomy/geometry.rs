@@ -50,8 +50,8 @@ pub(crate) struct Geometry {
 
 /// Superellipsoid exponents of the corpus (cross-section, axis): fuller than an ellipsoid, as a
 /// uterus is (an 8 x 5 x 4 cm ellipsoid holds 84 ml; references.md gives 80-200 ml).
-const P_XY: f64 = 2.6;
-const P_Z: f64 = 2.3;
+const P_XY: f64 = 3.0;
+const P_Z: f64 = 2.4;
 
 impl Geometry {
     /// Builds the geometry; `spacing_m` is the mesh lattice spacing, used for the resolution checks.
@@ -86,11 +86,11 @@ impl Geometry {
                 ),
             ));
         }
-        let corpus_bottom = 0.55 * cx;
+        let corpus_bottom = 0.45 * cx;
         // The corpus is widest at the level of the cornua (tubal insertions).
         let corpus_centre = lu - tf - 0.1 * lc;
         let h = spacing_m;
-        let min_wall = 3.0 * h;
+        let min_wall = 2.0 * h;
         let wf = p.fundal_cavity_width_mm * MM;
         let wos = p.internal_os_width_mm * MM;
         let canal = p.canal_diameter_mm * MM;
@@ -98,7 +98,7 @@ impl Geometry {
             return Err(AnatomyError::conflict(
                 &["fundal_wall_mm", "mesh.target_tets"],
                 format!(
-                    "a fundal wall of {} mm is thinner than the mesh resolves (3 lattice spacings = {:.1} mm); \
+                    "a fundal wall of {} mm is thinner than the mesh resolves (2 lattice spacings = {:.1} mm); \
                      raise mesh.target_tets",
                     p.fundal_wall_mm,
                     min_wall / MM
@@ -118,7 +118,7 @@ impl Geometry {
             return Err(AnatomyError::conflict(
                 &["canal_diameter_mm", "cervix_diameter_mm"],
                 format!(
-                    "a canal of {} mm in a cervix of {} mm leaves a wall below 3 lattice spacings ({:.1} mm)",
+                    "a canal of {} mm in a cervix of {} mm leaves a wall below 2 lattice spacings ({:.1} mm)",
                     p.canal_diameter_mm,
                     p.cervix_diameter_mm,
                     min_wall / MM
@@ -129,7 +129,7 @@ impl Geometry {
             return Err(AnatomyError::conflict(
                 &["internal_os_width_mm", "cervix_diameter_mm"],
                 format!(
-                    "an internal os of {} mm in a cervix of {} mm leaves a wall below 3 lattice spacings ({:.1} mm)",
+                    "an internal os of {} mm in a cervix of {} mm leaves a wall below 2 lattice spacings ({:.1} mm)",
                     p.internal_os_width_mm,
                     p.cervix_diameter_mm,
                     min_wall / MM
@@ -192,7 +192,7 @@ impl Geometry {
             corpus_centre_z_m: corpus_centre,
             corpus_up_m: lu - corpus_centre,
             corpus_down_m: corpus_centre - corpus_bottom,
-            corpus_taper: 0.45,
+            corpus_taper: 0.3,
             cervix_radius_m: cervix_r,
             cervix_top_z_m: cx + 0.5 * (z_io - cx) + 5.0 * MM,
             blend_m: 0.5 * cervix_r,
@@ -212,7 +212,7 @@ impl Geometry {
                 &["fundal_cavity_width_mm", "corpus_width_mm", "fundal_wall_mm"],
                 format!(
                     "the cavity ({} mm wide) leaves a lateral wall of {:.1} mm at the cornua in a corpus {} mm wide; \
-                     at least 3 lattice spacings ({:.1} mm) are needed",
+                     at least 2 lattice spacings ({:.1} mm) are needed",
                     p.fundal_cavity_width_mm,
                     (serosa_x - cornu_x) / MM,
                     p.corpus_width_mm,
