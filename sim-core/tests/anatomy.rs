@@ -300,7 +300,7 @@ fn resting_cavity_volume_matches_the_gap_integrated_over_the_footprint() {
 fn myoma(figo: u8) -> AnatomyParams {
     let mut p = AnatomyParams::default();
     p.myomas.push(MyomaParams {
-        wall: if figo % 2 == 0 {
+        wall: if figo.is_multiple_of(2) {
             WallSide::Posterior
         } else {
             WallSide::Anterior
@@ -399,7 +399,12 @@ fn same_parameters_give_a_bit_identical_mesh() {
 
 #[test]
 fn impossible_combinations_name_the_parameters_in_conflict() {
-    let cases: [(&str, fn(&mut AnatomyParams), &[&str]); 4] = [
+    type Case = (
+        &'static str,
+        fn(&mut AnatomyParams),
+        &'static [&'static str],
+    );
+    let cases: [Case; 4] = [
         (
             "cavity wider than the body",
             |p| {
