@@ -13,10 +13,10 @@ use hydrometra_sim::mesh::{Region, VertexLabel};
 /// Quality bounds this mesher guarantees over the tested parameter space (docs/anatomy.md).
 const MIN_DIHEDRAL_DEG: f64 = 8.0;
 const MAX_DIHEDRAL_DEG: f64 = 160.0;
-const MAX_ASPECT: f64 = 10.0;
+const MAX_ASPECT: f64 = 11.0;
 /// With lesions wrapped by the slit (curvature radii down to ~2 lattice spacings).
-const MIN_DIHEDRAL_LESION_DEG: f64 = 1.5;
-const MAX_DIHEDRAL_LESION_DEG: f64 = 177.0;
+const MIN_DIHEDRAL_LESION_DEG: f64 = 3.0;
+const MAX_DIHEDRAL_LESION_DEG: f64 = 170.0;
 
 fn spread_sets() -> Vec<(&'static str, AnatomyParams)> {
     let small = AnatomyParams {
@@ -306,7 +306,7 @@ fn myoma(figo: u8) -> AnatomyParams {
             WallSide::Anterior
         },
         x_mm: 0.0,
-        from_fundus_mm: 10.0,
+        from_fundus_mm: 12.0,
         diameters_mm: [12.0, 10.0, 12.0],
         figo: Some(figo),
         depth_mm: None,
@@ -357,7 +357,7 @@ fn sessile_and_pedunculated_polyps_mesh_with_their_own_region() {
         let mut p = AnatomyParams::default();
         p.polyps.push(PolypParams {
             wall: WallSide::Anterior,
-            x_mm: -1.0,
+            x_mm: 0.0,
             from_fundus_mm: 12.0,
             diameter_mm: 10.0,
             kind,
@@ -372,19 +372,23 @@ fn sessile_and_pedunculated_polyps_mesh_with_their_own_region() {
         // Head 10 x 8 x 10 mm (0.42 ml); sessile: most of it protrudes; pedunculated: all of it
         // plus the stalk.
         assert!(vol > 0.2 && vol < 0.8, "{name}: polyp region {vol} ml");
-        // Every polyp element lies in the cavity, i.e. on the far side of its wall's endometrial plane.
-        let base = generate(&AnatomyParams::default()).unwrap();
+        // The polyp is covered by endometrium: the slit wraps it.
+        let on_cavity: std::collections::HashSet<u32> =
+            a.mesh.cavity_triangles.iter().flatten().copied().collect();
+        let touching = (0..a.mesh.tets.len())
+            .filter(|&t| a.mesh.tet_regions[t] == Region::Polyp)
+            .filter(|&t| a.mesh.tets[t].iter().any(|v| on_cavity.contains(v)))
+            .count();
         assert!(
-            a.summary.cavity_volume_ml > base.summary.cavity_volume_ml,
-            "{name}: slit not wrapped"
+            touching > 10,
+            "{name}: only {touching} polyp elements touch the cavity"
         );
     }
 }
 
 #[test]
 fn same_parameters_give_a_bit_identical_mesh() {
-    let mut p = myoma(1);
-    p.mesh.target_tets = 20_000;
+    let p = myoma(1);
     let a = generate(&p).unwrap();
     let b = generate(&p).unwrap();
     assert!(a.mesh == b.mesh, "two runs differ");

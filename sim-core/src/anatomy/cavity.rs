@@ -150,7 +150,7 @@ pub(crate) fn open_slit(
     for &(v, c) in &copies {
         let p = mesh.pos[v as usize];
         let n = geo.side_gradient(p);
-        let half = 0.5 * geo.gap(p[0], p[2]);
+        let half = 0.5 * geo.gap_at(p);
         disp[v as usize] = n.map(|x| half * x);
         disp[c as usize] = n.map(|x| -half * x);
     }
@@ -191,8 +191,8 @@ pub(crate) fn opening_loop(triangles: &[[u32; 3]]) -> Result<Vec<u32>, AnatomyEr
     for w in boundary.windows(2) {
         if w[0].0 == w[1].0 {
             return Err(AnatomyError::Mesher(format!(
-                "the cavity opening is not a simple loop at vertex {}",
-                w[0].0
+                "the cavity opening is not a simple loop at vertex {} (edges to {} and {})",
+                w[0].0, w[0].1, w[1].1
             )));
         }
     }

@@ -17,6 +17,9 @@ use super::pathology::Lesion;
 
 const MM: f64 = 1e-3;
 
+/// Fraction of the resting gap kept over protruding lesions.
+pub(crate) const LESION_GAP_FRACTION: f64 = 0.25;
+
 /// Width of the zone along the footprint's rim over which the gap grows from 0 to its full value.
 pub(crate) const GAP_RAMP_M: f64 = 4.0 * MM;
 
@@ -289,6 +292,19 @@ impl Geometry {
     pub fn gap(&self, x: f64, z: f64) -> f64 {
         let t = (-self.footprint(x, z) / GAP_RAMP_M).clamp(0.0, 1.0);
         self.gap_m * t * (2.0 - t)
+    }
+
+    /// Gap at a point of the slit: `gap(x, z)`, reduced to a quarter over and around protruding
+    /// lesions, where the slit is strongly curved and opening it by the full gap would crush the
+    /// elements draped over the lesion.
+    pub fn gap_at(&self, p: [f64; 3]) -> f64 {
+        let mut w: f64 = 0.0;
+        for l in &self.lesions {
+            if let Some(sdf) = l.protruding_sdf(p) {
+                w = w.max((1.0 - sdf.max(0.0) / (l.fillet_m + 2.0 * MM)).clamp(0.0, 1.0));
+            }
+        }
+        self.gap(p[0], p[2]) * (1.0 - (1.0 - LESION_GAP_FRACTION) * w)
     }
 
     /// Side function: positive on the anterior side of the slit's mid-surface, negative on the

@@ -49,6 +49,9 @@ use mesher::{Insertion, WorkMesh};
 /// Warp threshold (fraction of an edge) for inserting surfaces: vertices closer than this to a
 /// crossing are moved onto the surface instead of splitting the edge next to them.
 const ALPHA: f64 = 0.3;
+/// Warp threshold for the slit's mid-surface: smaller, so fewer tetrahedra end with all four
+/// vertices on it (their side of the slit would be ambiguous).
+const ALPHA_MID: f64 = 0.2;
 /// Tetrahedra per lattice cube (Kuhn) times the growth from boundary splits, measured on the presets.
 const TETS_PER_CELL: f64 = 6.0 * 1.12;
 
@@ -194,7 +197,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
         &mut m,
         &Insertion {
             field: &side_fn,
-            alpha: ALPHA,
+            alpha: ALPHA_MID,
             movable: &|v, _| !boundary.get(v as usize).copied().unwrap_or(true),
             edge_ok: &|_, _| true,
             pin_unmovable: false,
