@@ -63,7 +63,14 @@ pub fn run(args: &AnatomyArgs) -> Result<()> {
         .as_ref()
         .context("--out DIR is required (or use --print-defaults)")?;
     let start = std::time::Instant::now();
-    let anatomy = generate(&params)?;
+    let source = args
+        .params
+        .as_ref()
+        .map_or("the parous defaults".to_string(), |p| {
+            p.display().to_string()
+        });
+    let anatomy =
+        generate(&params).with_context(|| format!("generating the anatomy from {source}"))?;
     let elapsed = start.elapsed();
     std::fs::create_dir_all(out)
         .with_context(|| format!("creating output directory {}", out.display()))?;
