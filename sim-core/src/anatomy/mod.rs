@@ -15,7 +15,7 @@
 //! ```
 //! use hydrometra_sim::anatomy::{generate, AnatomyParams};
 //! let mut params = AnatomyParams::default();
-//! params.mesh.target_tets = 4000; // coarse, for a quick look
+//! params.mesh.target_tets = 8000; // coarse, for a quick look
 //! let anatomy = generate(&params).unwrap();
 //! assert!(anatomy.summary.min_volume_positive());
 //! assert!(anatomy.mesh.cavity_volume_m3() > 0.0);
