@@ -515,21 +515,23 @@ fn random_parameter_sets_mesh_validly_or_are_refused_by_name() {
     };
     let mut meshed = 0;
     for i in 0..40 {
-        let mut p = AnatomyParams::default();
-        p.uterine_length_mm = rnd(65.0, 95.0);
-        p.corpus_width_mm = rnd(42.0, 62.0);
-        p.ap_depth_mm = rnd(32.0, 50.0);
-        p.fundal_wall_mm = rnd(8.0, 18.0);
-        p.cavity_length_mm = rnd(26.0, 38.0);
-        p.fundal_cavity_width_mm = rnd(24.0, 40.0);
-        p.cornual_angle_deg = rnd(45.0, 88.0);
-        p.internal_os_width_mm = rnd(4.0, 11.0);
-        p.slit_gap_mm = rnd(0.5, 3.0);
-        p.cervix_length_mm = rnd(25.0, 30.0);
-        p.cervix_diameter_mm = rnd(20.0, 30.0);
-        p.canal_diameter_mm = rnd(3.0, 10.0);
-        p.version_deg = rnd(-60.0, 60.0);
-        p.flexion_deg = rnd(-60.0, 80.0);
+        let mut p = AnatomyParams {
+            uterine_length_mm: rnd(65.0, 95.0),
+            corpus_width_mm: rnd(42.0, 62.0),
+            ap_depth_mm: rnd(32.0, 50.0),
+            fundal_wall_mm: rnd(8.0, 18.0),
+            cavity_length_mm: rnd(26.0, 38.0),
+            fundal_cavity_width_mm: rnd(24.0, 40.0),
+            cornual_angle_deg: rnd(45.0, 88.0),
+            internal_os_width_mm: rnd(4.0, 11.0),
+            slit_gap_mm: rnd(0.5, 3.0),
+            cervix_length_mm: rnd(25.0, 30.0),
+            cervix_diameter_mm: rnd(20.0, 30.0),
+            canal_diameter_mm: rnd(3.0, 10.0),
+            version_deg: rnd(-60.0, 60.0),
+            flexion_deg: rnd(-60.0, 80.0),
+            ..AnatomyParams::default()
+        };
         p.mesh.target_tets = 12_000;
         let name = format!("random set {i}");
         match generate(&p) {
