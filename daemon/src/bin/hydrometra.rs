@@ -15,6 +15,8 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Generate a parametric uterus mesh (VTU, JSON summary, mesh JSON).
+    Anatomy(hydrometra_daemon::cli::anatomy::AnatomyArgs),
     /// Run the FEM pressure sweep of an anatomy and write the deformation atlas, VTU/PVD series
     /// and P-V curve.
     Precompute(hydrometra_daemon::cli::precompute::PrecomputeArgs),
@@ -37,6 +39,7 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Anatomy(args) => hydrometra_daemon::cli::anatomy::run(&args),
         Command::Precompute(args) => hydrometra_daemon::cli::precompute::run(&args),
         Command::Fem(cmd) => hydrometra_daemon::cli::fem::run(&cmd),
     }

@@ -16,8 +16,6 @@ pub(crate) struct Cavity {
     pub triangles: Vec<[u32; 3]>,
     /// Boundary loop of the cavity surface at the external os, in order.
     pub opening_loop: Vec<u32>,
-    /// Vertices of the anterior face that were duplicated, with the id of their posterior copy.
-    pub copies: Vec<(u32, u32)>,
     /// Iterations and final relative residual of the harmonic opening solve.
     pub solve: (usize, f64),
 }
@@ -47,7 +45,9 @@ pub(crate) fn open_slit(
         }
     }
     faces.sort_unstable();
-    let mut crack: Vec<(([u32; 3], u32, usize), ([u32; 3], u32, usize))> = Vec::new();
+    // (anterior face, posterior face) of each slit face, as (vertices, tet, local opposite vertex).
+    type Face = ([u32; 3], u32, usize);
+    let mut crack: Vec<(Face, Face)> = Vec::new();
     let mut i = 0;
     while i < faces.len() {
         let mut j = i + 1;
@@ -58,11 +58,9 @@ pub(crate) fn open_slit(
             let (a, b) = (faces[i], faces[i + 1]);
             let (sa, sb) = (side[a.1 as usize], side[b.1 as usize]);
             let key = a.0;
+            // A face with all three vertices on the rim would have zero gap: it stays closed.
             let in_footprint = key.iter().all(|&v| psi[v as usize] <= 0.0)
-                && (key.iter().any(|&v| psi[v as usize] < 0.0) || {
-                    let c = centroid(&mesh.pos, &key);
-                    geo.footprint(c[0], c[2]) < 0.0
-                });
+                && key.iter().any(|&v| psi[v as usize] < 0.0);
             if sa * sb < 0.0 && in_footprint {
                 let (plus, minus) = if sa > 0.0 { (a, b) } else { (b, a) };
                 crack.push((plus, minus));
@@ -152,11 +150,11 @@ pub(crate) fn open_slit(
     for &(v, c) in &copies {
         let p = mesh.pos[v as usize];
         let n = geo.side_gradient(p);
-        let half = 0.5 * geo.gap(p[0], p[2]);
+        let half = 0.5 * geo.gap_at(p);
         disp[v as usize] = n.map(|x| half * x);
         disp[c as usize] = n.map(|x| -half * x);
     }
-    let solve = harmonic_extend(&mesh.tets, &fixed, &mut disp);
+    let solve = harmonic_extend(&mesh.tets, &mesh.pos, &fixed, &mut disp);
     for (p, u) in mesh.pos.iter_mut().zip(&disp) {
         for k in 0..3 {
             p[k] += u[k];
@@ -165,19 +163,8 @@ pub(crate) fn open_slit(
     Ok(Cavity {
         triangles,
         opening_loop,
-        copies,
         solve,
     })
-}
-
-fn centroid(pos: &[[f64; 3]], f: &[u32; 3]) -> [f64; 3] {
-    let mut c = [0.0; 3];
-    for &v in f {
-        for k in 0..3 {
-            c[k] += pos[v as usize][k] / 3.0;
-        }
-    }
-    c
 }
 
 /// Orders the boundary half-edges of the cavity surface into its single loop.
@@ -204,8 +191,8 @@ pub(crate) fn opening_loop(triangles: &[[u32; 3]]) -> Result<Vec<u32>, AnatomyEr
     for w in boundary.windows(2) {
         if w[0].0 == w[1].0 {
             return Err(AnatomyError::Mesher(format!(
-                "the cavity opening is not a simple loop at vertex {}",
-                w[0].0
+                "the cavity opening is not a simple loop at vertex {} (edges to {} and {})",
+                w[0].0, w[0].1, w[1].1
             )));
         }
     }
@@ -247,35 +234,52 @@ pub(crate) fn opening_loop(triangles: &[[u32; 3]]) -> Result<Vec<u32>, AnatomyEr
 
 /// Solves the graph Laplace equation for the free vertices' displacement (conjugate gradients,
 /// one system per component); returns (iterations, relative residual).
-fn harmonic_extend(tets: &[[u32; 4]], fixed: &[bool], disp: &mut [[f64; 3]]) -> (usize, f64) {
+fn harmonic_extend(
+    tets: &[[u32; 4]],
+    pos: &[[f64; 3]],
+    fixed: &[bool],
+    disp: &mut [[f64; 3]],
+) -> (usize, f64) {
     let nv = fixed.len();
     let edges = unique_edges(tets);
-    let mut deg = vec![0usize; nv];
+    let mut count = vec![0usize; nv];
     for &(a, b) in &edges {
-        deg[a as usize] += 1;
-        deg[b as usize] += 1;
+        count[a as usize] += 1;
+        count[b as usize] += 1;
     }
     let mut start = vec![0usize; nv + 1];
     for v in 0..nv {
-        start[v + 1] = start[v] + deg[v];
+        start[v + 1] = start[v] + count[v];
     }
     let mut fill = start.clone();
     let mut adj = vec![0u32; start[nv]];
+    // Edge weights 1/length^2: short edges (split next to a surface) couple strongly, so the
+    // displacement does not drop across a thin element.
+    let mut wgt = vec![0.0f64; start[nv]];
+    let mut deg = vec![0.0f64; nv];
     for &(a, b) in &edges {
+        let d = sub(pos[a as usize], pos[b as usize]);
+        let w = 1.0 / dot(d, d);
         adj[fill[a as usize]] = b;
+        wgt[fill[a as usize]] = w;
         fill[a as usize] += 1;
         adj[fill[b as usize]] = a;
+        wgt[fill[b as usize]] = w;
         fill[b as usize] += 1;
+        deg[a as usize] += w;
+        deg[b as usize] += w;
     }
     let free: Vec<usize> = (0..nv).filter(|&v| !fixed[v]).collect();
     let mut worst = (0usize, 0.0f64);
+    #[allow(clippy::needless_range_loop)] // one system per component of disp
     for comp in 0..3 {
         let apply = |x: &[f64], out: &mut [f64]| {
             for &v in &free {
-                let mut s = deg[v] as f64 * x[v];
-                for &w in &adj[start[v]..start[v + 1]] {
-                    if !fixed[w as usize] {
-                        s -= x[w as usize];
+                let mut s = deg[v] * x[v];
+                for k in start[v]..start[v + 1] {
+                    let w = adj[k] as usize;
+                    if !fixed[w] {
+                        s -= wgt[k] * x[w];
                     }
                 }
                 out[v] = s;
@@ -283,10 +287,9 @@ fn harmonic_extend(tets: &[[u32; 4]], fixed: &[bool], disp: &mut [[f64; 3]]) -> 
         };
         let mut b = vec![0.0; nv];
         for &v in &free {
-            b[v] = adj[start[v]..start[v + 1]]
-                .iter()
-                .filter(|&&w| fixed[w as usize])
-                .map(|&w| disp[w as usize][comp])
+            b[v] = (start[v]..start[v + 1])
+                .filter(|&k| fixed[adj[k] as usize])
+                .map(|k| wgt[k] * disp[adj[k] as usize][comp])
                 .sum();
         }
         let bnorm = free.iter().map(|&v| b[v] * b[v]).sum::<f64>().sqrt();

@@ -17,6 +17,9 @@ use super::pathology::Lesion;
 
 const MM: f64 = 1e-3;
 
+/// Fraction of the resting gap kept over protruding lesions.
+pub(crate) const LESION_GAP_FRACTION: f64 = 0.25;
+
 /// Width of the zone along the footprint's rim over which the gap grows from 0 to its full value.
 pub(crate) const GAP_RAMP_M: f64 = 4.0 * MM;
 
@@ -35,8 +38,6 @@ pub(crate) struct Geometry {
     pub cervix_radius_m: f64,
     pub cervix_top_z_m: f64,
     pub blend_m: f64,
-    /// Internal os level (the cavity's lower end).
-    pub internal_os_z_m: f64,
     /// Fundal end of the cavity.
     pub cavity_top_z_m: f64,
     pub gap_m: f64,
@@ -52,8 +53,8 @@ pub(crate) struct Geometry {
 
 /// Superellipsoid exponents of the corpus (cross-section, axis): fuller than an ellipsoid, as a
 /// uterus is (an 8 x 5 x 4 cm ellipsoid holds 84 ml; references.md gives 80-200 ml).
-const P_XY: f64 = 2.6;
-const P_Z: f64 = 2.3;
+const P_XY: f64 = 3.0;
+const P_Z: f64 = 2.4;
 
 impl Geometry {
     /// Builds the geometry; `spacing_m` is the mesh lattice spacing, used for the resolution checks.
@@ -88,11 +89,11 @@ impl Geometry {
                 ),
             ));
         }
-        let corpus_bottom = 0.55 * cx;
+        let corpus_bottom = 0.45 * cx;
         // The corpus is widest at the level of the cornua (tubal insertions).
         let corpus_centre = lu - tf - 0.1 * lc;
         let h = spacing_m;
-        let min_wall = 3.0 * h;
+        let min_wall = 2.0 * h;
         let wf = p.fundal_cavity_width_mm * MM;
         let wos = p.internal_os_width_mm * MM;
         let canal = p.canal_diameter_mm * MM;
@@ -100,7 +101,7 @@ impl Geometry {
             return Err(AnatomyError::conflict(
                 &["fundal_wall_mm", "mesh.target_tets"],
                 format!(
-                    "a fundal wall of {} mm is thinner than the mesh resolves (3 lattice spacings = {:.1} mm); \
+                    "a fundal wall of {} mm is thinner than the mesh resolves (2 lattice spacings = {:.1} mm); \
                      raise mesh.target_tets",
                     p.fundal_wall_mm,
                     min_wall / MM
@@ -120,7 +121,7 @@ impl Geometry {
             return Err(AnatomyError::conflict(
                 &["canal_diameter_mm", "cervix_diameter_mm"],
                 format!(
-                    "a canal of {} mm in a cervix of {} mm leaves a wall below 3 lattice spacings ({:.1} mm)",
+                    "a canal of {} mm in a cervix of {} mm leaves a wall below 2 lattice spacings ({:.1} mm)",
                     p.canal_diameter_mm,
                     p.cervix_diameter_mm,
                     min_wall / MM
@@ -131,7 +132,7 @@ impl Geometry {
             return Err(AnatomyError::conflict(
                 &["internal_os_width_mm", "cervix_diameter_mm"],
                 format!(
-                    "an internal os of {} mm in a cervix of {} mm leaves a wall below 3 lattice spacings ({:.1} mm)",
+                    "an internal os of {} mm in a cervix of {} mm leaves a wall below 2 lattice spacings ({:.1} mm)",
                     p.internal_os_width_mm,
                     p.cervix_diameter_mm,
                     min_wall / MM
@@ -194,11 +195,10 @@ impl Geometry {
             corpus_centre_z_m: corpus_centre,
             corpus_up_m: lu - corpus_centre,
             corpus_down_m: corpus_centre - corpus_bottom,
-            corpus_taper: 0.45,
+            corpus_taper: 0.3,
             cervix_radius_m: cervix_r,
             cervix_top_z_m: cx + 0.5 * (z_io - cx) + 5.0 * MM,
             blend_m: 0.5 * cervix_r,
-            internal_os_z_m: z_io,
             cavity_top_z_m: z_ft,
             gap_m: gap,
             rounding_m: rounding,
@@ -215,7 +215,7 @@ impl Geometry {
                 &["fundal_cavity_width_mm", "corpus_width_mm", "fundal_wall_mm"],
                 format!(
                     "the cavity ({} mm wide) leaves a lateral wall of {:.1} mm at the cornua in a corpus {} mm wide; \
-                     at least 3 lattice spacings ({:.1} mm) are needed",
+                     at least 2 lattice spacings ({:.1} mm) are needed",
                     p.fundal_cavity_width_mm,
                     (serosa_x - cornu_x) / MM,
                     p.corpus_width_mm,
@@ -260,12 +260,10 @@ impl Geometry {
         let r = self.cervix_radius_m;
         let zc = z.clamp(r, self.cervix_top_z_m);
         let cervix = (x * x + y * y + (z - zc) * (z - zc)).sqrt() - r;
-        smin(corpus, cervix, self.blend_m)
-    }
-
-    /// Outward unit normal of the serosa (numerical gradient).
-    pub fn organ_gradient(&self, p: [f64; 3]) -> [f64; 3] {
-        gradient(|q| self.organ(q), p)
+        // The blend rounds the isthmus; it fades out towards the portio so the external os stays
+        // exactly at z = 0.
+        let fade = ((z - self.portio_top_z_m * 0.5) / (self.portio_top_z_m * 0.5)).clamp(0.0, 1.0);
+        smin(corpus, cervix, self.blend_m * fade)
     }
 
     /// x of the serosa at height z in the plane y = 0 (bisection).
@@ -296,6 +294,19 @@ impl Geometry {
         self.gap_m * t * (2.0 - t)
     }
 
+    /// Gap at a point of the slit: `gap(x, z)`, reduced to a quarter over and around protruding
+    /// lesions, where the slit is strongly curved and opening it by the full gap would crush the
+    /// elements draped over the lesion.
+    pub fn gap_at(&self, p: [f64; 3]) -> f64 {
+        let mut w: f64 = 0.0;
+        for l in &self.lesions {
+            if let Some(sdf) = l.protruding_sdf(p) {
+                w = w.max((1.0 - sdf.max(0.0) / (l.fillet_m + 2.0 * MM)).clamp(0.0, 1.0));
+            }
+        }
+        self.gap(p[0], p[2]) * (1.0 - (1.0 - LESION_GAP_FRACTION) * w)
+    }
+
     /// Side function: positive on the anterior side of the slit's mid-surface, negative on the
     /// posterior side; its zero set is the plane y = 0 wrapped over protruding lesions.
     pub fn side(&self, p: [f64; 3]) -> f64 {
@@ -317,15 +328,13 @@ impl Geometry {
     pub fn side_gradient(&self, p: [f64; 3]) -> [f64; 3] {
         gradient(|q| self.side(q), p)
     }
-
-    /// Fundal cavity width as built: twice the largest half-width of the footprint.
-    pub fn fundal_cavity_width_m(&self) -> f64 {
-        2.0 * (self.polygon.iter().map(|q| q[0]).fold(0.0, f64::max) + self.rounding_m)
-    }
 }
 
 /// Polynomial smooth minimum with blend radius `k` (exact min where |a-b| >= k).
 pub(crate) fn smin(a: f64, b: f64, k: f64) -> f64 {
+    if k <= 0.0 {
+        return a.min(b);
+    }
     let h = (k - (a - b).abs()).max(0.0) / k;
     a.min(b) - h * h * k * 0.25
 }
@@ -467,9 +476,11 @@ mod tests {
     #[test]
     fn bend_inverts_exactly() {
         for flex in [-60.0, -10.0, 0.0, 25.0, 90.0] {
-            let mut p = AnatomyParams::default();
-            p.flexion_deg = flex;
-            p.version_deg = 15.0;
+            let p = AnatomyParams {
+                flexion_deg: flex,
+                version_deg: 15.0,
+                ..Default::default()
+            };
             let b = Bend::new(&p, 0.028, 0.031, 0.014);
             for q in [
                 [0.01, 0.005, 0.002],

@@ -103,7 +103,7 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
         let LesionKind::Myoma { figo } = l.kind else {
             continue;
         };
-        let plane = 0.5 * a.geometry.gap(l.centre_m[0], l.centre_m[2]);
+        let plane = 0.5 * a.geometry.gap_at(l.centre_m);
         let (mut inside, mut total, mut contact) = (0.0, 0.0, false);
         for (ti, t) in mesh.tets.iter().enumerate() {
             if mesh.tet_regions[ti] != Region::Fibroid {

@@ -156,14 +156,14 @@ pub(crate) struct Insertion<'a> {
     pub movable: &'a dyn Fn(u32, [f64; 3]) -> bool,
     /// Whether an edge may be cut (both endpoints given).
     pub edge_ok: &'a dyn Fn(u32, u32) -> bool,
+    /// A vertex that is too close to a crossing but may not move is declared on the surface
+    /// (value 0) where it is, instead of splitting a sliver off next to it.
+    pub pin_unmovable: bool,
 }
 
-/// Result of an insertion: the field's value at every vertex (exactly 0 on the inserted surface)
-/// and, for every new vertex (ids from the old vertex count on), the edge it split.
+/// Result of an insertion: the field's value at every vertex (exactly 0 on the inserted surface).
 pub(crate) struct Inserted {
     pub values: Vec<f64>,
-    pub parents: Vec<(u32, u32)>,
-    pub warped: usize,
 }
 
 /// Inserts the zero set of `ins.field` into `mesh` (see the module docs).
@@ -194,15 +194,23 @@ pub(crate) fn insert_surface(mesh: &mut WorkMesh, ins: &Insertion<'_>, tol: f64)
     }
     // Warping: each vertex goes to its nearest violating crossing.
     let mut best: HashMap<u32, (f64, [f64; 3])> = HashMap::new();
+    let mut pinned: Vec<u32> = Vec::new();
     for &((a, b), t, p) in &crossings {
         for (v, frac) in [(a, t), (b, 1.0 - t)] {
-            if frac < ins.alpha && (ins.movable)(v, p) {
-                let e = best.entry(v).or_insert((f64::INFINITY, p));
-                if frac < e.0 {
-                    *e = (frac, p);
+            if frac < ins.alpha {
+                if (ins.movable)(v, p) {
+                    let e = best.entry(v).or_insert((f64::INFINITY, p));
+                    if frac < e.0 {
+                        *e = (frac, p);
+                    }
+                } else if ins.pin_unmovable {
+                    pinned.push(v);
                 }
             }
         }
+    }
+    for v in pinned {
+        values[v as usize] = 0.0;
     }
     let mut warped: Vec<(u32, [f64; 3])> = best.into_iter().map(|(v, (_, p))| (v, p)).collect();
     warped.sort_unstable_by_key(|w| w.0);
@@ -212,13 +220,11 @@ pub(crate) fn insert_surface(mesh: &mut WorkMesh, ins: &Insertion<'_>, tol: f64)
     }
     // Splits at the crossings that remain.
     let mut splits: HashMap<(u32, u32), u32> = HashMap::new();
-    let mut parents = Vec::new();
     for &((a, b), _, p) in &crossings {
         if values[a as usize] * values[b as usize] < 0.0 {
             splits.insert((a, b), mesh.pos.len() as u32);
             mesh.pos.push(p);
             values.push(0.0);
-            parents.push((a, b));
         }
     }
     if !splits.is_empty() {
@@ -228,11 +234,33 @@ pub(crate) fn insert_surface(mesh: &mut WorkMesh, ins: &Insertion<'_>, tol: f64)
         }
         mesh.tets = out;
     }
-    Inserted {
-        values,
-        parents,
-        warped: warped.len(),
+    Inserted { values }
+}
+
+/// Splits edge (a, b) at `point` in every tetrahedron containing it; returns the new vertex.
+/// `point` should lie near the segment (the caller checks the resulting elements).
+pub(crate) fn split_edge(mesh: &mut WorkMesh, a: u32, b: u32, point: [f64; 3]) -> u32 {
+    let m = mesh.pos.len() as u32;
+    mesh.pos.push(point);
+    let mut out = Vec::with_capacity(mesh.tets.len() + 8);
+    for &t in &mesh.tets {
+        match (
+            t.iter().position(|&v| v == a),
+            t.iter().position(|&v| v == b),
+        ) {
+            (Some(i), Some(j)) => {
+                let mut t1 = t;
+                t1[j] = m;
+                let mut t2 = t;
+                t2[i] = m;
+                out.push(t1);
+                out.push(t2);
+            }
+            _ => out.push(t),
+        }
     }
+    mesh.tets = out;
+    m
 }
 
 /// Splits `t` at the split edges it contains, smallest edge first, recursively.
@@ -359,6 +387,7 @@ mod tests {
                 alpha: 0.3,
                 movable: &|_, _| true,
                 edge_ok: &|_, _| true,
+                pin_unmovable: false,
             },
             1e-12,
         );

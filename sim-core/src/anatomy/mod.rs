@@ -15,7 +15,7 @@
 //! ```
 //! use hydrometra_sim::anatomy::{generate, AnatomyParams};
 //! let mut params = AnatomyParams::default();
-//! params.mesh.target_tets = 4000; // coarse, for a quick look
+//! params.mesh.target_tets = 8000; // coarse, for a quick look
 //! let anatomy = generate(&params).unwrap();
 //! assert!(anatomy.summary.min_volume_positive());
 //! assert!(anatomy.mesh.cavity_volume_m3() > 0.0);
@@ -49,6 +49,9 @@ use mesher::{Insertion, WorkMesh};
 /// Warp threshold (fraction of an edge) for inserting surfaces: vertices closer than this to a
 /// crossing are moved onto the surface instead of splitting the edge next to them.
 const ALPHA: f64 = 0.3;
+/// Warp threshold for the slit's mid-surface: smaller, so fewer tetrahedra end with all four
+/// vertices on it (their side of the slit would be ambiguous).
+const ALPHA_MID: f64 = 0.2;
 /// Tetrahedra per lattice cube (Kuhn) times the growth from boundary splits, measured on the presets.
 const TETS_PER_CELL: f64 = 6.0 * 1.12;
 
@@ -177,14 +180,14 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
             // Vertices on the mid-plane stay on it.
             movable: &|v, target| pos0[v as usize][1] != 0.0 || target[1] == 0.0,
             edge_ok: &|_, _| true,
+            pin_unmovable: false,
         },
         tol,
     );
     let vals = outer.values;
-    m.tets.retain(|t| {
-        t.iter().any(|&v| vals[v as usize] < 0.0)
-            || (t.iter().all(|&v| vals[v as usize] == 0.0) && organ(tet_centroid(&m.pos, t)) < 0.0)
-    });
+    // Keep what lies inside. A tetrahedron whose four vertices were all warped onto the surface
+    // is flat (a sliver in the surface) and is dropped: its faces become surface faces.
+    m.tets.retain(|t| t.iter().any(|&v| vals[v as usize] < 0.0));
     mesher::compact(&mut m);
 
     // 2. The slit's mid-surface.
@@ -194,9 +197,10 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
         &mut m,
         &Insertion {
             field: &side_fn,
-            alpha: ALPHA,
+            alpha: ALPHA_MID,
             movable: &|v, _| !boundary.get(v as usize).copied().unwrap_or(true),
             edge_ok: &|_, _| true,
+            pin_unmovable: false,
         },
         tol,
     );
@@ -212,11 +216,15 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
             alpha: ALPHA,
             movable: &|v, _| chi_zero[v as usize] && !boundary[v as usize],
             edge_ok: &|a, b| chi_zero[a as usize] && chi_zero[b as usize],
+            // Where the rim meets the portio the surface vertices stay put and become rim vertices.
+            pin_unmovable: true,
         },
         tol,
     );
     let mut chi_zero = chi_zero;
     chi_zero.resize(m.pos.len(), true);
+    let mut psi = rim.values;
+    snap_cornua(&mut m, &mut chi_zero, &mut psi, &geo);
     let chi_vals: Vec<f64> = (0..m.pos.len())
         .map(|v| if chi_zero[v] { 0.0 } else { chi.values[v] })
         .collect();
@@ -236,7 +244,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
         m.tets.iter().map(|t| tet_centroid(&m.pos, t)).collect();
 
     // 4. Cut open, open to the resting gap.
-    let cav = cavity::open_slit(&mut m, &side, &chi_zero, &rim.values, &geo)?;
+    let cav = cavity::open_slit(&mut m, &side, &chi_zero, &psi, &geo)?;
 
     // 5. Regions from the reference centroids.
     let regions: Vec<Region> = reference_centroids
@@ -361,4 +369,81 @@ fn label_vertices(m: &WorkMesh, cavity: &[[u32; 3]], geo: &Geometry) -> Vec<Vert
         }
     }
     labels
+}
+
+/// Puts a rim vertex exactly on each cornu's lateral extreme, so the cavity's width between the
+/// cornua is represented exactly rather than by a chord of the rounded corner: the nearest rim
+/// vertex is moved there if it is close (a third of its rim edge), otherwise the rim edge passing
+/// the extreme is split there. A change is kept only if every element around the vertex keeps a
+/// dihedral angle of at least 8 degrees.
+fn snap_cornua(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo: &Geometry) {
+    let Some(top) = geo
+        .polygon
+        .iter()
+        .copied()
+        .max_by(|a, b| a[0].total_cmp(&b[0]))
+    else {
+        return;
+    };
+    let good = |m: &WorkMesh, v: u32| {
+        m.tets.iter().filter(|t| t.contains(&v)).all(|tet| {
+            mesher::volume6(&m.pos, tet) > 0.0
+                && tet_quality(tet.map(|w| m.pos[w as usize])).min_dihedral_deg >= 8.0
+        })
+    };
+    for sign in [1.0, -1.0] {
+        let target = [sign * (top[0] + geo.rounding_m), 0.0, top[1]];
+        let is_rim = |v: u32| {
+            let v = v as usize;
+            on_mid[v] && psi[v] == 0.0 && m.pos[v][1] == 0.0
+        };
+        // The rim edge passing closest to the target.
+        let mut best: Option<(f64, u32, u32, f64)> = None;
+        for (a, b) in mesher::unique_edges(&m.tets) {
+            if !(is_rim(a) && is_rim(b)) {
+                continue;
+            }
+            let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
+            let ab = mesher::sub(pb, pa);
+            let t =
+                (mesher::dot(mesher::sub(target, pa), ab) / mesher::dot(ab, ab)).clamp(0.0, 1.0);
+            let d = mesher::norm(mesher::sub(mesher::lerp(pa, pb, t), target));
+            if best.is_none_or(|x| d < x.0) {
+                best = Some((d, a, b, t));
+            }
+        }
+        let Some((_, a, b, t)) = best else { continue };
+        // Try the exact extreme first, then points part of the way from the chord towards it.
+        let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
+        let snap_vertex = !(1.0 / 3.0..=2.0 / 3.0).contains(&t);
+        let from = if snap_vertex {
+            if t < 0.5 {
+                pa
+            } else {
+                pb
+            }
+        } else {
+            mesher::lerp(pa, pb, t)
+        };
+        for f in [1.0, 0.75, 0.5, 0.25] {
+            let point = mesher::lerp(from, target, f);
+            if snap_vertex {
+                let v = if t < 0.5 { a } else { b };
+                m.pos[v as usize] = point;
+                if good(m, v) {
+                    break;
+                }
+                m.pos[v as usize] = from;
+            } else {
+                let saved = m.clone();
+                let v = mesher::split_edge(m, a, b, point);
+                if good(m, v) {
+                    on_mid.push(true);
+                    psi.push(0.0);
+                    break;
+                }
+                *m = saved;
+            }
+        }
+    }
 }

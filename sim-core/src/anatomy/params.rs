@@ -161,11 +161,11 @@ impl AnatomyParams {
         match parity {
             Parity::Nulliparous => AnatomyParams {
                 parity,
-                uterine_length_mm: 72.0,
-                corpus_width_mm: 48.0,
-                ap_depth_mm: 38.0,
+                uterine_length_mm: 74.0,
+                corpus_width_mm: 50.0,
+                ap_depth_mm: 41.0,
                 fundal_wall_mm: 12.0,
-                cavity_length_mm: 31.0,
+                cavity_length_mm: 33.0,
                 fundal_cavity_width_mm: 27.0,
                 cornual_angle_deg: 60.0,
                 internal_os_width_mm: 5.0,

@@ -2,7 +2,7 @@
 //! the implicit geometry and their material region.
 
 use super::error::AnatomyError;
-use super::geometry::Geometry;
+use super::geometry::{Geometry, LESION_GAP_FRACTION};
 use super::params::{AnatomyParams, PolypKind};
 
 const MM: f64 = 1e-3;
@@ -32,6 +32,9 @@ pub(crate) struct Lesion {
     pub fillet_m: f64,
     /// Whether the lesion protrudes into the cavity (so the slit wraps it).
     pub protrudes: bool,
+    /// The slit is wrapped this much outside the lesion: opening the slit moves each face by half
+    /// the gap, so the lesion ends up at its requested size.
+    pub inflate_m: f64,
 }
 
 /// Approximate signed distance to an axis-aligned ellipsoid (exact on the surface, distance-like
@@ -70,7 +73,7 @@ impl Lesion {
         if let Some((base, r)) = self.stalk {
             d = d.min(capsule_sdf(p, base, self.centre_m, r));
         }
-        Some(d)
+        Some(d - self.inflate_m)
     }
 
     /// Whether a tetrahedron with reference centroid `c` on slit side `side` (+1/-1) belongs to
@@ -80,7 +83,14 @@ impl Lesion {
             return false;
         }
         match self.kind {
-            LesionKind::Myoma { .. } => ellipsoid_sdf(c, self.centre_m, self.semi_axes_m) < 0.0,
+            LesionKind::Myoma { .. } => {
+                let grow = if self.wall_sign * c[1] < 0.0 {
+                    self.inflate_m
+                } else {
+                    0.0
+                };
+                ellipsoid_sdf(c, self.centre_m, self.semi_axes_m) < grow
+            }
             LesionKind::Polyp(_) => {
                 // Everything of the polyp's wall that lies beyond the mid-plane near the polyp.
                 self.wall_sign * c[1] < 0.0
@@ -137,7 +147,7 @@ fn depth_for_figo(figo: u8, ry: f64, stalk_len: f64, spacing: f64) -> f64 {
         1 => depth_for_fraction(0.7),
         2 => depth_for_fraction(0.3),
         3 => ry,
-        _ => ry + (5.0 * MM).max(2.5 * spacing),
+        _ => ry + (3.0 * MM).max(2.0 * spacing),
     }
 }
 
@@ -191,7 +201,10 @@ pub(crate) fn place_lesions(
         let z0 = g.cavity_top_z_m - m.from_fundus_mm * MM;
         let centre = [x0, sign * depth, z0];
         let protrudes = figo <= 2;
-        let fillet = (0.25 * r[0].min(r[1]).min(r[2])).clamp(1.5 * MM, 4.0 * MM);
+        // The fillet must be well above the half-gap the slit opens by, or the wall draped over the
+        // lesion's base is crushed when the slit opens.
+        let min_fillet = (3.0 * MM).max(2.0 * g.gap_m);
+        let fillet = (0.3 * r[0].min(r[1]).min(r[2])).clamp(min_fillet, min_fillet.max(5.0 * MM));
         let stalk = (figo == 0).then(|| {
             let rs = (0.35 * r[0].min(r[2])).max(1.2 * spacing);
             ([x0, sign * 2.0 * MM, z0], rs)
@@ -205,6 +218,11 @@ pub(crate) fn place_lesions(
             stalk,
             fillet_m: fillet,
             protrudes,
+            inflate_m: if protrudes {
+                0.5 * LESION_GAP_FRACTION * g.gap_m
+            } else {
+                0.0
+            },
         };
         check_fit(g, &lesion, &key, spacing, depth)?;
         out.push(lesion);
@@ -241,8 +259,12 @@ pub(crate) fn place_lesions(
             centre_m: [x0, sign * depth, z0],
             semi_axes_m: r,
             stalk,
-            fillet_m: (0.3 * rr).clamp(1.5 * MM, 4.0 * MM),
+            fillet_m: {
+                let min_fillet = (3.0 * MM).max(2.0 * g.gap_m);
+                (0.3 * rr).clamp(min_fillet, min_fillet.max(5.0 * MM))
+            },
             protrudes: true,
+            inflate_m: 0.5 * LESION_GAP_FRACTION * g.gap_m,
         };
         check_fit(g, &lesion, &key, spacing, depth)?;
         out.push(lesion);
@@ -291,14 +313,26 @@ fn check_fit(
         }
     }
     if l.protrudes {
-        // The wrapped slit must stay inside the cavity's footprint, away from its rim.
-        let m = l.fillet_m + 1.5 * spacing;
+        // The wrapped slit must stay inside the cavity's footprint, away from its rim: the part in
+        // the cavity projects to its full outline, the base (where the wall is cut) adds the fillet.
+        let base = if depth.abs() < r[1] {
+            (1.0 - (depth / r[1]).powi(2)).sqrt()
+        } else {
+            0.0
+        };
+        let stalk_r = l.stalk.map_or(0.0, |s| s.1);
+        let reach = |ri: f64| {
+            let body = if depth < r[1] { ri } else { 0.0 };
+            body.max((ri * base).max(stalk_r) + l.fillet_m) + 0.5 * spacing
+        };
+        let (mx, mz) = (reach(r[0]), reach(r[2]));
+        let m = mx.max(mz);
         let probes = [
             [x0, z0],
-            [x0 + r[0] + m, z0],
-            [x0 - r[0] - m, z0],
-            [x0, z0 + r[2] + m],
-            [x0, z0 - r[2] - m],
+            [x0 + mx, z0],
+            [x0 - mx, z0],
+            [x0, z0 + mz],
+            [x0, z0 - mz],
         ];
         for q in probes {
             if g.footprint(q[0], q[1]) > 0.0 {
@@ -309,8 +343,8 @@ fn check_fit(
                         "fundal_cavity_width_mm",
                     ],
                     format!(
-                        "a lesion protruding into the cavity must lie inside the cavity outline with a margin of {:.1} mm; \
-                         ({:.1}, {:.1}) mm is outside",
+                        "a lesion protruding into the cavity must lie inside the cavity outline, with its base fillet \
+                         (reach {:.1} mm from its centre); ({:.1}, {:.1}) mm is outside",
                         m / MM,
                         q[0] / MM,
                         q[1] / MM

@@ -56,8 +56,8 @@ pub(crate) fn smooth_interior(m: &mut WorkMesh, labels: &[VertexLabel], sweeps: 
             let old = m.pos[v];
             let mut c = [0.0; 3];
             for &w in &nbr[v] {
-                for k in 0..3 {
-                    c[k] += m.pos[w as usize][k] / nbr[v].len() as f64;
+                for (ck, pk) in c.iter_mut().zip(m.pos[w as usize]) {
+                    *ck += pk / nbr[v].len() as f64;
                 }
             }
             let mut best = (q0, old);
