@@ -61,11 +61,11 @@ fn sphere(a: &SphereArgs) -> Result<()> {
         bail!("--resolution {}: expected 1..=64 layers", a.resolution);
     }
     for (i, w) in a.pressures.windows(2).enumerate() {
-        if !(w[1] > w[0]) {
+        if w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater) {
             bail!("--pressures: entry {} ({}) is not above entry {} ({}); expected increasing pressures", i + 1, w[1], i, w[0]);
         }
     }
-    if let Some(p) = a.pressures.iter().find(|p| !(**p > 0.0) || !p.is_finite()) {
+    if let Some(p) = a.pressures.iter().find(|p| !p.is_finite() || **p <= 0.0) {
         bail!("--pressures: {p} is not a positive pressure");
     }
     let materials = MaterialSet::from_file(&a.material)?;
