@@ -4,7 +4,10 @@
 //! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
 #![warn(missing_docs)]
 
-pub mod hydraulics;
+pub mod anatomy;
+pub mod atlas;
+pub mod fem;
 pub mod fluid;
+pub mod hydraulics;
 pub mod mesh;
 pub mod units;

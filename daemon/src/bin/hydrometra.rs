@@ -29,6 +29,14 @@ enum Command {
     /// Fluid solver: run case files, benchmark, soak.
     #[command(subcommand)]
     Fluid(hydrometra_daemon::cli::fluid::FluidCommand),
+    /// Generate a parametric uterus mesh (VTU, JSON summary, mesh JSON).
+    Anatomy(hydrometra_daemon::cli::anatomy::AnatomyArgs),
+    /// Run the FEM pressure sweep of an anatomy and write the deformation atlas, VTU/PVD series
+    /// and P-V curve.
+    Precompute(hydrometra_daemon::cli::precompute::PrecomputeArgs),
+    /// FEM verification cases (thick sphere).
+    #[command(subcommand)]
+    Fem(hydrometra_daemon::cli::fem::FemCommand),
 }
 
 fn main() -> Result<()> {
@@ -50,5 +58,8 @@ fn main() -> Result<()> {
         Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
         Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
         Command::Fluid(cmd) => hydrometra_daemon::cli::fluid::run(cmd),
+        Command::Anatomy(args) => hydrometra_daemon::cli::anatomy::run(&args),
+        Command::Precompute(args) => hydrometra_daemon::cli::precompute::run(&args),
+        Command::Fem(cmd) => hydrometra_daemon::cli::fem::run(&cmd),
     }
 }

@@ -1,6 +1,10 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
+pub mod fluid;
 pub mod hydraulics;
 pub mod monitor;
 pub mod procedure;
 pub mod rig;
-pub mod fluid;
+
+pub mod anatomy;
+pub mod fem;
+pub mod precompute;

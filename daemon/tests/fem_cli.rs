@@ -1,0 +1,108 @@
+//! End-to-end checks of `hydrometra fem sphere` and `hydrometra precompute` through the binary.
+
+use hydrometra_sim::atlas::Atlas;
+use std::path::PathBuf;
+use std::process::Command;
+
+fn out_dir(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hydrometra-fem-cli-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn fem_sphere_json_reports_stretch_near_the_integral_oracle() {
+    let dir = out_dir("sphere");
+    let mat = dir.join("n2.toml");
+    std::fs::write(
+        &mat,
+        "[myometrium]\nmu_pa = [0.5, 0.4]\nkappa_pa = 1000.0\n",
+    )
+    .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .args([
+            "fem",
+            "sphere",
+            "--inner",
+            "0.8",
+            "--outer",
+            "1.0",
+            "--resolution",
+            "4",
+            "--json",
+            "--pressures",
+            "0.04,0.08",
+        ])
+        .arg("--material")
+        .arg(&mat)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = v["results"].as_array().unwrap();
+    assert_eq!(rows.len(), 2);
+    for r in rows {
+        let err = r["relative_error_of_stretch_minus_1"].as_f64().unwrap();
+        // Coarse (4 layers): a few per cent at most, converging with --resolution.
+        assert!(err.abs() < 0.03, "error {err}");
+        assert!(r["inner_stretch"].as_f64().unwrap() > 1.0);
+    }
+    // Bad input names the argument.
+    let bad = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .args([
+            "fem",
+            "sphere",
+            "--inner",
+            "1",
+            "--outer",
+            "2",
+            "--pressures",
+            "0.3,0.1",
+        ])
+        .arg("--material")
+        .arg(&mat)
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--pressures"));
+}
+
+#[test]
+fn precompute_writes_a_loadable_atlas_csv_and_paraview_series() {
+    let dir = out_dir("precompute");
+    let anatomy = dir.join("anatomy.toml");
+    std::fs::write(&anatomy, "[mesh]\ntarget_tets = 20000\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .args(["precompute", "--max-mmhg", "30", "--levels", "3", "--out"])
+        .arg(&dir)
+        .arg("--anatomy")
+        .arg(&anatomy)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let atlas = Atlas::read(&dir.join("atlas.hma")).unwrap();
+    assert_eq!(atlas.level_count(), 3);
+    assert!((atlas.pressure_pa[2] - 30.0 * 133.322).abs() < 1e-6);
+    assert!(atlas.cavity_volume_m3.windows(2).all(|w| w[1] > w[0]));
+    let csv = std::fs::read_to_string(dir.join("pv_curve.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 4);
+    let pvd = std::fs::read_to_string(dir.join("atlas.pvd")).unwrap();
+    assert_eq!(pvd.matches("<DataSet").count(), 3);
+    assert!(dir.join("vtu/level_002.vtu").exists());
+    // A truncated copy is rejected with a size error naming the file.
+    let bytes = std::fs::read(dir.join("atlas.hma")).unwrap();
+    let cut = dir.join("cut.hma");
+    std::fs::write(&cut, &bytes[..bytes.len() - 100]).unwrap();
+    let err = Atlas::read(&cut).unwrap_err().to_string();
+    assert!(err.contains("cut.hma") && err.contains("expected"), "{err}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

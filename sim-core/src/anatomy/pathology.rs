@@ -1,0 +1,390 @@
+//! Myomas and polyps: placement from the FIGO type (or the type from the placement), their shape in
+//! the implicit geometry and their material region.
+
+use super::error::AnatomyError;
+use super::geometry::{Geometry, LESION_GAP_FRACTION};
+use super::params::{AnatomyParams, PolypKind};
+
+const MM: f64 = 1e-3;
+
+/// What a lesion is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum LesionKind {
+    /// A myoma of the given FIGO type (0-4).
+    Myoma { figo: u8 },
+    /// A polyp.
+    Polyp(PolypKind),
+}
+
+/// A placed lesion in the straight reference frame (metres).
+#[derive(Debug, Clone)]
+pub(crate) struct Lesion {
+    /// Index in `params.myomas` or `params.polyps`.
+    pub index: usize,
+    pub kind: LesionKind,
+    /// +1 anterior wall, -1 posterior wall.
+    pub wall_sign: f64,
+    pub centre_m: [f64; 3],
+    pub semi_axes_m: [f64; 3],
+    /// Stalk: (base point on the mid-surface, radius) for pedunculated lesions.
+    pub stalk: Option<([f64; 3], f64)>,
+    /// Fillet radius where the lesion meets the endometrium.
+    pub fillet_m: f64,
+    /// Whether the lesion protrudes into the cavity (so the slit wraps it).
+    pub protrudes: bool,
+    /// The slit is wrapped this much outside the lesion: opening the slit moves each face by half
+    /// the gap, so the lesion ends up at its requested size.
+    pub inflate_m: f64,
+}
+
+/// Approximate signed distance to an axis-aligned ellipsoid (exact on the surface, distance-like
+/// near it).
+pub(crate) fn ellipsoid_sdf(p: [f64; 3], c: [f64; 3], r: [f64; 3]) -> f64 {
+    let q = [
+        (p[0] - c[0]) / r[0],
+        (p[1] - c[1]) / r[1],
+        (p[2] - c[2]) / r[2],
+    ];
+    let k0 = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+    let q1 = [q[0] / r[0], q[1] / r[1], q[2] / r[2]];
+    let k1 = (q1[0] * q1[0] + q1[1] * q1[1] + q1[2] * q1[2]).sqrt();
+    if k1 < 1e-300 {
+        return -r[0].min(r[1]).min(r[2]);
+    }
+    k0 * (k0 - 1.0) / k1
+}
+
+fn capsule_sdf(p: [f64; 3], a: [f64; 3], b: [f64; 3], r: f64) -> f64 {
+    let ab = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+    let ap = [p[0] - a[0], p[1] - a[1], p[2] - a[2]];
+    let l2 = ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2];
+    let t = ((ap[0] * ab[0] + ap[1] * ab[1] + ap[2] * ab[2]) / l2).clamp(0.0, 1.0);
+    let d = [ap[0] - ab[0] * t, ap[1] - ab[1] * t, ap[2] - ab[2] * t];
+    (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt() - r
+}
+
+impl Lesion {
+    /// Distance-like function of the lesion body (with its stalk), if it protrudes.
+    pub fn protruding_sdf(&self, p: [f64; 3]) -> Option<f64> {
+        if !self.protrudes {
+            return None;
+        }
+        let mut d = ellipsoid_sdf(p, self.centre_m, self.semi_axes_m);
+        if let Some((base, r)) = self.stalk {
+            d = d.min(capsule_sdf(p, base, self.centre_m, r));
+        }
+        Some(d - self.inflate_m)
+    }
+
+    /// Whether a tetrahedron with reference centroid `c` on slit side `side` (+1/-1) belongs to
+    /// this lesion's material region.
+    pub fn region_contains(&self, c: [f64; 3], side: f64) -> bool {
+        if side != self.wall_sign {
+            return false;
+        }
+        match self.kind {
+            LesionKind::Myoma { .. } => {
+                let grow = if self.wall_sign * c[1] < 0.0 {
+                    self.inflate_m
+                } else {
+                    0.0
+                };
+                ellipsoid_sdf(c, self.centre_m, self.semi_axes_m) < grow
+            }
+            LesionKind::Polyp(_) => {
+                // Everything of the polyp's wall that lies beyond the mid-plane near the polyp.
+                self.wall_sign * c[1] < 0.0
+                    && self
+                        .protruding_sdf(c)
+                        .is_some_and(|d| d < self.fillet_m + 2.0 * MM)
+            }
+        }
+    }
+}
+
+/// Fraction of an ellipsoid's volume beyond a plane at normalised distance `t` (= depth / semi-axis)
+/// from its centre: the cap of height 1 - t of the unit sphere.
+pub(crate) fn protruding_fraction(t: f64) -> f64 {
+    let eta = (1.0 - t).clamp(0.0, 2.0);
+    eta * eta * (3.0 - eta) / 4.0
+}
+
+/// FIGO type of a myoma whose centre lies `depth` below the endometrium (semi-axis `ry` across
+/// the wall), in the geometry as requested (before meshing).
+pub(crate) fn figo_from_depth(depth: f64, ry: f64) -> u8 {
+    if depth <= -ry {
+        0
+    } else if depth < ry {
+        if protruding_fraction(depth / ry) > 0.5 {
+            1
+        } else {
+            2
+        }
+    } else if depth <= ry + 1.0 * MM {
+        3
+    } else {
+        4
+    }
+}
+
+/// Depth at which a myoma of semi-axis `ry` is placed for a requested FIGO type.
+fn depth_for_figo(figo: u8, ry: f64, stalk_len: f64, spacing: f64) -> f64 {
+    let depth_for_fraction = |f: f64| {
+        // Solve protruding_fraction(t) = f by bisection (monotone decreasing in t).
+        let (mut lo, mut hi) = (-1.0, 1.0);
+        for _ in 0..80 {
+            let mid = 0.5 * (lo + hi);
+            if protruding_fraction(mid) > f {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi) * ry
+    };
+    match figo {
+        0 => -(ry + stalk_len),
+        1 => depth_for_fraction(0.7),
+        2 => depth_for_fraction(0.3),
+        3 => ry,
+        _ => ry + (3.0 * MM).max(2.0 * spacing),
+    }
+}
+
+/// Places every myoma and polyp and checks that it fits the anatomy and the mesh resolution.
+pub(crate) fn place_lesions(
+    p: &AnatomyParams,
+    g: &Geometry,
+    spacing: f64,
+) -> Result<Vec<Lesion>, AnatomyError> {
+    let mut out = Vec::new();
+    for (i, m) in p.myomas.iter().enumerate() {
+        let key = format!("myomas[{i}]");
+        let r = m.diameters_mm.map(|d| 0.5 * d * MM);
+        if 2.0 * r.iter().cloned().fold(f64::INFINITY, f64::min) < 3.0 * spacing {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.diameters_mm"), "mesh.target_tets"],
+                format!(
+                    "a myoma of {:?} mm is below the mesh resolution (smallest diameter at least 3 lattice spacings = {:.1} mm); \
+                     raise mesh.target_tets",
+                    m.diameters_mm,
+                    3.0 * spacing / MM
+                ),
+            ));
+        }
+        let stalk_len = (0.4 * r[1]).max(1.5 * spacing);
+        let depth = match (m.figo, m.depth_mm) {
+            (Some(f), None) => depth_for_figo(f, r[1], stalk_len, spacing),
+            (None, Some(d)) => d * MM,
+            (Some(f), Some(d)) => {
+                let derived = figo_from_depth(d * MM, r[1]);
+                if derived != f {
+                    return Err(AnatomyError::conflict(
+                        &[&format!("{key}.figo"), &format!("{key}.depth_mm")],
+                        format!(
+                            "depth {d} mm with an antero-posterior diameter of {} mm gives FIGO type {derived}, not {f}",
+                            m.diameters_mm[1]
+                        ),
+                    ));
+                }
+                d * MM
+            }
+            (None, None) => {
+                return Err(AnatomyError::Parse(format!(
+                    "{key}: give `figo` or `depth_mm`"
+                )))
+            }
+        };
+        let figo = figo_from_depth(depth, r[1]);
+        let sign = m.wall.sign();
+        let x0 = m.x_mm * MM;
+        let z0 = g.cavity_top_z_m - m.from_fundus_mm * MM;
+        let centre = [x0, sign * depth, z0];
+        let protrudes = figo <= 2;
+        // The fillet must be well above the half-gap the slit opens by, or the wall draped over the
+        // lesion's base is crushed when the slit opens.
+        let min_fillet = (3.0 * MM).max(2.0 * g.gap_m);
+        let fillet = (0.3 * r[0].min(r[1]).min(r[2])).clamp(min_fillet, min_fillet.max(5.0 * MM));
+        let stalk = (figo == 0).then(|| {
+            let rs = (0.35 * r[0].min(r[2])).max(1.2 * spacing);
+            ([x0, sign * 2.0 * MM, z0], rs)
+        });
+        let lesion = Lesion {
+            index: i,
+            kind: LesionKind::Myoma { figo },
+            wall_sign: sign,
+            centre_m: centre,
+            semi_axes_m: r,
+            stalk,
+            fillet_m: fillet,
+            protrudes,
+            inflate_m: if protrudes {
+                0.5 * LESION_GAP_FRACTION * g.gap_m
+            } else {
+                0.0
+            },
+        };
+        check_fit(g, &lesion, &key, spacing, depth)?;
+        out.push(lesion);
+    }
+    for (i, pp) in p.polyps.iter().enumerate() {
+        let key = format!("polyps[{i}]");
+        let rr = 0.5 * pp.diameter_mm * MM;
+        let r = [rr, 0.8 * rr, rr];
+        if 2.0 * r[1] < 3.0 * spacing {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.diameter_mm"), "mesh.target_tets"],
+                format!(
+                    "a polyp of {} mm is below the mesh resolution (at least {:.1} mm at this spacing); raise mesh.target_tets",
+                    pp.diameter_mm,
+                    3.0 * spacing / 0.8 / MM
+                ),
+            ));
+        }
+        let sign = pp.wall.sign();
+        let x0 = pp.x_mm * MM;
+        let z0 = g.cavity_top_z_m - pp.from_fundus_mm * MM;
+        let (depth, stalk) = match pp.kind {
+            PolypKind::Sessile => (-0.55 * r[1], None),
+            PolypKind::Pedunculated => {
+                let len = (0.8 * r[1]).max(1.5 * spacing);
+                let rs = (0.3 * rr).max(1.0 * spacing);
+                (-(r[1] + len), Some(([x0, sign * 2.0 * MM, z0], rs)))
+            }
+        };
+        let lesion = Lesion {
+            index: i,
+            kind: LesionKind::Polyp(pp.kind),
+            wall_sign: sign,
+            centre_m: [x0, sign * depth, z0],
+            semi_axes_m: r,
+            stalk,
+            fillet_m: {
+                let min_fillet = (3.0 * MM).max(2.0 * g.gap_m);
+                (0.3 * rr).clamp(min_fillet, min_fillet.max(5.0 * MM))
+            },
+            protrudes: true,
+            inflate_m: 0.5 * LESION_GAP_FRACTION * g.gap_m,
+        };
+        check_fit(g, &lesion, &key, spacing, depth)?;
+        out.push(lesion);
+    }
+    Ok(out)
+}
+
+fn check_fit(
+    g: &Geometry,
+    l: &Lesion,
+    key: &str,
+    spacing: f64,
+    depth: f64,
+) -> Result<(), AnatomyError> {
+    let [x0, _, z0] = l.centre_m;
+    let r = l.semi_axes_m;
+    let s = l.wall_sign;
+    // Inside the wall: every extreme point of the part in the wall stays 1.5 spacings from the serosa.
+    let wall_extent = depth + r[1];
+    if wall_extent > 0.0 {
+        let yc = s * depth.max(0.0);
+        let probes = [
+            [x0, s * wall_extent, z0],
+            [x0 + r[0], yc, z0],
+            [x0 - r[0], yc, z0],
+            [x0, yc, z0 + r[2]],
+            [x0, yc, z0 - r[2]],
+        ];
+        for q in probes {
+            if g.organ(q) > -1.5 * spacing {
+                return Err(AnatomyError::conflict(
+                    &[
+                        &format!("{key}.x_mm"),
+                        &format!("{key}.from_fundus_mm"),
+                        &format!("{key}.diameters_mm"),
+                    ],
+                    format!(
+                        "the lesion reaches within 1.5 lattice spacings of the serosa at ({:.1}, {:.1}, {:.1}) mm \
+                         (subserosal FIGO types 5-7 are not modelled)",
+                        q[0] / MM,
+                        q[1] / MM,
+                        q[2] / MM
+                    ),
+                ));
+            }
+        }
+    }
+    if l.protrudes {
+        // The wrapped slit must stay inside the cavity's footprint, away from its rim: the part in
+        // the cavity projects to its full outline, the base (where the wall is cut) adds the fillet.
+        let base = if depth.abs() < r[1] {
+            (1.0 - (depth / r[1]).powi(2)).sqrt()
+        } else {
+            0.0
+        };
+        let stalk_r = l.stalk.map_or(0.0, |s| s.1);
+        let reach = |ri: f64| {
+            let body = if depth < r[1] { ri } else { 0.0 };
+            body.max((ri * base).max(stalk_r) + l.fillet_m) + 0.5 * spacing
+        };
+        let (mx, mz) = (reach(r[0]), reach(r[2]));
+        let m = mx.max(mz);
+        let probes = [
+            [x0, z0],
+            [x0 + mx, z0],
+            [x0 - mx, z0],
+            [x0, z0 + mz],
+            [x0, z0 - mz],
+        ];
+        for q in probes {
+            if g.footprint(q[0], q[1]) > 0.0 {
+                return Err(AnatomyError::conflict(
+                    &[
+                        &format!("{key}.x_mm"),
+                        &format!("{key}.from_fundus_mm"),
+                        "fundal_cavity_width_mm",
+                    ],
+                    format!(
+                        "a lesion protruding into the cavity must lie inside the cavity outline, with its base fillet \
+                         (reach {:.1} mm from its centre); ({:.1}, {:.1}) mm is outside",
+                        m / MM,
+                        q[0] / MM,
+                        q[1] / MM
+                    ),
+                ));
+            }
+        }
+        // The opposite wall drapes over the protrusion: it must keep 2 spacings of thickness.
+        let top = r[1] - depth;
+        let q = [x0, -s * (top + 2.0 * spacing), z0];
+        if g.organ(q) > 0.0 {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.diameters_mm"), "ap_depth_mm"],
+                format!(
+                    "the lesion protrudes {:.1} mm into the cavity: the opposite wall would be thinner than 2 lattice spacings",
+                    top / MM
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn figo_placement_round_trips() {
+        let ry = 0.008;
+        for f in 0..=4u8 {
+            let d = depth_for_figo(f, ry, 0.003, 0.0025);
+            assert_eq!(figo_from_depth(d, ry), f, "type {f} at depth {d}");
+        }
+    }
+
+    #[test]
+    fn protruding_fraction_of_a_hemisphere_is_one_half() {
+        assert!((protruding_fraction(0.0) - 0.5).abs() < 1e-15);
+        assert!((protruding_fraction(1.0)).abs() < 1e-15);
+        assert!((protruding_fraction(-1.0) - 1.0).abs() < 1e-15);
+    }
+}

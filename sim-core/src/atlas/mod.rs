@@ -1,0 +1,363 @@
+//! The deformation atlas: FEM equilibrium states of one mesh at increasing cavity pressures, with
+//! `dx/dp` per level, replayed in real time by cubic Hermite interpolation in pressure.
+//!
+//! The binary layout is specified in `docs/atlas-format.md` and implemented in [`format`].
+//!
+//! ```
+//! use hydrometra_sim::atlas::{Atlas, AtlasLevel};
+//! let rest = vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]];
+//! let level = |p: f64| AtlasLevel {
+//!     pressure_pa: p,
+//!     cavity_volume_m3: 1.0 + p,
+//!     positions_m: vec![[0.0, 0.0, 0.0], [1.0 + p, 0.0, 0.0]],
+//!     dxdp_m_per_pa: vec![[0.0; 3], [1.0, 0.0, 0.0]],
+//! };
+//! let atlas = Atlas::new(0, serde_json::json!({}), rest, &[level(0.0), level(1.0)]).unwrap();
+//! let bytes = atlas.to_bytes();
+//! let back = Atlas::from_bytes(&bytes, "example").unwrap();
+//! let mut out = vec![[0.0f32; 3]; 2];
+//! back.positions_at(0.5, &mut out).unwrap();
+//! assert!((out[1][0] - 1.5).abs() < 1e-6);
+//! ```
+
+pub mod format;
+
+use crate::mesh::TetMesh;
+
+/// Atlas errors: every one names what is wrong and where.
+#[derive(Debug, thiserror::Error)]
+pub enum AtlasError {
+    /// File system error.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// The file is shorter or longer than its header says.
+    #[error("{origin}: size mismatch: {what}: expected {expected} bytes, found {found}")]
+    Size {
+        /// File name or origin.
+        origin: String,
+        /// Which part.
+        what: String,
+        /// Expected bytes.
+        expected: usize,
+        /// Found bytes.
+        found: usize,
+    },
+    /// Not an atlas file.
+    #[error("{origin}: bad magic {found:?}, expected {expected:?} (not a hydrometra atlas)")]
+    Magic {
+        /// File name or origin.
+        origin: String,
+        /// Found bytes.
+        found: [u8; 8],
+        /// Expected bytes.
+        expected: [u8; 8],
+    },
+    /// A version this build cannot read.
+    #[error("{origin}: unsupported atlas version {found}; this build reads version {supported}")]
+    Version {
+        /// File name or origin.
+        origin: String,
+        /// Found version.
+        found: u32,
+        /// Supported version.
+        supported: u32,
+    },
+    /// Checksum mismatch (corruption).
+    #[error("{origin}: CRC-32 mismatch: stored {stored:#010x}, computed {computed:#010x} (file corrupt)")]
+    Checksum {
+        /// File name or origin.
+        origin: String,
+        /// Stored value.
+        stored: u32,
+        /// Computed value.
+        computed: u32,
+    },
+    /// Content that violates the format's rules.
+    #[error("{origin}: {message}")]
+    Invalid {
+        /// File name or origin.
+        origin: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A caller's buffer or argument does not fit the atlas.
+    #[error("{0}")]
+    Argument(String),
+}
+
+/// One equilibrium state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AtlasLevel {
+    /// Cavity pressure in Pa.
+    pub pressure_pa: f64,
+    /// Cavity volume in m^3.
+    pub cavity_volume_m3: f64,
+    /// Vertex positions in m.
+    pub positions_m: Vec<[f64; 3]>,
+    /// `dx/dp` in m/Pa.
+    pub dxdp_m_per_pa: Vec<[f64; 3]>,
+}
+
+/// A loaded (validated) deformation atlas.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Atlas {
+    /// Hash of the mesh the atlas belongs to ([`mesh_hash`]).
+    pub mesh_hash: u64,
+    /// Material, solver and provenance metadata (JSON object).
+    pub metadata: serde_json::Value,
+    /// Rest positions in m.
+    pub rest_positions_m: Vec<[f64; 3]>,
+    /// Pressure of each level in Pa, strictly increasing.
+    pub pressure_pa: Vec<f64>,
+    /// Cavity volume of each level in m^3.
+    pub cavity_volume_m3: Vec<f64>,
+    positions_m: Vec<[f32; 3]>,
+    dxdp_m_per_pa: Vec<[f32; 3]>,
+}
+
+/// FNV-1a 64-bit hash of a mesh's geometry and topology (positions, tets, regions, labels,
+/// cavity triangles, opening loop), to tie an atlas to its mesh.
+pub fn mesh_hash(mesh: &TetMesh) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |bytes: &[u8]| {
+        for &b in bytes {
+            h ^= b as u64;
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    };
+    eat(&(mesh.positions_m.len() as u64).to_le_bytes());
+    for p in &mesh.positions_m {
+        for c in p {
+            eat(&c.to_le_bytes());
+        }
+    }
+    eat(&(mesh.tets.len() as u64).to_le_bytes());
+    for t in &mesh.tets {
+        for i in t {
+            eat(&i.to_le_bytes());
+        }
+    }
+    for r in &mesh.tet_regions {
+        eat(&[*r as u8]);
+    }
+    for l in &mesh.vertex_labels {
+        eat(&[*l as u8]);
+    }
+    eat(&(mesh.cavity_triangles.len() as u64).to_le_bytes());
+    for t in &mesh.cavity_triangles {
+        for i in t {
+            eat(&i.to_le_bytes());
+        }
+    }
+    for i in &mesh.cavity_opening_loop {
+        eat(&i.to_le_bytes());
+    }
+    h
+}
+
+impl Atlas {
+    /// Builds an atlas from solved levels; checks sizes, finiteness and increasing pressures.
+    pub fn new(
+        mesh_hash: u64,
+        metadata: serde_json::Value,
+        rest_positions_m: Vec<[f64; 3]>,
+        levels: &[AtlasLevel],
+    ) -> Result<Self, AtlasError> {
+        let n = rest_positions_m.len();
+        let mut positions = Vec::with_capacity(n * levels.len());
+        let mut dxdp = Vec::with_capacity(n * levels.len());
+        for (k, l) in levels.iter().enumerate() {
+            if l.positions_m.len() != n || l.dxdp_m_per_pa.len() != n {
+                return Err(AtlasError::Argument(format!(
+                    "level {k}: {} positions and {} dx/dp for {n} vertices",
+                    l.positions_m.len(),
+                    l.dxdp_m_per_pa.len()
+                )));
+            }
+            positions.extend(l.positions_m.iter().map(|p| p.map(|v| v as f32)));
+            dxdp.extend(l.dxdp_m_per_pa.iter().map(|p| p.map(|v| v as f32)));
+        }
+        let atlas = Self {
+            mesh_hash,
+            metadata,
+            rest_positions_m,
+            pressure_pa: levels.iter().map(|l| l.pressure_pa).collect(),
+            cavity_volume_m3: levels.iter().map(|l| l.cavity_volume_m3).collect(),
+            positions_m: positions,
+            dxdp_m_per_pa: dxdp,
+        };
+        atlas.validate("new atlas")?;
+        Ok(atlas)
+    }
+
+    /// Checks the invariants the replay relies on.
+    pub(crate) fn validate(&self, origin: &str) -> Result<(), AtlasError> {
+        let bad = |message: String| {
+            Err(AtlasError::Invalid {
+                origin: origin.to_string(),
+                message,
+            })
+        };
+        let n = self.rest_positions_m.len();
+        let l = self.pressure_pa.len();
+        if n == 0 {
+            return bad("the atlas has no vertices".into());
+        }
+        if l < 2 {
+            return bad(format!(
+                "the atlas has {l} levels; at least 2 are needed to interpolate"
+            ));
+        }
+        for (k, w) in self.pressure_pa.windows(2).enumerate() {
+            if w[1].partial_cmp(&w[0]) != Some(std::cmp::Ordering::Greater) {
+                return bad(format!(
+                    "pressures must increase strictly: level {} has {} Pa after {} Pa at level {k}",
+                    k + 1,
+                    w[1],
+                    w[0]
+                ));
+            }
+        }
+        if let Some(k) = self
+            .pressure_pa
+            .iter()
+            .chain(&self.cavity_volume_m3)
+            .position(|v| !v.is_finite())
+        {
+            return bad(format!("non-finite pressure or cavity volume (entry {k})"));
+        }
+        if self
+            .rest_positions_m
+            .iter()
+            .flatten()
+            .any(|v| !v.is_finite())
+        {
+            return bad("non-finite rest position".into());
+        }
+        if let Some(i) = self
+            .positions_m
+            .iter()
+            .chain(&self.dxdp_m_per_pa)
+            .position(|p| p.iter().any(|v| !v.is_finite()))
+        {
+            return bad(format!("non-finite position or dx/dp (vertex record {i})"));
+        }
+        Ok(())
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.rest_positions_m.len()
+    }
+
+    /// Number of levels.
+    pub fn level_count(&self) -> usize {
+        self.pressure_pa.len()
+    }
+
+    /// Positions of level `k` (m, single precision).
+    pub fn level_positions(&self, k: usize) -> &[[f32; 3]] {
+        let n = self.vertex_count();
+        &self.positions_m[k * n..(k + 1) * n]
+    }
+
+    /// `dx/dp` of level `k` (m/Pa, single precision).
+    pub fn level_dxdp(&self, k: usize) -> &[[f32; 3]] {
+        let n = self.vertex_count();
+        &self.dxdp_m_per_pa[k * n..(k + 1) * n]
+    }
+
+    /// The level interval containing `pressure_pa` (clamped to the atlas range) and the local
+    /// parameter `t` in [0, 1].
+    fn segment(&self, pressure_pa: f64) -> (usize, f64) {
+        let p = &self.pressure_pa;
+        let last = p.len() - 1;
+        let q = if pressure_pa.is_nan() {
+            p[0]
+        } else {
+            pressure_pa.clamp(p[0], p[last])
+        };
+        let k = p.partition_point(|&v| v <= q).clamp(1, last) - 1;
+        (k, ((q - p[k]) / (p[k + 1] - p[k])).clamp(0.0, 1.0))
+    }
+
+    /// Vertex positions at `pressure_pa` by cubic Hermite interpolation with the stored `dx/dp`
+    /// (clamped to the atlas's pressure range) into `out` (one entry per vertex).
+    pub fn positions_at(&self, pressure_pa: f64, out: &mut [[f32; 3]]) -> Result<(), AtlasError> {
+        let n = self.vertex_count();
+        if out.len() != n {
+            return Err(AtlasError::Argument(format!(
+                "positions_at: output has {} entries, the atlas has {n} vertices",
+                out.len()
+            )));
+        }
+        let (k, t) = self.segment(pressure_pa);
+        let h = self.pressure_pa[k + 1] - self.pressure_pa[k];
+        let t2 = t * t;
+        let t3 = t2 * t;
+        let c0 = (2.0 * t3 - 3.0 * t2 + 1.0) as f32;
+        let d0 = ((t3 - 2.0 * t2 + t) * h) as f32;
+        let c1 = (-2.0 * t3 + 3.0 * t2) as f32;
+        let d1 = ((t3 - t2) * h) as f32;
+        let (x0, x1) = (self.level_positions(k), self.level_positions(k + 1));
+        let (g0, g1) = (self.level_dxdp(k), self.level_dxdp(k + 1));
+        for i in 0..n {
+            for c in 0..3 {
+                out[i][c] = c0 * x0[i][c] + d0 * g0[i][c] + c1 * x1[i][c] + d1 * g1[i][c];
+            }
+        }
+        Ok(())
+    }
+
+    /// Vertex positions at `pressure_pa` by linear interpolation (for comparison).
+    pub fn positions_at_linear(
+        &self,
+        pressure_pa: f64,
+        out: &mut [[f32; 3]],
+    ) -> Result<(), AtlasError> {
+        let n = self.vertex_count();
+        if out.len() != n {
+            return Err(AtlasError::Argument(format!(
+                "positions_at_linear: output has {} entries, the atlas has {n} vertices",
+                out.len()
+            )));
+        }
+        let (k, t) = self.segment(pressure_pa);
+        let (x0, x1) = (self.level_positions(k), self.level_positions(k + 1));
+        let (a, b) = ((1.0 - t) as f32, t as f32);
+        for i in 0..n {
+            for c in 0..3 {
+                out[i][c] = a * x0[i][c] + b * x1[i][c];
+            }
+        }
+        Ok(())
+    }
+
+    /// Cavity volume at `pressure_pa` (m^3), piecewise linear between levels, clamped.
+    pub fn cavity_volume_at(&self, pressure_pa: f64) -> f64 {
+        let (k, t) = self.segment(pressure_pa);
+        (1.0 - t) * self.cavity_volume_m3[k] + t * self.cavity_volume_m3[k + 1]
+    }
+
+    /// Pressure at cavity volume `volume_m3` (Pa), the inverse of [`Self::cavity_volume_at`]
+    /// where the P-V curve is monotone; clamped to the atlas range.
+    pub fn pressure_at_volume(&self, volume_m3: f64) -> f64 {
+        let v = &self.cavity_volume_m3;
+        let p = &self.pressure_pa;
+        if volume_m3 <= v[0] {
+            return p[0];
+        }
+        for k in 0..v.len() - 1 {
+            if volume_m3 <= v[k + 1] && v[k + 1] > v[k] {
+                let t = (volume_m3 - v[k]) / (v[k + 1] - v[k]);
+                return p[k] + t * (p[k + 1] - p[k]);
+            }
+        }
+        p[p.len() - 1]
+    }
+}
