@@ -5,7 +5,8 @@
 //! use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
 //! use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink};
 //! use hydrometra_drivers::calibration::Calibration;
-//! let rig = EmulatedRig::start(Scenario::builtin("default").unwrap(), EmulatorOptions::default())?;
+//! let scenario = Scenario::builtin("default").ok_or("no built-in scenario \"default\"")?;
+//! let rig = EmulatedRig::start(scenario, EmulatorOptions::default())?;
 //! let link = RigLink::spawn(LinkConfig::new(
 //!     DeviceTarget::Path(rig.device_path().to_path_buf()),
 //!     Calibration::default(),
