@@ -150,6 +150,19 @@ pub struct LinkSnapshot {
     pub last_error: Option<String>,
 }
 
+/// The allocation-free part of a [`LinkSnapshot`]: what the simulation loop reads every tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LinkStatus {
+    /// Current link state (`Stale` once the latest sample is older than `stale_after`).
+    pub link_state: LinkState,
+    /// Cumulative counters.
+    pub counters: LinkCounters,
+    /// Last calibrated sample (kept after a loss).
+    pub latest: Option<RigState>,
+    /// Age of `latest`.
+    pub last_sample_age: Option<Duration>,
+}
+
 /// The transport could not start.
 #[derive(Debug, thiserror::Error)]
 pub enum TransportError {
@@ -256,24 +269,40 @@ impl RigLink {
 
     /// A consistent copy of state, counters and the latest sample; cheap (one mutex lock).
     pub fn snapshot(&self) -> LinkSnapshot {
-        let now = Instant::now();
         let inner = self.shared.lock();
+        let status = self.status_of(&inner);
+        LinkSnapshot {
+            link_state: status.link_state,
+            counters: status.counters,
+            device: inner.device.clone(),
+            latest: status.latest,
+            last_sample_age: status.last_sample_age,
+            latest_raw: inner.latest_raw,
+            last_error: inner.last_error.clone(),
+        }
+    }
+
+    /// The part of [`snapshot`](Self::snapshot) a real-time consumer needs, without allocating:
+    /// safe to call every tick of a 1 kHz loop.
+    pub fn status(&self) -> LinkStatus {
+        let inner = self.shared.lock();
+        self.status_of(&inner)
+    }
+
+    fn status_of(&self, inner: &Inner) -> LinkStatus {
         let age = inner
             .latest
             .as_ref()
-            .map(|s| now.saturating_duration_since(s.received_at));
+            .map(|s| Instant::now().saturating_duration_since(s.received_at));
         let link_state = match (inner.link_state, age) {
             (LinkState::Connected, Some(a)) if a > self.shared.stale_after => LinkState::Stale,
             (s, _) => s,
         };
-        LinkSnapshot {
+        LinkStatus {
             link_state,
             counters: inner.counters,
-            device: inner.device.clone(),
             latest: inner.latest,
             last_sample_age: age,
-            latest_raw: inner.latest_raw,
-            last_error: inner.last_error.clone(),
         }
     }
 

@@ -14,7 +14,7 @@ use super::rig_input::{RigSource, RigView};
 
 impl RigSource for RigLink {
     fn view(&self) -> RigView {
-        let s = self.snapshot();
+        let s = self.status();
         RigView {
             link_state: s.link_state,
             counters: s.counters,
