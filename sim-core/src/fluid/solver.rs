@@ -162,12 +162,18 @@ pub struct FluidSolver {
     /// Face velocities per component (m/s).
     u: [Vec<f32>; 3],
     tmp: [Vec<f32>; 3],
-    /// Cell-centred velocity (for tracing).
-    centred: Vec<[f32; 3]>,
+    /// Cell-centred velocity (for tracing), one array per component.
+    centred: [Vec<f32>; 3],
     faces: [FaceSet; 3],
     compact: [Vec<f32>; 3],
-    lo: [Vec<f32>; 3],
-    hi: [Vec<f32>; 3],
+    /// Advection: geometry, runs of active faces, and results in concatenated compact order (with
+    /// the MacCormack clamping bounds and the field before the step).
+    geo: advection::Geometry,
+    plan: advection::Plan,
+    adv: Vec<f32>,
+    adv_lo: Vec<f32>,
+    adv_hi: Vec<f32>,
+    adv_orig: Vec<f32>,
     ghost: [Vec<f32>; 3],
     visc: ViscosityScratch,
     pressure: PressureSolver,
@@ -184,7 +190,13 @@ impl FluidSolver {
         let u: [Vec<f32>; 3] = std::array::from_fn(|c| vec![0.0; layout.face_count(c)]);
         let mut s = Self {
             tmp: u.clone(),
-            centred: vec![[0.0; 3]; grid.cell_count()],
+            centred: std::array::from_fn(|_| vec![0.0; grid.cell_count()]),
+            geo: advection::Geometry::new(grid.dims(), &layout),
+            plan: advection::Plan::default(),
+            adv: Vec::new(),
+            adv_lo: Vec::new(),
+            adv_hi: Vec::new(),
+            adv_orig: Vec::new(),
             u,
             grid,
             params,
@@ -192,8 +204,6 @@ impl FluidSolver {
             revision: 0,
             faces: Default::default(),
             compact: Default::default(),
-            lo: Default::default(),
-            hi: Default::default(),
             ghost: Default::default(),
             visc: ViscosityScratch::default(),
             pressure: PressureSolver::default(),
@@ -303,12 +313,7 @@ impl FluidSolver {
             let row_of_cell = &self.pressure.mg.levels[0].row_of_cell;
             self.faces[c].rebuild(&self.grid, &self.layout, c, row_of_cell);
             let n = self.faces[c].active.len();
-            for v in [
-                &mut self.compact[c],
-                &mut self.lo[c],
-                &mut self.hi[c],
-                &mut self.ghost[c],
-            ] {
+            for v in [&mut self.compact[c], &mut self.ghost[c]] {
                 v.clear();
                 v.resize(n, 0.0);
             }
@@ -318,6 +323,20 @@ impl FluidSolver {
                     *v = 0.0;
                 }
             }
+        }
+        let [f0, f1, f2] = &self.faces;
+        self.plan
+            .rebuild(&self.layout, [&f0.active, &f1.active, &f2.active]);
+        let total = self.plan.offset[3];
+        eprintln!("DEBUG faces {:?} runs {}", self.plan.offset, self.plan.runs.len());
+        for v in [
+            &mut self.adv,
+            &mut self.adv_lo,
+            &mut self.adv_hi,
+            &mut self.adv_orig,
+        ] {
+            v.clear();
+            v.resize(total, 0.0);
         }
         self.revision = self.grid.revision();
         self.apply_fixed();
@@ -524,89 +543,44 @@ impl FluidSolver {
     fn advect(&mut self, dt_cells: f64, parallel: bool) {
         let dt_cells = dt_cells as f32;
         let mac = self.params.advection == AdvectionScheme::MacCormack;
-        self.update_centred();
-        let layout = &self.layout;
         let [u0, u1, u2] = &self.u;
-        let uref: [&[f32]; 3] = [u0, u1, u2];
-        let vc = advection::Centred {
-            dims: self.grid.dims(),
-            v: &self.centred,
+        advection::update_centred(
+            &self.layout,
+            self.grid.dims(),
+            [u0, u1, u2],
+            &mut self.centred,
+        );
+        let pass = advection::Pass {
+            geo: &self.geo,
+            plan: &self.plan,
+            vc: [&self.centred[0], &self.centred[1], &self.centred[2]],
+            src: [u0, u1, u2],
+            dt_cells,
         };
-        for c in 0..3 {
-            let set = &self.faces[c];
-            let bounds = if mac {
-                Some((&mut self.lo[c][..], &mut self.hi[c][..]))
-            } else {
-                None
-            };
-            advection::semi_lagrangian(
-                layout,
-                &vc,
-                uref[c],
-                c,
-                &set.active,
-                dt_cells,
-                &mut self.compact[c],
-                bounds,
-                parallel,
-            );
-        }
         if mac {
+            pass.semi_lagrangian_bounds(&mut self.adv, &mut self.adv_lo, &mut self.adv_hi, parallel);
+            advection::gather(&self.plan, [u0, u1, u2], &mut self.adv_orig);
             for c in 0..3 {
                 self.tmp[c].copy_from_slice(&self.u[c]);
-                for (n, &idx) in self.faces[c].active.iter().enumerate() {
-                    self.tmp[c][idx as usize] = self.compact[c][n];
-                }
             }
-            for c in 0..3 {
-                advection::maccormack_correct(
-                    layout,
-                    &vc,
-                    uref[c],
-                    &self.tmp[c],
-                    c,
-                    &self.faces[c].active,
-                    dt_cells,
-                    &mut self.compact[c],
-                    &self.lo[c],
-                    &self.hi[c],
-                    parallel,
-                );
-            }
+            advection::scatter(&self.plan, &self.adv, &mut self.tmp);
+            let [t0, t1, t2] = &self.tmp;
+            let forward = advection::Pass {
+                src: [t0, t1, t2],
+                dt_cells: -dt_cells,
+                ..pass
+            };
+            forward.maccormack(
+                &self.adv_orig,
+                &mut self.adv,
+                &self.adv_lo,
+                &self.adv_hi,
+                parallel,
+            );
+        } else {
+            pass.semi_lagrangian(&mut self.adv, parallel);
         }
-        for c in 0..3 {
-            for (n, &idx) in self.faces[c].active.iter().enumerate() {
-                self.u[c][idx as usize] = self.compact[c][n];
-            }
-        }
-    }
-
-    /// Averages the face velocities to cell centres.
-    fn update_centred(&mut self) {
-        let dims = self.grid.dims();
-        let periodic = self.grid.periodic();
-        let [nx, ny, nz] = dims;
-        let mut idx = 0;
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let cell = [i, j, k];
-                    let mut v = [0.0f32; 3];
-                    for (c, vc) in v.iter_mut().enumerate() {
-                        let lo = self.layout.face_index(c, cell);
-                        let mut up = cell;
-                        up[c] += 1;
-                        if periodic[c] && up[c] == dims[c] {
-                            up[c] = 0;
-                        }
-                        let hi = self.layout.face_index(c, up);
-                        *vc = 0.5 * (self.u[c][lo] + self.u[c][hi]);
-                    }
-                    self.centred[idx] = v;
-                    idx += 1;
-                }
-            }
-        }
+        advection::scatter(&self.plan, &self.adv, &mut self.u);
     }
 
     /// `-h div u` per pressure row, from the face velocities.
