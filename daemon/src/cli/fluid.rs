@@ -62,8 +62,17 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 60)]
     pub warmup: usize,
     /// Time step (s); the default is the 60 Hz frame of the paper's simulator.
-    #[arg(long, default_value_t = 1.0 / 60.0)]
+    #[arg(long, default_value_t = 1.0 / 60.0, conflicts_with = "hz")]
     pub dt_s: f64,
+    /// Step rate (Hz) instead of --dt-s: dt = 1 / HZ.
+    #[arg(long)]
+    pub hz: Option<f64>,
+    /// Advection scheme of our solver (and of the baseline).
+    #[arg(long, value_enum, default_value_t = AdvectionArg::SemiLagrangian)]
+    pub advection: AdvectionArg,
+    /// Skip the Gauss-Seidel baseline (only our solver's rows).
+    #[arg(long)]
+    pub no_baseline: bool,
     /// Jet speed at the scope tip (m/s).
     #[arg(long, default_value_t = 1.0)]
     pub jet_m_s: f32,
@@ -82,6 +91,24 @@ pub struct BenchArgs {
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Advection scheme on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum AdvectionArg {
+    /// RK2 semi-Lagrangian.
+    SemiLagrangian,
+    /// MacCormack (clamped) on top of it.
+    Maccormack,
+}
+
+impl From<AdvectionArg> for AdvectionScheme {
+    fn from(a: AdvectionArg) -> Self {
+        match a {
+            AdvectionArg::SemiLagrangian => AdvectionScheme::SemiLagrangian,
+            AdvectionArg::Maccormack => AdvectionScheme::MacCormack,
+        }
+    }
 }
 
 /// Arguments of `fluid soak`.
@@ -187,29 +214,51 @@ fn bench(a: BenchArgs) -> Result<()> {
             .context("configuring the rayon thread pool")?;
     }
     anyhow::ensure!(a.steps > 0, "--steps must be at least 1");
+    let dt_s = match a.hz {
+        Some(hz) => {
+            anyhow::ensure!(
+                hz.is_finite() && hz > 0.0,
+                "--hz must be a finite rate > 0, got {hz}"
+            );
+            1.0 / hz
+        }
+        None => a.dt_s,
+    };
     anyhow::ensure!(
-        a.dt_s.is_finite() && a.dt_s > 0.0,
-        "--dt-s must be > 0, got {}",
-        a.dt_s
+        dt_s.is_finite() && dt_s > 0.0,
+        "--dt-s must be > 0, got {dt_s}"
     );
-    let mut rows: Vec<(BenchRow, BenchRow)> = Vec::new();
+    for &mm in &a.voxels_mm {
+        anyhow::ensure!(
+            mm.is_finite() && mm > 0.0,
+            "--voxels-mm: {mm} is not a voxel size > 0 (mm)"
+        );
+    }
+    let advection = AdvectionScheme::from(a.advection);
+    let mut rows: Vec<(BenchRow, Option<BenchRow>)> = Vec::new();
     let mut cpu: Vec<(f64, f64)> = Vec::new();
     for &mm in &a.voxels_mm {
         let h = mm * 1e-3;
         let ours = FluidParams {
             tolerance: a.tolerance,
             projection: ProjectionMethod::MultigridPcg,
+            advection,
             ..Default::default()
         };
         let base = FluidParams {
             tolerance: a.tolerance,
             projection: ProjectionMethod::GaussSeidel { sweeps: a.sweeps },
+            advection,
             ..Default::default()
         };
         let c0 = process_cpu_s();
-        let r1 = bench_cavity(h, a.jet_m_s, a.dt_s, a.warmup, a.steps, ours)?;
+        let r1 = bench_cavity(h, a.jet_m_s, dt_s, a.warmup, a.steps, ours)?;
         let c1 = process_cpu_s();
-        let r2 = bench_cavity(h, a.jet_m_s, a.dt_s, a.warmup, a.steps, base)?;
+        let r2 = if a.no_baseline {
+            None
+        } else {
+            Some(bench_cavity(h, a.jet_m_s, dt_s, a.warmup, a.steps, base)?)
+        };
         let c2 = process_cpu_s();
         let per_step = |c: Option<f64>, d: Option<f64>| match (c, d) {
             (Some(c), Some(d)) => (d - c) * 1e3 / (a.warmup + a.steps) as f64,
@@ -230,9 +279,10 @@ fn bench(a: BenchArgs) -> Result<()> {
     }
     let [sa, sb, sc] = CAVITY_SEMI_AXES_M.map(|v| v * 1e3);
     println!(
-        "Ellipsoid cavity {sa} x {sb} x {sc} mm (semi-axes), jet {} m/s, dt {:.5} s, {} warm-up + {} timed steps, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baseline {} Gauss-Seidel sweeps.",
+        "Ellipsoid cavity {sa} x {sb} x {sc} mm (semi-axes), jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baseline {} Gauss-Seidel sweeps.",
         a.jet_m_s,
-        a.dt_s,
+        dt_s,
+        advection,
         a.warmup,
         a.steps,
         rayon::current_num_threads(),
@@ -240,7 +290,7 @@ fn bench(a: BenchArgs) -> Result<()> {
         a.sweeps
     );
     println!();
-    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | ours ms mean ± sem | ours p99 | ours CPU ms | ours advect/project ms | ours CG its | ours max div h/U | GS ms mean ± sem | GS p99 | GS CPU ms | GS mean div h/U |");
+    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | ours ms mean ± sem | ours p99 | ours CPU ms | ours advect / diffuse / project / other ms | ours CG its | ours max div h/U | GS ms mean ± sem | GS p99 | GS CPU ms | GS mean div h/U |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for ((o, b), (co, cb)) in rows.iter().zip(&cpu) {
         let paper = PAPER_VOXELS_M
@@ -249,8 +299,17 @@ fn bench(a: BenchArgs) -> Result<()> {
         let (pf, pm) = paper.map_or(("-".into(), "-".into()), |i| {
             (PAPER_FLUID_VOXELS[i].to_string(), PAPER_MS[i].to_string())
         });
+        let gs = b.as_ref().map_or_else(
+            || "- | - | - | -".to_string(),
+            |b| {
+                format!(
+                    "{:.2} ± {:.2} | {:.2} | {:.2} | {:.1e}",
+                    b.ms_mean, b.ms_sem, b.ms_p99, cb, b.div_rel_mean
+                )
+            },
+        );
         println!(
-            "| {:.1} | {} | {} ({}) | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.2} / {:.2} | {:.1} | {:.2e} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.1e} |",
+            "| {:.1} | {} | {} ({}) | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.1} | {:.2e} | {gs} |",
             o.voxel_m * 1e3,
             o.voxels_total,
             o.fluid_voxels,
@@ -261,14 +320,11 @@ fn bench(a: BenchArgs) -> Result<()> {
             o.ms_p99,
             co,
             o.advect_ms_mean,
+            o.diffuse_ms_mean,
             o.project_ms_mean,
+            o.other_ms_mean,
             o.iterations_mean,
             o.div_rel_max,
-            b.ms_mean,
-            b.ms_sem,
-            b.ms_p99,
-            cb,
-            b.div_rel_mean
         );
     }
     Ok(())

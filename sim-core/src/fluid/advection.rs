@@ -23,6 +23,9 @@ pub enum AdvectionScheme {
     MacCormack,
 }
 
+/// Faces per chunk of the trace's split loops.
+const CHAIN: usize = 64;
+
 /// Faces per parallel task (a block of the concatenated active faces).
 pub(crate) const BLOCK: usize = 2048;
 
@@ -110,18 +113,36 @@ impl Plan {
 struct Axis {
     n: i32,
     last: f32,
-    stride: usize,
+    /// Largest lower sample index (n - 2, or 0 for a single point).
+    top: u32,
+    stride: u32,
+    /// Offset from a sample to the next one (0 for a single point).
+    step: u32,
     periodic: bool,
     shift: f32,
 }
 
 impl Axis {
+    fn new(n: usize, stride: usize, periodic: bool, shift: f32) -> Self {
+        Self {
+            n: n as i32,
+            last: (n - 1) as f32,
+            top: n.saturating_sub(2) as u32,
+            stride: stride as u32,
+            step: if n > 1 { stride as u32 } else { 0 },
+            periodic,
+            shift,
+        }
+    }
+
     /// Offsets (index times stride) of the two samples around `p` and the weight of the second.
     /// Periodic axes wrap, others clamp to the outermost samples (a NaN lands on sample 0).
+    /// Wrapping arithmetic throughout: indices stay far below 2^32 by construction, and the dev
+    /// profile's overflow checks would double the cost of this inner loop.
     #[inline(always)]
-    fn locate(&self, p: f32) -> (usize, usize, f32) {
+    fn locate(&self, p: f32) -> (u32, u32, f32) {
         let s = p - self.shift;
-        let (i0, i1, t) = if self.periodic {
+        if self.periodic {
             let fl = s.floor();
             let t = s - fl;
             let mut i0 = (fl as i32) % self.n;
@@ -129,14 +150,22 @@ impl Axis {
                 i0 += self.n;
             }
             let i1 = if i0 + 1 == self.n { 0 } else { i0 + 1 };
-            (i0, i1, t)
+            (
+                (i0 as u32).wrapping_mul(self.stride),
+                (i1 as u32).wrapping_mul(self.stride),
+                t,
+            )
         } else {
-            // max/min (not clamp): NaN-safe. i32 conversions compile to one instruction.
+            // max/min (not clamp): NaN-safe.
             let s = s.max(0.0).min(self.last);
-            let i0 = (s as i32).min(self.n - 2).max(0);
-            (i0, (i0 + 1).min(self.n - 1), s - i0 as f32)
-        };
-        (i0 as usize * self.stride, i1 as usize * self.stride, t)
+            // Round s - 1/2 to an integer by adding 2^23 (the mantissa then holds it): floor(s),
+            // or floor(s) - 1 with weight t = 1 when s is an integer, which interpolates the same.
+            // One add instead of a floor (a libm call without SSE4.1) and a saturating cast.
+            let r = (s - 0.5) + 8_388_608.0;
+            let i0 = r.to_bits().wrapping_sub(0x4B00_0000).min(self.top);
+            let o0 = i0.wrapping_mul(self.stride);
+            (o0, o0.wrapping_add(self.step), s - i0 as f32)
+        }
     }
 }
 
@@ -150,48 +179,95 @@ impl Grid3 {
     fn new(npts: [usize; 3], periodic: [bool; 3], shift: [f32; 3]) -> Self {
         let strides = [1, npts[0], npts[0] * npts[1]];
         Self {
-            ax: std::array::from_fn(|a| Axis {
-                n: npts[a] as i32,
-                last: (npts[a] - 1) as f32,
-                stride: strides[a],
-                periodic: periodic[a],
-                shift: shift[a],
-            }),
+            ax: std::array::from_fn(|a| Axis::new(npts[a], strides[a], periodic[a], shift[a])),
         }
     }
+}
 
-    /// The 8 sample indices and trilinear weights around `p`.
+/// Four-lane vectors for positions and the centred velocity (the fourth lane is unused): one SSE
+/// register on x86-64, where building them element-wise would go through memory (a stalled
+/// store-to-load forward per face) and LLVM would drop the fourth lane and emit scalar code.
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod v4 {
+    use std::arch::x86_64::{
+        __m128, _mm_add_ps, _mm_mul_ps, _mm_set1_ps, _mm_set_ps, _mm_setzero_ps, _mm_sub_ps,
+    };
+    // SAFETY (every `unsafe` below): SSE is part of the x86-64 baseline, so every x86-64 CPU has
+    // it, and these intrinsics take no pointers.
+
+    /// A vector.
+    pub type V4 = __m128;
+    /// `[a, b, c, 0]`.
     #[inline(always)]
-    fn stencil(&self, p: [f32; 3]) -> ([usize; 8], [f32; 8]) {
-        let (x0, x1, tx) = self.ax[0].locate(p[0]);
-        let (y0, y1, ty) = self.ax[1].locate(p[1]);
-        let (z0, z1, tz) = self.ax[2].locate(p[2]);
-        let (r00, r10, r01, r11) = (y0 + z0, y1 + z0, y0 + z1, y1 + z1);
-        let (sx, sy, sz) = (1.0 - tx, 1.0 - ty, 1.0 - tz);
-        (
-            [
-                r00 + x0,
-                r00 + x1,
-                r10 + x0,
-                r10 + x1,
-                r01 + x0,
-                r01 + x1,
-                r11 + x0,
-                r11 + x1,
-            ],
-            [
-                sx * sy * sz,
-                tx * sy * sz,
-                sx * ty * sz,
-                tx * ty * sz,
-                sx * sy * tz,
-                tx * sy * tz,
-                sx * ty * tz,
-                tx * ty * tz,
-            ],
-        )
+    pub fn new(a: f32, b: f32, c: f32) -> V4 {
+        unsafe { _mm_set_ps(0.0, c, b, a) }
+    }
+    /// All zero.
+    #[inline(always)]
+    pub fn zero() -> V4 {
+        unsafe { _mm_setzero_ps() }
+    }
+    /// The lanes.
+    #[inline(always)]
+    pub fn lanes(v: V4) -> [f32; 4] {
+        bytemuck::cast(v)
+    }
+    /// `a + b`.
+    #[inline(always)]
+    pub fn add(a: V4, b: V4) -> V4 {
+        unsafe { _mm_add_ps(a, b) }
+    }
+    /// `a + t (b - a)`.
+    #[inline(always)]
+    pub fn lerp(a: V4, b: V4, t: f32) -> V4 {
+        unsafe { _mm_add_ps(a, _mm_mul_ps(_mm_set1_ps(t), _mm_sub_ps(b, a))) }
+    }
+    /// `x - s v`.
+    #[inline(always)]
+    pub fn sub_scaled(x: V4, s: f32, v: V4) -> V4 {
+        unsafe { _mm_sub_ps(x, _mm_mul_ps(_mm_set1_ps(s), v)) }
     }
 }
+
+/// Four-lane vectors (portable fallback).
+#[cfg(not(target_arch = "x86_64"))]
+pub(crate) mod v4 {
+    /// A vector.
+    pub type V4 = [f32; 4];
+    /// `[a, b, c, 0]`.
+    #[inline(always)]
+    pub fn new(a: f32, b: f32, c: f32) -> V4 {
+        [a, b, c, 0.0]
+    }
+    /// All zero.
+    #[inline(always)]
+    pub fn zero() -> V4 {
+        [0.0; 4]
+    }
+    /// The lanes.
+    #[inline(always)]
+    pub fn lanes(v: V4) -> [f32; 4] {
+        v
+    }
+    /// `a + b`.
+    #[inline(always)]
+    pub fn add(a: V4, b: V4) -> V4 {
+        std::array::from_fn(|l| a[l] + b[l])
+    }
+    /// `a + t (b - a)`.
+    #[inline(always)]
+    pub fn lerp(a: V4, b: V4, t: f32) -> V4 {
+        std::array::from_fn(|l| a[l] + t * (b[l] - a[l]))
+    }
+    /// `x - s v`.
+    #[inline(always)]
+    pub fn sub_scaled(x: V4, s: f32, v: V4) -> V4 {
+        std::array::from_fn(|l| x[l] - s * v[l])
+    }
+}
+
+pub(crate) use v4::V4;
+use v4::lerp as lerp4;
 
 /// Geometry of the advection: the centred grid and the face grids of the three components.
 #[derive(Clone, Copy, Debug)]
@@ -221,45 +297,63 @@ impl Geometry {
 
     /// Trilinear interpolation of the padded cell-centred velocity at `p` (grid units).
     #[inline(always)]
-    fn centred(&self, v: &[[f32; 4]], p: [f32; 3]) -> [f32; 4] {
+    fn centred(&self, v: &[V4], p: V4) -> V4 {
+        let p = v4::lanes(p);
         let (x0, x1, tx) = self.centred.ax[0].locate(p[0]);
         let (y0, y1, ty) = self.centred.ax[1].locate(p[1]);
         let (z0, z1, tz) = self.centred.ax[2].locate(p[2]);
         #[inline(always)]
-        fn lerp(a: [f32; 4], b: [f32; 4], t: f32) -> [f32; 4] {
-            std::array::from_fn(|l| a[l] + t * (b[l] - a[l]))
+        fn row(v: &[V4], o: u32, x0: u32, x1: u32, tx: f32) -> V4 {
+            lerp4(
+                v[o.wrapping_add(x0) as usize],
+                v[o.wrapping_add(x1) as usize],
+                tx,
+            )
         }
-        let row = |o: usize| lerp(v[o + x0], v[o + x1], tx);
-        let c0 = lerp(row(y0 + z0), row(y1 + z0), ty);
-        let c1 = lerp(row(y0 + z1), row(y1 + z1), ty);
-        lerp(c0, c1, tz)
+        let c0 = lerp4(
+            row(v, y0.wrapping_add(z0), x0, x1, tx),
+            row(v, y1.wrapping_add(z0), x0, x1, tx),
+            ty,
+        );
+        let c1 = lerp4(
+            row(v, y0.wrapping_add(z1), x0, x1, tx),
+            row(v, y1.wrapping_add(z1), x0, x1, tx),
+            ty,
+        );
+        lerp4(c0, c1, tz)
     }
 
-    /// Component `c` of `field` at `p`.
+    /// Component `c` of `field` at `p`, with the min and max of the samples used when `BOUNDS`.
     #[inline(always)]
-    fn sample(&self, c: usize, field: &[f32], p: [f32; 3]) -> f32 {
-        let (idx, w) = self.faces[c].stencil(p);
-        let mut v = 0.0;
-        for n in 0..8 {
-            v += w[n] * field[idx[n]];
+    fn sample<const BOUNDS: bool>(&self, c: usize, field: &[f32], p: V4) -> (f32, f32, f32) {
+        let p = v4::lanes(p);
+        let g = &self.faces[c];
+        let (x0, x1, tx) = g.ax[0].locate(p[0]);
+        let (y0, y1, ty) = g.ax[1].locate(p[1]);
+        let (z0, z1, tz) = g.ax[2].locate(p[2]);
+        let r = [
+            y0.wrapping_add(z0),
+            y1.wrapping_add(z0),
+            y0.wrapping_add(z1),
+            y1.wrapping_add(z1),
+        ];
+        let mut s = [0f32; 8];
+        for q in 0..4 {
+            s[2 * q] = field[r[q].wrapping_add(x0) as usize];
+            s[2 * q + 1] = field[r[q].wrapping_add(x1) as usize];
         }
-        v
-    }
-
-    /// Component `c` of `field` at `p`, with the min and max of the samples used.
-    #[inline(always)]
-    fn sample_bounds(&self, c: usize, field: &[f32], p: [f32; 3]) -> (f32, f32, f32) {
-        let (idx, w) = self.faces[c].stencil(p);
-        let mut v = 0.0;
-        let mut lo = f32::INFINITY;
-        let mut hi = f32::NEG_INFINITY;
-        for n in 0..8 {
-            let f = field[idx[n]];
-            v += w[n] * f;
-            lo = lo.min(f);
-            hi = hi.max(f);
+        let (mut lo, mut hi) = (0.0, 0.0);
+        if BOUNDS {
+            lo = s.iter().fold(f32::INFINITY, |m, &v| m.min(v));
+            hi = s.iter().fold(f32::NEG_INFINITY, |m, &v| m.max(v));
         }
-        (v, lo, hi)
+        let r00 = s[0] + tx * (s[1] - s[0]);
+        let r10 = s[2] + tx * (s[3] - s[2]);
+        let r01 = s[4] + tx * (s[5] - s[4]);
+        let r11 = s[6] + tx * (s[7] - s[6]);
+        let c0 = r00 + ty * (r10 - r00);
+        let c1 = r01 + ty * (r11 - r01);
+        (c0 + tz * (c1 - c0), lo, hi)
     }
 
     /// Centred-grid indices of the two cells beside face `f` of component `c` (clamped at a
@@ -267,7 +361,7 @@ impl Geometry {
     #[inline(always)]
     fn face_cells(&self, c: usize, f: [usize; 3]) -> (usize, usize) {
         let n = self.dims[c];
-        let stride = self.centred.ax[c].stride;
+        let stride = self.centred.ax[c].stride as usize;
         let mut base = f[0] + self.dims[0] * (f[1] + self.dims[1] * f[2]);
         if f[c] >= n {
             // The far boundary face of a non-periodic axis: both sides clamp to the last cell.
@@ -283,55 +377,10 @@ impl Geometry {
         };
         (lo, base)
     }
-
-    /// RK2 (midpoint) trace from face `f` of component `c` at `x0` over `dt_cells` (= dt / h).
-    #[inline(always)]
-    fn trace(&self, v: &[[f32; 4]], c: usize, f: [usize; 3], x0: [f32; 3], dt: f32) -> [f32; 3] {
-        // At the face the centred field is the mean of the two cells beside it: two loads.
-        let (lo, hi) = self.face_cells(c, f);
-        let (a, b) = (v[lo], v[hi]);
-        let h = 0.5 * dt;
-        let xm: [f32; 3] = std::array::from_fn(|l| x0[l] - h * 0.5 * (a[l] + b[l]));
-        let vm = self.centred(v, xm);
-        std::array::from_fn(|l| x0[l] - dt * vm[l])
-    }
-}
-
-/// Averages the face velocities to the cell centres (one array per component), row by row.
-pub(crate) fn update_centred(layout: &Layout, dims: [usize; 3], u: [&[f32]; 3], out: &mut [Vec<f32>; 3]) {
-    let [nx, ny, nz] = dims;
-    let fd = layout.fdims;
-    let p = layout.periodic;
-    let [ox, oy, oz] = out;
-    for k in 0..nz {
-        let k1 = if k + 1 == nz && p[2] { 0 } else { k + 1 };
-        for j in 0..ny {
-            let j1 = if j + 1 == ny && p[1] { 0 } else { j + 1 };
-            let o = nx * (j + ny * k);
-            let r0 = fd[0][0] * (j + fd[0][1] * k);
-            let x = &u[0][r0..r0 + fd[0][0]];
-            let rx = &mut ox[o..o + nx];
-            for (cell, xs) in rx.iter_mut().zip(x.windows(2)) {
-                *cell = 0.5 * (xs[0] + xs[1]);
-            }
-            let hi = if p[0] { x[0] } else { x[nx] };
-            rx[nx - 1] = 0.5 * (x[nx - 1] + hi);
-            let y0 = &u[1][nx * (j + fd[1][1] * k)..][..nx];
-            let y1 = &u[1][nx * (j1 + fd[1][1] * k)..][..nx];
-            for ((cell, a), b) in oy[o..o + nx].iter_mut().zip(y0).zip(y1) {
-                *cell = 0.5 * (a + b);
-            }
-            let z0 = &u[2][nx * (j + ny * k)..][..nx];
-            let z1 = &u[2][nx * (j + ny * k1)..][..nx];
-            for ((cell, a), b) in oz[o..o + nx].iter_mut().zip(z0).zip(z1) {
-                *cell = 0.5 * (a + b);
-            }
-        }
-    }
 }
 
 /// Runtime dispatch to the widest instruction set the CPU has (the shipped binary targets generic
-/// x86-64; AVX2 + FMA doubles the lanes of the vectorised group arithmetic).
+/// x86-64, whose floor, min/max and FMA-free code is slower).
 mod simd {
     /// Runs `f`, compiled for AVX2 + FMA when the CPU has them.
     #[inline(always)]
@@ -342,8 +391,10 @@ mod simd {
             fn avx2(f: impl FnOnce()) {
                 f()
             }
-            if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma") {
-                // SAFETY: the CPU supports the features `avx2` was compiled for (checked above).
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports the features `avx2` is compiled for (checked above).
                 unsafe { avx2(f) };
                 return;
             }
@@ -352,170 +403,12 @@ mod simd {
     }
 }
 
-/// Faces traced together (SIMD lanes: the arithmetic of a group vectorises, the loads are gathers).
-const L: usize = 8;
-/// One value per lane.
-type Lanes = [f32; L];
-
-/// [`Axis::locate`] for a group of lanes; the clamped (non-periodic) case is branch-free so it
-/// vectorises.
-#[inline(always)]
-fn locate_lanes(ax: &Axis, p: &Lanes) -> ([u32; L], [u32; L], Lanes) {
-    let mut o0 = [0u32; L];
-    let mut o1 = [0u32; L];
-    let mut t = [0f32; L];
-    if ax.periodic {
-        for l in 0..L {
-            let (a, b, w) = ax.locate(p[l]);
-            (o0[l], o1[l], t[l]) = (a as u32, b as u32, w);
-        }
-    } else {
-        let stride = ax.stride as u32;
-        let step = if ax.n > 1 { stride } else { 0 };
-        let top = (ax.n - 2).max(0) as f32;
-        for l in 0..L {
-            let s = (p[l] - ax.shift).max(0.0).min(ax.last);
-            let fl = s.floor().min(top);
-            t[l] = s - fl;
-            // fl is a small non-negative integer: adding 2^23 puts it in the mantissa bits, an
-            // exact conversion that vectorises (unlike the saturating `as`).
-            // Wrapping arithmetic: the dev profile's overflow checks would stop vectorisation (the
-            // values are far below 2^32 by construction).
-            let i0 = (fl + 8_388_608.0).to_bits().wrapping_sub(0x4B00_0000);
-            o0[l] = i0.wrapping_mul(stride);
-            o1[l] = o0[l].wrapping_add(step);
-        }
-    }
-    (o0, o1, t)
-}
-
-#[inline(always)]
-fn lerp4(a: [f32; 4], b: [f32; 4], t: f32) -> [f32; 4] {
-    [
-        a[0] + t * (b[0] - a[0]),
-        a[1] + t * (b[1] - a[1]),
-        a[2] + t * (b[2] - a[2]),
-        a[3] + t * (b[3] - a[3]),
-    ]
-}
-
-/// The 8 trilinear sample indices and weights around each lane's point `p` on grid `g`.
-#[inline(always)]
-fn stencil_lanes(g: &Grid3, p: &[Lanes; 3]) -> ([[u32; L]; 8], [Lanes; 8]) {
-    let (x0, x1, tx) = locate_lanes(&g.ax[0], &p[0]);
-    let (y0, y1, ty) = locate_lanes(&g.ax[1], &p[1]);
-    let (z0, z1, tz) = locate_lanes(&g.ax[2], &p[2]);
-    let mut w = [[0f32; L]; 8];
-    let mut idx = [[0u32; L]; 8];
-    for l in 0..L {
-        let (sx, sy, sz) = (1.0 - tx[l], 1.0 - ty[l], 1.0 - tz[l]);
-        let (a, b, c, d) = (sy * sz, ty[l] * sz, sy * tz[l], ty[l] * tz[l]);
-        w[0][l] = sx * a;
-        w[1][l] = tx[l] * a;
-        w[2][l] = sx * b;
-        w[3][l] = tx[l] * b;
-        w[4][l] = sx * c;
-        w[5][l] = tx[l] * c;
-        w[6][l] = sx * d;
-        w[7][l] = tx[l] * d;
-    }
-    // Wrapping arithmetic: no overflow checks in the vectorised loop (indices < 2^30).
-    for l in 0..L {
-        let r = [
-            y0[l].wrapping_add(z0[l]),
-            y1[l].wrapping_add(z0[l]),
-            y0[l].wrapping_add(z1[l]),
-            y1[l].wrapping_add(z1[l]),
-        ];
-        for q in 0..4 {
-            idx[2 * q][l] = r[q].wrapping_add(x0[l]);
-            idx[2 * q + 1][l] = r[q].wrapping_add(x1[l]);
-        }
-    }
-    (idx, w)
-}
-
-/// `sum_q w[q] field[idx[q]]` per lane.
-#[inline(always)]
-fn interpolate_lanes(field: &[f32], idx: &[[u32; L]; 8], w: &[Lanes; 8]) -> Lanes {
-    let mut vals = [[0f32; L]; 8];
-    for q in 0..8 {
-        for l in 0..L {
-            vals[q][l] = field[idx[q][l] as usize];
-        }
-    }
-    let mut r = [0f32; L];
-    for q in 0..8 {
-        for l in 0..L {
-            r[l] += w[q][l] * vals[q][l];
-        }
-    }
-    r
-}
-
-impl Geometry {
-    /// RK2 (midpoint) foot points of the `count` (<= L) consecutive x-faces of component `c` from
-    /// face `f`, traced over `dt` (= dt / h) through the cell-centred velocity `v` (one array per
-    /// component). Lanes past `count` repeat the last face.
-    #[inline(always)]
-    fn trace_lanes(
-        &self,
-        v: [&[f32]; 3],
-        c: usize,
-        f: [usize; 3],
-        count: usize,
-        dt: f32,
-    ) -> [Lanes; 3] {
-        let sh: [f32; 3] = std::array::from_fn(|a| if a == c { 0.0 } else { 0.5 });
-        let mut x = [[0f32; L]; 3];
-        let mut m = [[0f32; L]; 3];
-        let h = 0.25 * dt;
-        for l in 0..L {
-            let fl = [f[0] + l.min(count - 1), f[1], f[2]];
-            // At the face the centred field is the mean of the two cells beside it: two loads.
-            let (lo, hi) = self.face_cells(c, fl);
-            for d in 0..3 {
-                x[d][l] = fl[d] as f32 + sh[d];
-                m[d][l] = v[d][lo] + v[d][hi];
-            }
-        }
-        for d in 0..3 {
-            for l in 0..L {
-                m[d][l] = x[d][l] - h * m[d][l];
-            }
-        }
-        let (idx, w) = stencil_lanes(&self.centred, &m);
-        let mut foot = [[0f32; L]; 3];
-        for d in 0..3 {
-            let vm = interpolate_lanes(v[d], &idx, &w);
-            for l in 0..L {
-                foot[d][l] = x[d][l] - dt * vm[l];
-            }
-        }
-        foot
-    }
-
-    /// The 8 trilinear samples of component `c` of `field` around each lane's point, and their
-    /// weights.
-    #[inline(always)]
-    fn gather_lanes(&self, c: usize, field: &[f32], p: &[Lanes; 3]) -> ([Lanes; 8], [Lanes; 8]) {
-        let (idx, w) = stencil_lanes(&self.faces[c], p);
-        let mut vals = [[0f32; L]; 8];
-        for q in 0..8 {
-            for l in 0..L {
-                vals[q][l] = field[idx[q][l] as usize];
-            }
-        }
-        (vals, w)
-    }
-}
-
 /// Read-only inputs of one advection pass.
 pub(crate) struct Pass<'a> {
     pub geo: &'a Geometry,
     pub plan: &'a Plan,
-    /// Cell-centred velocity for the trace, one array per component.
-    pub vc: [&'a [f32]; 3],
+    /// Padded cell-centred velocity for the trace.
+    pub vc: &'a [V4],
     /// Fields sampled at the foot points, per component.
     pub src: [&'a [f32]; 3],
     /// dt / h; negative for the forward trace of MacCormack.
@@ -523,47 +416,62 @@ pub(crate) struct Pass<'a> {
 }
 
 impl Pass<'_> {
-    /// For every group of up to L faces of block `b`: traces them and gathers the samples of their
-    /// component at the foot points, then calls `each(position within the block, count, samples,
-    /// weights)`. Runs on the widest SIMD the CPU has (runtime dispatch).
+    /// For every face of block `b`: traces it back (RK2 midpoint rule through the centred
+    /// velocity) and samples its component of `src` at the foot point, then calls
+    /// `each(position within the block, (value, min, max))` (min/max only when `BOUNDS`).
     #[inline(always)]
-    fn block(&self, b: usize, mut each: impl FnMut(usize, usize, &[Lanes; 8], &[Lanes; 8])) {
+    fn block<const BOUNDS: bool>(&self, b: usize, mut each: impl FnMut(usize, (f32, f32, f32))) {
         let plan = self.plan;
         let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
         let base = b * BLOCK;
+        let (geo, v, dt) = (self.geo, self.vc, self.dt_cells);
         let body = || {
-                for run in runs {
-                    let c = run.c as usize;
-                    let f0 = run.f.map(|v| v as usize);
-                    let o = run.compact as usize - base;
-                    let len = run.len as usize;
-                    let mut i = 0;
-                    while i < len {
-                        let count = (len - i).min(L);
-                        let f = [f0[0] + i, f0[1], f0[2]];
-                        let foot = self.geo.trace_lanes(self.vc, c, f, count, self.dt_cells);
-                        let (vals, w) = self.geo.gather_lanes(c, self.src[c], &foot);
-                        each(o + i, count, &vals, &w);
-                        i += count;
+            for run in runs {
+                let c = run.c as usize;
+                let f0 = run.f.map(|v| v as usize);
+                let src = self.src[c];
+                let o = run.compact as usize - base;
+                let sh: [f32; 3] = std::array::from_fn(|a| if a == c { 0.0 } else { 0.5 });
+                let mut x0 = v4::new(
+                    f0[0] as f32 + sh[0],
+                    f0[1] as f32 + sh[1],
+                    f0[2] as f32 + sh[2],
+                );
+                let step = v4::new(1.0, 0.0, 0.0);
+                // Three short loops over a chunk instead of one long one: each face's work is a
+                // chain of dependent loads (velocity -> midpoint -> velocity -> foot -> samples),
+                // and independent iterations let the CPU overlap many chains.
+                let len = run.len as usize;
+                let mut start = 0;
+                while start < len {
+                    let n = (len - start).min(CHAIN);
+                    let mut pts = [v4::zero(); CHAIN];
+                    let mut x = x0;
+                    for (i, p) in pts[..n].iter_mut().enumerate() {
+                        // At the face the centred field is the mean of the two cells beside it.
+                        let (lo, hi) = geo.face_cells(c, [f0[0] + start + i, f0[1], f0[2]]);
+                        *p = v4::sub_scaled(x, 0.5 * dt, lerp4(v[lo], v[hi], 0.5));
+                        x = v4::add(x, step);
                     }
+                    let mut x = x0;
+                    for p in &mut pts[..n] {
+                        *p = v4::sub_scaled(x, dt, geo.centred(v, *p));
+                        x = v4::add(x, step);
+                    }
+                    for (i, p) in pts[..n].iter().enumerate() {
+                        each(o + start + i, geo.sample::<BOUNDS>(c, src, *p));
+                    }
+                    x0 = x;
+                    start += n;
                 }
-            };
+            }
+        };
         simd::dispatch(body)
     }
 
     /// Semi-Lagrangian values at every active face into `out` (concatenated compact order).
     pub fn semi_lagrangian(&self, out: &mut [f32], parallel: bool) {
-        let task = |(b, os): (usize, &mut [f32])| {
-            self.block(b, |n, count, vals, w| {
-                let mut r = [0f32; L];
-                for q in 0..8 {
-                    for l in 0..L {
-                        r[l] += w[q][l] * vals[q][l];
-                    }
-                }
-                os[n..n + count].copy_from_slice(&r[..count]);
-            })
-        };
+        let task = |(b, os): (usize, &mut [f32])| self.block::<false>(b, |n, r| os[n] = r.0);
         if parallel {
             out.par_chunks_mut(BLOCK).enumerate().for_each(task);
         } else {
@@ -580,21 +488,7 @@ impl Pass<'_> {
         parallel: bool,
     ) {
         let task = |(b, ((os, ls), hs)): (usize, ((&mut [f32], &mut [f32]), &mut [f32]))| {
-            self.block(b, |n, count, vals, w| {
-                let mut r = [0f32; L];
-                let mut mn = [f32::INFINITY; L];
-                let mut mx = [f32::NEG_INFINITY; L];
-                for q in 0..8 {
-                    for l in 0..L {
-                        r[l] += w[q][l] * vals[q][l];
-                        mn[l] = mn[l].min(vals[q][l]);
-                        mx[l] = mx[l].max(vals[q][l]);
-                    }
-                }
-                os[n..n + count].copy_from_slice(&r[..count]);
-                ls[n..n + count].copy_from_slice(&mn[..count]);
-                hs[n..n + count].copy_from_slice(&mx[..count]);
-            })
+            self.block::<true>(b, |n, r| (os[n], ls[n], hs[n]) = r)
         };
         if parallel {
             out.par_chunks_mut(BLOCK)
@@ -624,20 +518,14 @@ impl Pass<'_> {
     ) {
         type Slices<'s> = (((&'s mut [f32], &'s [f32]), &'s [f32]), &'s [f32]);
         let task = |(b, (((os, ls), hs), us)): (usize, Slices)| {
-            self.block(b, |n, count, vals, w| {
-                for l in 0..count {
-                    let mut back = 0.0;
-                    for q in 0..8 {
-                        back += w[q][l] * vals[q][l];
-                    }
-                    let fwd = os[n + l];
-                    let v = fwd + 0.5 * (us[n + l] - back);
-                    os[n + l] = if v.is_finite() {
-                        v.clamp(ls[n + l], hs[n + l])
-                    } else {
-                        fwd
-                    };
-                }
+            self.block::<false>(b, |n, (back, _, _)| {
+                let fwd = os[n];
+                let v = fwd + 0.5 * (us[n] - back);
+                os[n] = if v.is_finite() {
+                    v.clamp(ls[n], hs[n])
+                } else {
+                    fwd
+                };
             })
         };
         if parallel {
@@ -654,6 +542,36 @@ impl Pass<'_> {
                 .zip(orig.chunks(BLOCK))
                 .enumerate()
                 .for_each(task);
+        }
+    }
+}
+
+/// Averages the face velocities to the (padded) cell centres, row by row.
+pub(crate) fn update_centred(layout: &Layout, dims: [usize; 3], u: [&[f32]; 3], out: &mut [V4]) {
+    let [nx, ny, nz] = dims;
+    let fd = layout.fdims;
+    let p = layout.periodic;
+    for k in 0..nz {
+        let k1 = if k + 1 == nz && p[2] { 0 } else { k + 1 };
+        for j in 0..ny {
+            let j1 = if j + 1 == ny && p[1] { 0 } else { j + 1 };
+            let o = nx * (j + ny * k);
+            let row = &mut out[o..o + nx];
+            let r0 = fd[0][0] * (j + fd[0][1] * k);
+            let x = &u[0][r0..r0 + fd[0][0]];
+            let y0 = &u[1][nx * (j + fd[1][1] * k)..][..nx];
+            let y1 = &u[1][nx * (j1 + fd[1][1] * k)..][..nx];
+            let z0 = &u[2][nx * (j + ny * k)..][..nx];
+            let z1 = &u[2][nx * (j + ny * k1)..][..nx];
+            for (i, cell) in row.iter_mut().enumerate() {
+                // The last x face wraps to the first on a periodic axis.
+                let xh = if i + 1 < x.len() { x[i + 1] } else { x[0] };
+                *cell = v4::new(
+                    0.5 * (x[i] + xh),
+                    0.5 * (y0[i] + y1[i]),
+                    0.5 * (z0[i] + z1[i]),
+                );
+            }
         }
     }
 }

@@ -36,8 +36,13 @@ pub struct BenchRow {
     pub ms_p99: f64,
     /// Projection share of the mean (ms).
     pub project_ms_mean: f64,
-    /// Advection share of the mean (ms).
+    /// Advection share of the mean (ms): centred velocity, extrapolation, the semi-Lagrangian (and
+    /// MacCormack) passes.
     pub advect_ms_mean: f64,
+    /// Body force and viscosity share of the mean (ms).
+    pub diffuse_ms_mean: f64,
+    /// The rest of the step (ms): boundary values, topology, substep bookkeeping.
+    pub other_ms_mean: f64,
     /// Projection iterations per step (mean).
     pub iterations_mean: f64,
     /// Mean over steps of `max |div u| h / U` after projection.
@@ -64,12 +69,15 @@ pub fn bench_cavity(
     }
     let mut ms = Vec::with_capacity(steps);
     let (mut proj, mut adv, mut its, mut div, mut divmax) = (0.0, 0.0, 0usize, 0.0, 0.0f64);
+    let (mut diffuse, mut total) = (0.0, 0.0);
     for _ in 0..steps {
         let t = Instant::now();
         let st = s.step(dt_s)?;
         ms.push(t.elapsed().as_secs_f64() * 1e3);
         proj += st.project_ms;
         adv += st.advect_ms;
+        diffuse += st.diffuse_ms;
+        total += st.total_ms;
         its += st.projection_iterations;
         div += st.max_div_rel;
         divmax = divmax.max(st.max_div_rel);
@@ -94,6 +102,8 @@ pub fn bench_cavity(
         ms_p99: p99,
         project_ms_mean: proj / n,
         advect_ms_mean: adv / n,
+        diffuse_ms_mean: diffuse / n,
+        other_ms_mean: (total - adv - diffuse - proj) / n,
         iterations_mean: its as f64 / n,
         div_rel_mean: div / n,
         div_rel_max: divmax,

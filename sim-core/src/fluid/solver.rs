@@ -162,8 +162,8 @@ pub struct FluidSolver {
     /// Face velocities per component (m/s).
     u: [Vec<f32>; 3],
     tmp: [Vec<f32>; 3],
-    /// Cell-centred velocity (for tracing), one array per component.
-    centred: [Vec<f32>; 3],
+    /// Cell-centred velocity (for tracing), padded to 4 lanes.
+    centred: Vec<advection::V4>,
     faces: [FaceSet; 3],
     compact: [Vec<f32>; 3],
     /// Advection: geometry, runs of active faces, and results in concatenated compact order (with
@@ -190,7 +190,7 @@ impl FluidSolver {
         let u: [Vec<f32>; 3] = std::array::from_fn(|c| vec![0.0; layout.face_count(c)]);
         let mut s = Self {
             tmp: u.clone(),
-            centred: std::array::from_fn(|_| vec![0.0; grid.cell_count()]),
+            centred: vec![advection::v4::zero(); grid.cell_count()],
             geo: advection::Geometry::new(grid.dims(), &layout),
             plan: advection::Plan::default(),
             adv: Vec::new(),
@@ -553,7 +553,7 @@ impl FluidSolver {
         let pass = advection::Pass {
             geo: &self.geo,
             plan: &self.plan,
-            vc: [&self.centred[0], &self.centred[1], &self.centred[2]],
+            vc: &self.centred,
             src: [u0, u1, u2],
             dt_cells,
         };
