@@ -158,11 +158,8 @@ impl Axis {
         } else {
             // max/min (not clamp): NaN-safe.
             let s = s.max(0.0).min(self.last);
-            // Round s - 1/2 to an integer by adding 2^23 (the mantissa then holds it): floor(s),
-            // or floor(s) - 1 with weight t = 1 when s is an integer, which interpolates the same.
-            // One add instead of a floor (a libm call without SSE4.1) and a saturating cast.
-            let r = (s - 0.5) + 8_388_608.0;
-            let i0 = r.to_bits().wrapping_sub(0x4B00_0000).min(self.top);
+            // s >= 0, so truncation is the floor.
+            let i0 = (s as u32).min(self.top);
             let o0 = i0.wrapping_mul(self.stride);
             (o0, o0.wrapping_add(self.step), s - i0 as f32)
         }
@@ -589,5 +586,57 @@ pub(crate) fn gather(plan: &Plan, u: [&[f32]; 3], compact: &mut [f32]) {
     for run in &plan.runs {
         let (f, n, len) = (run.full as usize, run.compact as usize, run.len as usize);
         compact[n..n + len].copy_from_slice(&u[run.c as usize][f..f + len]);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic pseudo-random sequence in [0, 1).
+    fn lcg(state: &mut u64) -> f32 {
+        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (*state >> 40) as f32 / (1u64 << 24) as f32
+    }
+
+    #[test]
+    fn fast_sampling_matches_the_reference_interpolation_everywhere() {
+        for periodic in [[false; 3], [true, false, true], [false, true, false]] {
+            let dims = [5, 4, 6];
+            let layout = Layout::new(dims, periodic);
+            let geo = Geometry::new(dims, &layout);
+            let mut st = 7u64;
+            let fields: Vec<Vec<f32>> = (0..3)
+                .map(|c| (0..layout.face_count(c)).map(|_| lcg(&mut st) - 0.5).collect())
+                .collect();
+            let cells = dims.iter().product::<usize>();
+            let centred3: Vec<[f32; 3]> = (0..cells)
+                .map(|_| [lcg(&mut st), lcg(&mut st), lcg(&mut st)])
+                .collect();
+            let centred: Vec<V4> = centred3.iter().map(|v| v4::new(v[0], v[1], v[2])).collect();
+            for _ in 0..2000 {
+                // Points inside, on sample positions, and far outside the grid.
+                let p: [f32; 3] = std::array::from_fn(|a| {
+                    let r = lcg(&mut st);
+                    if r < 0.1 {
+                        (lcg(&mut st) * 4.0).floor() * 0.5
+                    } else {
+                        (r - 0.5) * 3.0 * dims[a] as f32
+                    }
+                });
+                let pv = v4::new(p[0], p[1], p[2]);
+                for c in 0..3 {
+                    let want = layout.sample_bounds(c, &fields[c], p);
+                    let got = geo.sample::<true>(c, &fields[c], pv);
+                    assert!((want.0 - got.0).abs() < 1e-5, "{periodic:?} c {c} {p:?}: {want:?} {got:?}");
+                    assert_eq!((want.1, want.2), (got.1, got.2), "{periodic:?} c {c} {p:?}");
+                }
+                let want = layout.sample_centred(dims, &centred3, p);
+                let got = v4::lanes(geo.centred(&centred, pv));
+                for a in 0..3 {
+                    assert!((want[a] - got[a]).abs() < 1e-5, "{periodic:?} {p:?}: {want:?} {got:?}");
+                }
+            }
+        }
     }
 }
