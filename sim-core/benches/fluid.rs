@@ -4,7 +4,7 @@
 //! iterations come from `hydrometra fluid bench`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use hydrometra_sim::fluid::cavity::ellipsoid_cavity;
+use hydrometra_sim::fluid::cavity::uterine_cavity;
 use hydrometra_sim::fluid::{FluidParams, FluidSolver, ProjectionMethod};
 
 fn step(c: &mut Criterion) {
@@ -18,7 +18,7 @@ fn step(c: &mut Criterion) {
                 ProjectionMethod::GaussSeidel { sweeps: 20 },
             ),
         ] {
-            let grid = ellipsoid_cavity(voxel_mm * 1e-3, 1.0).expect("cavity");
+            let grid = uterine_cavity(voxel_mm * 1e-3, 1.0).expect("cavity");
             let params = FluidParams {
                 projection: method,
                 tolerance: 1e-5,

@@ -1,11 +1,11 @@
-//! The paper's Table 1 operating points on the benchmark cavity ([`super::cavity`]): our solver and the
+//! The paper's Table 1 operating points on the benchmark cavity ([`super::cavity::uterine_cavity`]): our solver and the
 //! paper-class baseline side by side.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use super::cavity::ellipsoid_cavity;
+use super::cavity::uterine_cavity;
 use super::{FluidError, FluidParams, FluidSolver, ProjectionMethod};
 
 /// The paper's voxel sizes (m).
@@ -60,7 +60,7 @@ pub fn bench_cavity(
     steps: usize,
     params: FluidParams,
 ) -> Result<BenchRow, FluidError> {
-    let grid = ellipsoid_cavity(voxel_m, jet_m_s)?;
+    let grid = uterine_cavity(voxel_m, jet_m_s)?;
     let voxels_total = grid.cell_count();
     let method = params.projection;
     let mut s = FluidSolver::new(grid, params)?;

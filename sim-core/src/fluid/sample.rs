@@ -120,6 +120,8 @@ impl Layout {
     }
 
     /// Component `c` at `p`, with the minimum and maximum of the samples used (for clamping).
+    /// (The reference for the advection's fast sampler, in its tests.)
+    #[cfg(test)]
     #[inline]
     pub fn sample_bounds(&self, c: usize, field: &[f32], p: [f32; 3]) -> (f32, f32, f32) {
         let (idx, w) = self.stencil(c, p);
@@ -136,6 +138,8 @@ impl Layout {
     }
 
     /// Trilinear interpolation of a cell-centred vector field at `p`.
+    /// (The reference for the advection's fast sampler, in its tests.)
+    #[cfg(test)]
     #[inline]
     pub fn sample_centred(&self, dims: [usize; 3], field: &[[f32; 3]], p: [f32; 3]) -> [f32; 3] {
         let (x0, x1, tx) = Self::axis(p[0] - 0.5, dims[0], self.periodic[0]);
