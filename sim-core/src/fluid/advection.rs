@@ -263,8 +263,8 @@ pub(crate) mod v4 {
     }
 }
 
-pub(crate) use v4::V4;
 use v4::lerp as lerp4;
+pub(crate) use v4::V4;
 
 /// Geometry of the advection: the centred grid and the face grids of the three components.
 #[derive(Clone, Copy, Debug)]
@@ -595,7 +595,9 @@ mod tests {
 
     /// A deterministic pseudo-random sequence in [0, 1).
     fn lcg(state: &mut u64) -> f32 {
-        *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (*state >> 40) as f32 / (1u64 << 24) as f32
     }
 
@@ -607,7 +609,11 @@ mod tests {
             let geo = Geometry::new(dims, &layout);
             let mut st = 7u64;
             let fields: Vec<Vec<f32>> = (0..3)
-                .map(|c| (0..layout.face_count(c)).map(|_| lcg(&mut st) - 0.5).collect())
+                .map(|c| {
+                    (0..layout.face_count(c))
+                        .map(|_| lcg(&mut st) - 0.5)
+                        .collect()
+                })
                 .collect();
             let cells = dims.iter().product::<usize>();
             let centred3: Vec<[f32; 3]> = (0..cells)
@@ -628,13 +634,19 @@ mod tests {
                 for c in 0..3 {
                     let want = layout.sample_bounds(c, &fields[c], p);
                     let got = geo.sample::<true>(c, &fields[c], pv);
-                    assert!((want.0 - got.0).abs() < 1e-5, "{periodic:?} c {c} {p:?}: {want:?} {got:?}");
+                    assert!(
+                        (want.0 - got.0).abs() < 1e-5,
+                        "{periodic:?} c {c} {p:?}: {want:?} {got:?}"
+                    );
                     assert_eq!((want.1, want.2), (got.1, got.2), "{periodic:?} c {c} {p:?}");
                 }
                 let want = layout.sample_centred(dims, &centred3, p);
                 let got = v4::lanes(geo.centred(&centred, pv));
                 for a in 0..3 {
-                    assert!((want[a] - got[a]).abs() < 1e-5, "{periodic:?} {p:?}: {want:?} {got:?}");
+                    assert!(
+                        (want[a] - got[a]).abs() < 1e-5,
+                        "{periodic:?} {p:?}: {want:?} {got:?}"
+                    );
                 }
             }
         }

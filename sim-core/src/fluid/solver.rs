@@ -328,7 +328,11 @@ impl FluidSolver {
         self.plan
             .rebuild(&self.layout, [&f0.active, &f1.active, &f2.active]);
         let total = self.plan.offset[3];
-        eprintln!("DEBUG faces {:?} runs {}", self.plan.offset, self.plan.runs.len());
+        eprintln!(
+            "DEBUG faces {:?} runs {}",
+            self.plan.offset,
+            self.plan.runs.len()
+        );
         for v in [
             &mut self.adv,
             &mut self.adv_lo,
@@ -558,7 +562,12 @@ impl FluidSolver {
             dt_cells,
         };
         if mac {
-            pass.semi_lagrangian_bounds(&mut self.adv, &mut self.adv_lo, &mut self.adv_hi, parallel);
+            pass.semi_lagrangian_bounds(
+                &mut self.adv,
+                &mut self.adv_lo,
+                &mut self.adv_hi,
+                parallel,
+            );
             advection::gather(&self.plan, [u0, u1, u2], &mut self.adv_orig);
             for c in 0..3 {
                 self.tmp[c].copy_from_slice(&self.u[c]);

@@ -34,6 +34,11 @@ pub(crate) struct FaceSet {
     pub stencil: Vec<[u32; 6]>,
     /// Diagonal of the negative Laplacian (6, plus one per wall ghost, minus one per outflow side).
     pub diag: Vec<f32>,
+    /// The stencil as full face indices for the explicit step: the neighbour's full index (active or
+    /// fixed), or the face itself where the stencil has NONE; `self_diag` is `diag` plus the number
+    /// of such self entries, so `sum(full[nbr]) - self_diag u` is the stencil without branches.
+    pub nbr: Vec<[u32; 6]>,
+    pub self_diag: Vec<f32>,
     /// Wall ghosts: (compact face, cell a, cell b, opposite face): the wall velocity is the mean of the
     /// prescribed velocities of `Velocity` cells among a and b (zero for solids and outside); the
     /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
@@ -139,6 +144,8 @@ impl FaceSet {
         self.fixed.clear();
         self.stencil.clear();
         self.diag.clear();
+        self.nbr.clear();
+        self.self_diag.clear();
         self.ghosts.clear();
         self.ext1.clear();
         self.ext2.clear();
@@ -228,8 +235,21 @@ impl FaceSet {
                     }
                 }
             }
+            let mut nbr = [idx as u32; 6];
+            let mut selfs = 0.0f32;
+            for (slot, &e) in nbr.iter_mut().zip(&st) {
+                if e == NONE {
+                    selfs += 1.0;
+                } else if e & CONST_BIT != 0 {
+                    *slot = e & !CONST_BIT;
+                } else {
+                    *slot = self.active[e as usize];
+                }
+            }
             self.stencil.push(st);
             self.diag.push(diag);
+            self.self_diag.push(diag + selfs);
+            self.nbr.push(nbr);
         }
 
         // Extrapolation layers.

@@ -58,14 +58,18 @@ fn variable_part(set: &FaceSet, x: &[f32], n: usize) -> f32 {
 
 /// Explicit step: `out[n] = u + a (sum of neighbours + ghosts - diag u)`.
 pub(crate) fn explicit(set: &FaceSet, full: &[f32], ghost: &[f32], a: f32, out: &mut [f32]) {
-    for (n, o) in out.iter_mut().enumerate() {
-        let idx = set.active[n] as usize;
-        let u = full[idx];
-        let mut s = constant_part(set, full, ghost, n) - set.diag[n] * u;
-        for &e in &set.stencil[n] {
-            if e != NONE && e & CONST_BIT == 0 {
-                s += full[set.active[e as usize] as usize];
-            }
+    // Branch-free form of the stencil (see `FaceSet::nbr`).
+    for ((((o, &idx), nbr), &d), &g) in out
+        .iter_mut()
+        .zip(&set.active)
+        .zip(&set.nbr)
+        .zip(&set.self_diag)
+        .zip(ghost)
+    {
+        let u = full[idx as usize];
+        let mut s = g - d * u;
+        for &e in nbr {
+            s += full[e as usize];
         }
         *o = u + a * s;
     }
