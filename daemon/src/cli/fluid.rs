@@ -6,11 +6,12 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::fluid::benchmark::{
-    bench_cavity, BenchRow, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
+    bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
 };
 use hydrometra_sim::fluid::case::Case;
 use hydrometra_sim::fluid::cavity::{
-    UTERINE_HALF_LENGTH_M, UTERINE_HALF_THICKNESS_M, UTERINE_HALF_WIDTH_M, UTERINE_TAPER,
+    CAVITY_SEMI_AXES_M, UTERINE_HALF_LENGTH_M, UTERINE_HALF_THICKNESS_M, UTERINE_HALF_WIDTH_M,
+    UTERINE_TAPER,
 };
 use hydrometra_sim::fluid::soak::run_soak;
 use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
@@ -75,6 +76,10 @@ pub struct BenchArgs {
     /// Skip the Gauss-Seidel baseline (only our solver's rows).
     #[arg(long)]
     pub no_baseline: bool,
+    /// Benchmark geometry: the uterine stand-in (matches the paper's fluid-cell counts) or the
+    /// earlier ellipsoid (for comparison with older figures).
+    #[arg(long, value_enum, default_value_t = CavityArg::Uterine)]
+    pub cavity: CavityArg,
     /// Jet speed at the scope tip (m/s).
     #[arg(long, default_value_t = 1.0)]
     pub jet_m_s: f32,
@@ -93,6 +98,15 @@ pub struct BenchArgs {
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// Benchmark geometry on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum CavityArg {
+    /// The uterine stand-in (flattened pear).
+    Uterine,
+    /// The earlier ellipsoid.
+    Ellipsoid,
 }
 
 /// Advection scheme on the command line.
@@ -237,6 +251,10 @@ fn bench(a: BenchArgs) -> Result<()> {
         );
     }
     let advection = AdvectionScheme::from(a.advection);
+    let cavity = match a.cavity {
+        CavityArg::Uterine => Cavity::Uterine,
+        CavityArg::Ellipsoid => Cavity::Ellipsoid,
+    };
     let mut rows: Vec<(BenchRow, Option<BenchRow>)> = Vec::new();
     let mut cpu: Vec<(f64, f64)> = Vec::new();
     for &mm in &a.voxels_mm {
@@ -254,12 +272,14 @@ fn bench(a: BenchArgs) -> Result<()> {
             ..Default::default()
         };
         let c0 = process_cpu_s();
-        let r1 = bench_cavity(h, a.jet_m_s, dt_s, a.warmup, a.steps, ours)?;
+        let r1 = bench_shape(cavity, h, a.jet_m_s, dt_s, a.warmup, a.steps, ours)?;
         let c1 = process_cpu_s();
         let r2 = if a.no_baseline {
             None
         } else {
-            Some(bench_cavity(h, a.jet_m_s, dt_s, a.warmup, a.steps, base)?)
+            Some(bench_shape(
+                cavity, h, a.jet_m_s, dt_s, a.warmup, a.steps, base,
+            )?)
         };
         let c2 = process_cpu_s();
         let per_step = |c: Option<f64>, d: Option<f64>| match (c, d) {
@@ -279,12 +299,21 @@ fn bench(a: BenchArgs) -> Result<()> {
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
+    let shape = match cavity {
+        Cavity::Uterine => format!(
+            "Uterine cavity (flattened pear: {} mm long, {} mm thick, mid half-width {} mm, taper {}; cells with all corners inside)",
+            2e3 * UTERINE_HALF_LENGTH_M,
+            2e3 * UTERINE_HALF_THICKNESS_M,
+            1e3 * UTERINE_HALF_WIDTH_M,
+            UTERINE_TAPER
+        ),
+        Cavity::Ellipsoid => {
+            let [sa, sb, sc] = CAVITY_SEMI_AXES_M.map(|v| v * 1e3);
+            format!("Ellipsoid cavity {sa} x {sb} x {sc} mm (semi-axes)")
+        }
+    };
     println!(
-        "Uterine cavity (flattened pear: {} mm long, {} mm thick, mid half-width {} mm, taper {}; cells with all corners inside), jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baseline {} Gauss-Seidel sweeps.",
-        2e3 * UTERINE_HALF_LENGTH_M,
-        2e3 * UTERINE_HALF_THICKNESS_M,
-        1e3 * UTERINE_HALF_WIDTH_M,
-        UTERINE_TAPER,
+        "{shape}, jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baseline {} Gauss-Seidel sweeps.",
         a.jet_m_s,
         dt_s,
         advection,

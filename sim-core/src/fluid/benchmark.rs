@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use super::cavity::uterine_cavity;
+use super::cavity::{ellipsoid_cavity, uterine_cavity};
 use super::{FluidError, FluidParams, FluidSolver, ProjectionMethod};
 
 /// The paper's voxel sizes (m).
@@ -51,7 +51,19 @@ pub struct BenchRow {
     pub div_rel_max: f64,
 }
 
-/// Runs `warmup + steps` steps of the cavity at `voxel_m` with the jet at `jet_m_s` and `dt_s`.
+/// Benchmark geometry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Cavity {
+    /// [`uterine_cavity`]: matches the paper's fluid-cell counts.
+    #[default]
+    Uterine,
+    /// [`ellipsoid_cavity`]: the earlier stand-in (for comparison with older figures).
+    Ellipsoid,
+}
+
+/// Runs `warmup + steps` steps of the uterine cavity at `voxel_m` with the jet at `jet_m_s` and
+/// `dt_s`.
 pub fn bench_cavity(
     voxel_m: f64,
     jet_m_s: f32,
@@ -60,7 +72,31 @@ pub fn bench_cavity(
     steps: usize,
     params: FluidParams,
 ) -> Result<BenchRow, FluidError> {
-    let grid = uterine_cavity(voxel_m, jet_m_s)?;
+    bench_shape(
+        Cavity::Uterine,
+        voxel_m,
+        jet_m_s,
+        dt_s,
+        warmup,
+        steps,
+        params,
+    )
+}
+
+/// As [`bench_cavity`] on the chosen geometry.
+pub fn bench_shape(
+    cavity: Cavity,
+    voxel_m: f64,
+    jet_m_s: f32,
+    dt_s: f64,
+    warmup: usize,
+    steps: usize,
+    params: FluidParams,
+) -> Result<BenchRow, FluidError> {
+    let grid = match cavity {
+        Cavity::Uterine => uterine_cavity(voxel_m, jet_m_s)?,
+        Cavity::Ellipsoid => ellipsoid_cavity(voxel_m, jet_m_s)?,
+    };
     let voxels_total = grid.cell_count();
     let method = params.projection;
     let mut s = FluidSolver::new(grid, params)?;
