@@ -484,7 +484,8 @@ impl Pass<'_> {
         hi: &mut [f32],
         parallel: bool,
     ) {
-        let task = |(b, ((os, ls), hs)): (usize, ((&mut [f32], &mut [f32]), &mut [f32]))| {
+        type Slices<'s> = ((&'s mut [f32], &'s mut [f32]), &'s mut [f32]);
+        let task = |(b, ((os, ls), hs)): (usize, Slices)| {
             self.block::<true>(b, |n, r| (os[n], ls[n], hs[n]) = r)
         };
         if parallel {
@@ -631,9 +632,9 @@ mod tests {
                     }
                 });
                 let pv = v4::new(p[0], p[1], p[2]);
-                for c in 0..3 {
-                    let want = layout.sample_bounds(c, &fields[c], p);
-                    let got = geo.sample::<true>(c, &fields[c], pv);
+                for (c, field) in fields.iter().enumerate() {
+                    let want = layout.sample_bounds(c, field, p);
+                    let got = geo.sample::<true>(c, field, pv);
                     assert!(
                         (want.0 - got.0).abs() < 1e-5,
                         "{periodic:?} c {c} {p:?}: {want:?} {got:?}"
