@@ -544,17 +544,23 @@ impl Pass<'_> {
     }
 }
 
-/// Averages the face velocities to the (padded) cell centres, row by row.
-pub(crate) fn update_centred(layout: &Layout, dims: [usize; 3], u: [&[f32]; 3], out: &mut [V4]) {
+/// Averages the face velocities to the (padded) cell centres, row by row (z-slabs in parallel if
+/// `parallel`).
+pub(crate) fn update_centred(
+    layout: &Layout,
+    dims: [usize; 3],
+    u: [&[f32]; 3],
+    out: &mut [V4],
+    parallel: bool,
+) {
     let [nx, ny, nz] = dims;
     let fd = layout.fdims;
     let p = layout.periodic;
-    for k in 0..nz {
+    let slab = |(k, slab): (usize, &mut [V4])| {
         let k1 = if k + 1 == nz && p[2] { 0 } else { k + 1 };
         for j in 0..ny {
             let j1 = if j + 1 == ny && p[1] { 0 } else { j + 1 };
-            let o = nx * (j + ny * k);
-            let row = &mut out[o..o + nx];
+            let row = &mut slab[nx * j..nx * (j + 1)];
             let r0 = fd[0][0] * (j + fd[0][1] * k);
             let x = &u[0][r0..r0 + fd[0][0]];
             let y0 = &u[1][nx * (j + fd[1][1] * k)..][..nx];
@@ -571,6 +577,11 @@ pub(crate) fn update_centred(layout: &Layout, dims: [usize; 3], u: [&[f32]; 3], 
                 );
             }
         }
+    };
+    if parallel {
+        out.par_chunks_mut(nx * ny).enumerate().for_each(slab);
+    } else {
+        out.chunks_mut(nx * ny).enumerate().for_each(slab);
     }
 }
 

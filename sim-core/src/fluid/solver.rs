@@ -277,7 +277,7 @@ impl FluidSolver {
                 self.u[c][idx] = field(c, x) as f32;
             }
         }
-        self.apply_fixed();
+        self.apply_fixed(true);
         self.extrapolate();
     }
 
@@ -343,15 +343,21 @@ impl FluidSolver {
             v.resize(total, 0.0);
         }
         self.revision = self.grid.revision();
-        self.apply_fixed();
+        self.apply_fixed(true);
         self.extrapolate();
     }
 
-    /// Writes the prescribed normal velocity of every fixed face and the wall ghosts.
-    fn apply_fixed(&mut self) {
+    /// Writes the prescribed normal velocity of the fixed faces: all of them (`all`, after the faces
+    /// were rebuilt or overwritten), or only those beside `Velocity` cells (the others stay zero).
+    fn apply_fixed(&mut self, all: bool) {
         for c in 0..3 {
             let set = &self.faces[c];
-            for &[idx, a, b] in &set.fixed {
+            let list = if all {
+                &set.fixed[..]
+            } else {
+                &set.fixed[..set.fixed_moving]
+            };
+            for &[idx, a, b] in list {
                 self.u[c][idx as usize] = topology::wall_velocity(&self.grid, c, a, b);
             }
         }
@@ -440,7 +446,7 @@ impl FluidSolver {
             stats.topology_rebuilt = true;
             stats.topology_ms = t0.elapsed().as_secs_f64() * 1e3;
         } else {
-            self.apply_fixed();
+            self.apply_fixed(false);
         }
         let mut n = 1usize;
         if let Some(max_cfl) = self.params.max_cfl {
@@ -477,6 +483,8 @@ impl FluidSolver {
         let t = Instant::now();
         let nu = self.params.viscosity_m2_s;
         let a = nu * dt / (h * h);
+        // The cheap per-face stages pay for a rayon region only on large grids.
+        let wide = self.fluid_cells() >= self.params.parallel_threshold_cells;
         let implicit = nu > 0.0 && a > viscosity::EXPLICIT_LIMIT;
         stats.viscosity = match (nu > 0.0, implicit) {
             (false, _) => ViscosityMode::Skipped,
@@ -514,6 +522,7 @@ impl FluidSolver {
                         &self.ghost[c],
                         a as f32,
                         &mut self.compact[c],
+                        wide,
                     );
                     for (n, &idx) in set.active.iter().enumerate() {
                         self.u[c][idx as usize] = self.compact[c][n];
@@ -547,12 +556,14 @@ impl FluidSolver {
     fn advect(&mut self, dt_cells: f64, parallel: bool) {
         let dt_cells = dt_cells as f32;
         let mac = self.params.advection == AdvectionScheme::MacCormack;
+        let wide = self.fluid_cells() >= self.params.parallel_threshold_cells;
         let [u0, u1, u2] = &self.u;
         advection::update_centred(
             &self.layout,
             self.grid.dims(),
             [u0, u1, u2],
             &mut self.centred,
+            wide,
         );
         let pass = advection::Pass {
             geo: &self.geo,
@@ -773,7 +784,7 @@ impl FluidSolver {
         if self.revision != self.grid.revision() {
             self.rebuild_topology();
         }
-        self.apply_fixed();
+        self.apply_fixed(true);
         self.project(dt_s, &mut stats);
         self.extrapolate();
         stats

@@ -44,8 +44,12 @@ pub(crate) struct FaceSet {
     /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
     /// quadratic wall extrapolation.
     pub ghosts: Vec<[u32; 4]>,
-    /// Fixed faces: (full face, cell a, cell b) as for ghosts.
+    /// Fixed faces: (full face, cell a, cell b) as for ghosts. Cells that are not `Velocity` cells
+    /// are stored as NONE here and in `ghosts` (they contribute nothing to the wall velocity, and
+    /// labels cannot change without a rebuild), and the faces with a `Velocity` cell come first.
     pub fixed: Vec<[u32; 3]>,
+    /// Number of fixed faces beside a `Velocity` cell (the others stay at zero between rebuilds).
+    pub fixed_moving: usize,
     /// Extrapolation layers: faces next to active faces, and next to those.
     pub ext1: Vec<u32>,
     pub ext2: Vec<u32>,
@@ -251,6 +255,31 @@ impl FaceSet {
             self.self_diag.push(diag + selfs);
             self.nbr.push(nbr);
         }
+
+        // Keep only `Velocity` cells in the wall-velocity pairs, moving fixed faces first, so the
+        // per-step wall updates skip label lookups and still walls.
+        let moving = |i: u32| i != NONE && grid.label_at(i as usize) == CellLabel::Velocity;
+        for f in &mut self.fixed {
+            for cell in &mut f[1..] {
+                if !moving(*cell) {
+                    *cell = NONE;
+                }
+            }
+        }
+        for g in &mut self.ghosts {
+            for cell in &mut g[1..3] {
+                if !moving(*cell) {
+                    *cell = NONE;
+                }
+            }
+        }
+        self.fixed
+            .sort_unstable_by_key(|f| f[1] == NONE && f[2] == NONE);
+        self.fixed_moving = self
+            .fixed
+            .iter()
+            .take_while(|f| f[1] != NONE || f[2] != NONE)
+            .count();
 
         // Extrapolation layers.
         for (layer, from) in [(EXT1, ACTIVE), (EXT2, EXT1)] {

@@ -5,7 +5,12 @@
 // Index loops over several parallel arrays read clearer than zipped iterators here.
 #![allow(clippy::needless_range_loop)]
 
+use rayon::prelude::*;
+
 use super::topology::{FaceSet, CONST_BIT, NONE};
+
+/// Faces per parallel task of the explicit step.
+const CHUNK: usize = 4096;
 
 /// Which viscosity step ran.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -57,21 +62,37 @@ fn variable_part(set: &FaceSet, x: &[f32], n: usize) -> f32 {
 }
 
 /// Explicit step: `out[n] = u + a (sum of neighbours + ghosts - diag u)`.
-pub(crate) fn explicit(set: &FaceSet, full: &[f32], ghost: &[f32], a: f32, out: &mut [f32]) {
+pub(crate) fn explicit(
+    set: &FaceSet,
+    full: &[f32],
+    ghost: &[f32],
+    a: f32,
+    out: &mut [f32],
+    parallel: bool,
+) {
     // Branch-free form of the stencil (see `FaceSet::nbr`).
-    for ((((o, &idx), nbr), &d), &g) in out
-        .iter_mut()
-        .zip(&set.active)
-        .zip(&set.nbr)
-        .zip(&set.self_diag)
-        .zip(ghost)
-    {
-        let u = full[idx as usize];
-        let mut s = g - d * u;
-        for &e in nbr {
-            s += full[e as usize];
+    let chunk = |(b, os): (usize, &mut [f32])| {
+        let s0 = b * CHUNK;
+        let s1 = s0 + os.len();
+        for ((((o, &idx), nbr), &d), &g) in os
+            .iter_mut()
+            .zip(&set.active[s0..s1])
+            .zip(&set.nbr[s0..s1])
+            .zip(&set.self_diag[s0..s1])
+            .zip(&ghost[s0..s1])
+        {
+            let u = full[idx as usize];
+            let mut s = g - d * u;
+            for &e in nbr {
+                s += full[e as usize];
+            }
+            *o = u + a * s;
         }
-        *o = u + a * s;
+    };
+    if parallel {
+        out.par_chunks_mut(CHUNK).enumerate().for_each(chunk);
+    } else {
+        out.chunks_mut(CHUNK).enumerate().for_each(chunk);
     }
 }
 
