@@ -328,11 +328,6 @@ impl FluidSolver {
         self.plan
             .rebuild(&self.layout, [&f0.active, &f1.active, &f2.active]);
         let total = self.plan.offset[3];
-        eprintln!(
-            "DEBUG faces {:?} runs {}",
-            self.plan.offset,
-            self.plan.runs.len()
-        );
         for v in [
             &mut self.adv,
             &mut self.adv_lo,
