@@ -1,23 +1,36 @@
 //! Geometric multigrid V-cycle on voxelized (irregular) domains, used as the CG preconditioner.
 //!
 //! Each level is a 7-point Poisson operator on the "fluid" cells of a label grid (0 = solid wall,
-//! Neumann; 1 = fluid, unknown; 2 = open, Dirichlet p = 0), stored as compressed rows with neighbour
-//! lists (periodic axes wrap). A coarse cell is open if any child is open, else fluid if any child
-//! is fluid, else solid. Restriction sums the children's residuals (times a scale), prolongation
-//! injects the coarse value into every child (its transpose). Smoothing is red-black Gauss-Seidel,
-//! forward before and reversed after the coarse correction, so the V-cycle is a symmetric operator and
-//! CG preconditioned by it stays valid.
-
-use rayon::prelude::*;
+//! Neumann; 1 = fluid, unknown; 2 = open, Dirichlet p = 0). A coarse cell is open if any child is
+//! open, else fluid if any child is fluid, else solid. Restriction sums the children's residuals
+//! (times a scale), prolongation injects the coarse value into every child (its transpose).
+//! Smoothing is red-black Gauss-Seidel, red then black before and black then red after the coarse
+//! correction, so the V-cycle is a symmetric operator and CG preconditioned by it stays valid.
+//!
+//! The levels are stored matrix-free on the dense box padded by one ghost layer per side: vectors
+//! hold zero on every non-fluid cell (solid walls contribute nothing, open cells are p = 0), the
+//! labels only decide the diagonal, so every kernel is a branch-free loop over contiguous spans of
+//! cells with fixed strides that the compiler vectorises. Periodic axes fill their ghost layers from
+//! the opposite side before each stencil application (`halo`). A colour's half-sweep reads only the
+//! other colour, so it computes a chunk into a stack buffer and adds it back (exact Gauss-Seidel;
+//! where an odd periodic axis or a one-cell periodic axis makes a cell its own colour's neighbour it
+//! is a Jacobi update within the colour, still symmetric, and the half-sweeps stay convergent).
+//!
+//! Level 0 also keeps the compressed rows (fluid cells numbered in order, with neighbour lists) that
+//! the reference solvers, the baseline and the region search use.
 
 use super::topology::NONE;
-
-const CHUNK: usize = 2048;
 
 /// Label codes of a level.
 pub(crate) const L_SOLID: u8 = 0;
 pub(crate) const L_FLUID: u8 = 1;
 pub(crate) const L_OPEN: u8 = 2;
+
+/// Cells per stack buffer of the smoother (a few cache lines; any length is correct).
+const CHUNK: usize = 128;
+/// Spans closer than this many cells merge (the cells between are masked out, so this only trades
+/// a little work on non-fluid cells for longer vector loops).
+const SPAN_GAP: usize = 12;
 
 /// One multigrid level.
 #[derive(Default, Debug)]
@@ -25,28 +38,38 @@ pub(crate) struct Level {
     pub dims: [usize; 3],
     pub periodic: [bool; 3],
     pub label: Vec<u8>,
+    /// Compressed rows (level 0 only): row of each cell (NONE if not fluid), cell of each row.
     pub row_of_cell: Vec<u32>,
     pub cell_of_row: Vec<u32>,
-    /// Neighbour rows, order -x +x -y +y -z +z; a wall or open neighbour points at the extra slot
-    /// `rows()` of `x`, which is always zero, so the smoother needs no branches.
+    /// Neighbour rows, order -x +x -y +y -z +z; a wall or open neighbour is `rows()` (level 0 only).
     pub nbr: Vec<[u32; 6]>,
-    /// Number of fluid or open neighbours.
+    /// Number of fluid or open neighbours, per row (level 0 only).
     pub diag: Vec<f32>,
     pub inv_diag: Vec<f32>,
-    /// Rows `0..red_rows` are red (even i+j+k), the rest black.
-    pub red_rows: usize,
-    /// True when no row has a neighbour of its own colour (parallel sweeps are then exact).
-    pub exact_colouring: bool,
-    /// Scratch for parallel sweeps.
-    pub scratch: Vec<f32>,
-    /// Coarse row of each row's parent cell (NONE when the parent is open).
-    pub parent: Vec<u32>,
+    /// Dense (padded) index of each compressed row (level 0 only).
+    pub pad_of_row: Vec<u32>,
+    /// Strides of the padded box along y and z (x is 1).
+    pub sy: usize,
+    pub sz: usize,
+    /// Fluid cells.
+    pub fluid: usize,
+    /// Padded-index ranges `[start, end)` that cover every fluid cell.
+    pub spans: Vec<[u32; 2]>,
+    /// Interior rows holding fluid: `[j, k, i_first, i_end)`.
+    pub row_spans: Vec<[u32; 4]>,
+    /// Dense diagonal (fluid cells; 0 elsewhere), fluid mask, and the inverse diagonal on red
+    /// (`inv[0]`, even i+j+k) and black (`inv[1]`) fluid cells only.
+    pub ddiag: Vec<f32>,
+    pub mask: Vec<f32>,
+    pub inv: [Vec<f32>; 2],
+    /// Dense unknowns, right-hand side and residual.
     pub x: Vec<f32>,
     pub b: Vec<f32>,
     pub r: Vec<f32>,
 }
 
 impl Level {
+    /// Compressed rows (fluid cells).
     pub fn rows(&self) -> usize {
         self.cell_of_row.len()
     }
@@ -74,75 +97,132 @@ impl Level {
         Some(g[0] + self.dims[0] * (g[1] + self.dims[1] * g[2]))
     }
 
-    /// Builds rows, stencils and colours from `self.label`, `dims`, `periodic`.
+    /// Padded index of interior cell (i, j, k).
+    #[inline]
+    pub fn pad(&self, i: usize, j: usize, k: usize) -> usize {
+        (i + 1) + self.sy * (j + 1) + self.sz * (k + 1)
+    }
+
+    /// Number of fluid or open neighbours of a fluid cell.
+    fn count_diag(&self, c: [usize; 3]) -> f32 {
+        let mut diag = 0.0f32;
+        for axis in 0..3 {
+            for dir in [-1i32, 1] {
+                if let Some(g) = self.neighbour_cell(c, axis, dir) {
+                    if matches!(self.label[g], L_FLUID | L_OPEN) {
+                        diag += 1.0;
+                    }
+                }
+            }
+        }
+        diag
+    }
+
+    /// Builds the compressed rows of level 0 (and then its dense form) from `label`, `dims`,
+    /// `periodic`.
     pub fn build_rows(&mut self) {
         let [nx, ny, _] = self.dims;
         let ncell = self.label.len();
         self.row_of_cell.clear();
         self.row_of_cell.resize(ncell, NONE);
         self.cell_of_row.clear();
-        // Red cells (even i+j+k) first, then black: each colour is a contiguous range of rows, so a
-        // colour can be relaxed in parallel into a scratch buffer and copied back in one piece.
-        let parity = |i: usize| (i % nx + (i / nx) % ny + i / (nx * ny)) % 2;
-        for colour in 0..2 {
-            for (i, &l) in self.label.iter().enumerate() {
-                if l == L_FLUID && parity(i) == colour {
-                    self.row_of_cell[i] = self.cell_of_row.len() as u32;
-                    self.cell_of_row.push(i as u32);
-                }
-            }
-            if colour == 0 {
-                self.red_rows = self.cell_of_row.len();
+        for (i, &l) in self.label.iter().enumerate() {
+            if l == L_FLUID {
+                self.row_of_cell[i] = self.cell_of_row.len() as u32;
+                self.cell_of_row.push(i as u32);
             }
         }
         self.nbr.clear();
         self.diag.clear();
         self.inv_diag.clear();
-        self.exact_colouring = true;
         let zero_slot = self.cell_of_row.len() as u32;
         for row in 0..self.cell_of_row.len() {
             let ci = self.cell_of_row[row] as usize;
             let c = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
             let mut nb = [zero_slot; 6];
-            let mut diag = 0.0f32;
             for axis in 0..3 {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
                     if let Some(g) = self.neighbour_cell(c, axis, dir) {
-                        match self.label[g] {
-                            L_FLUID => {
-                                nb[2 * axis + s] = self.row_of_cell[g];
-                                diag += 1.0;
-                            }
-                            L_OPEN => diag += 1.0,
-                            _ => {}
+                        if self.label[g] == L_FLUID {
+                            nb[2 * axis + s] = self.row_of_cell[g];
                         }
                     }
                 }
             }
+            let diag = self.count_diag(c);
             self.nbr.push(nb);
             self.diag.push(diag);
             self.inv_diag
                 .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
-            // Odd periodic axes make some neighbours share a colour: then only serial sweeps are
-            // Gauss-Seidel.
-            let red = row < self.red_rows;
-            if nb
-                .iter()
-                .any(|&m| m != zero_slot && ((m as usize) < self.red_rows) == red)
-            {
-                self.exact_colouring = false;
-            }
         }
-        let n = self.cell_of_row.len() + 1;
-        for v in [&mut self.x, &mut self.b, &mut self.r, &mut self.scratch] {
-            v.clear();
-            v.resize(n, 0.0);
+        self.build_dense();
+        self.pad_of_row.clear();
+        for row in 0..self.cell_of_row.len() {
+            let ci = self.cell_of_row[row] as usize;
+            self.pad_of_row
+                .push(self.pad(ci % nx, (ci / nx) % ny, ci / (nx * ny)) as u32);
         }
     }
 
-    /// Labels of the next coarser level, or None when this level should be the coarsest.
+    /// Builds the dense (padded) operator, spans and vectors from `label`.
+    pub fn build_dense(&mut self) {
+        let [nx, ny, nz] = self.dims;
+        self.sy = nx + 2;
+        self.sz = (nx + 2) * (ny + 2);
+        let len = self.sz * (nz + 2);
+        let [inv0, inv1] = &mut self.inv;
+        for v in [
+            &mut self.ddiag,
+            &mut self.mask,
+            inv0,
+            inv1,
+            &mut self.x,
+            &mut self.b,
+            &mut self.r,
+        ] {
+            v.clear();
+            v.resize(len, 0.0);
+        }
+        self.spans.clear();
+        self.row_spans.clear();
+        self.fluid = 0;
+        for k in 0..nz {
+            for j in 0..ny {
+                let mut first = None;
+                let mut end = 0;
+                for i in 0..nx {
+                    let c = i + nx * (j + ny * k);
+                    if self.label[c] != L_FLUID {
+                        continue;
+                    }
+                    self.fluid += 1;
+                    first.get_or_insert(i);
+                    end = i + 1;
+                    let d = self.count_diag([i, j, k]);
+                    let p = self.pad(i, j, k);
+                    self.ddiag[p] = d;
+                    self.mask[p] = 1.0;
+                    self.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
+                }
+                if let Some(i0) = first {
+                    self.row_spans
+                        .push([j as u32, k as u32, i0 as u32, end as u32]);
+                    let (s, e) = (
+                        self.pad(i0, j, k) as u32,
+                        self.pad(end - 1, j, k) as u32 + 1,
+                    );
+                    match self.spans.last_mut() {
+                        Some(last) if (s as usize) <= last[1] as usize + SPAN_GAP => last[1] = e,
+                        _ => self.spans.push([s, e]),
+                    }
+                }
+            }
+        }
+    }
+
+    /// Labels of the next coarser level, or false when this level should be the coarsest.
     fn coarsen(&self, coarse: &mut Level) -> bool {
-        if self.rows() <= 8 || self.dims.iter().all(|&n| n <= 1) {
+        if self.fluid <= 8 || self.dims.iter().all(|&n| n <= 1) {
             return false;
         }
         for a in 0..3 {
@@ -171,91 +251,226 @@ impl Level {
         true
     }
 
-    fn link_parents(&mut self, coarse: &Level) {
-        let [nx, ny, _] = self.dims;
-        let cd = coarse.dims;
-        self.parent.clear();
-        for row in 0..self.rows() {
-            let ci = self.cell_of_row[row] as usize;
-            let (i, j, k) = (ci % nx, (ci / nx) % ny, ci / (nx * ny));
-            let p = i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2));
-            self.parent.push(coarse.row_of_cell[p]);
+    fn any_periodic(&self) -> bool {
+        self.periodic.iter().any(|&p| p)
+    }
+
+    /// Fills the ghost layers of periodic axes of `v` from the opposite side.
+    pub fn halo<T: Copy>(&self, v: &mut [T]) {
+        let [nx, ny, nz] = self.dims;
+        let (sy, sz) = (self.sy, self.sz);
+        let (py, pz) = (ny + 2, nz + 2);
+        if self.periodic[0] {
+            for k in 0..pz {
+                for j in 0..py {
+                    let row = j * sy + k * sz;
+                    v[row] = v[row + nx];
+                    v[row + nx + 1] = v[row + 1];
+                }
+            }
+        }
+        if self.periodic[1] {
+            for k in 0..pz {
+                let plane = k * sz;
+                v.copy_within(plane + ny * sy..plane + (ny + 1) * sy, plane);
+                v.copy_within(plane + sy..plane + 2 * sy, plane + (ny + 1) * sy);
+            }
+        }
+        if self.periodic[2] {
+            v.copy_within(nz * sz..(nz + 1) * sz, 0);
+            v.copy_within(sz..2 * sz, (nz + 1) * sz);
         }
     }
 
-    #[inline]
-    fn relax(&mut self, row: usize) {
-        let nb = self.nbr[row];
-        let x = &self.x;
-        let s = self.b[row]
-            + (x[nb[0] as usize] + x[nb[1] as usize])
-            + (x[nb[2] as usize] + x[nb[3] as usize])
-            + (x[nb[4] as usize] + x[nb[5] as usize]);
-        self.x[row] = s * self.inv_diag[row];
-    }
-
-    /// Relaxes rows `range` (one colour): in parallel through the scratch buffer when `parallel` and
-    /// the colouring is exact, else in order (`reverse`: backwards).
-    fn relax_range(&mut self, range: std::ops::Range<usize>, reverse: bool, parallel: bool) {
-        if parallel && self.exact_colouring {
-            let start = range.start;
-            let Level {
-                x,
-                b,
-                nbr,
-                inv_diag,
-                scratch,
-                ..
-            } = self;
-            let x_read: &[f32] = x;
-            scratch[range.clone()]
-                .par_chunks_mut(CHUNK)
-                .enumerate()
-                .for_each(|(ci, out)| {
-                    for (o, v) in out.iter_mut().enumerate() {
-                        let row = start + ci * CHUNK + o;
-                        let nb = nbr[row];
-                        let s = b[row]
-                            + (x_read[nb[0] as usize] + x_read[nb[1] as usize])
-                            + (x_read[nb[2] as usize] + x_read[nb[3] as usize])
-                            + (x_read[nb[4] as usize] + x_read[nb[5] as usize]);
-                        *v = s * inv_diag[row];
-                    }
-                });
-            x[range.clone()].copy_from_slice(&scratch[range]);
-        } else if reverse {
-            for row in range.rev() {
-                self.relax(row);
+    /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
+    /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
+    fn half_sweep(&mut self, colour: usize, init: bool) {
+        if init {
+            let inv = &self.inv[colour];
+            for &[s, e] in &self.spans {
+                let (s, e) = (s as usize, e as usize);
+                for ((x, &b), &d) in self.x[s..e].iter_mut().zip(&self.b[s..e]).zip(&inv[s..e]) {
+                    *x = b * d;
+                }
             }
-        } else {
-            for row in range {
-                self.relax(row);
-            }
+            return;
+        }
+        if self.any_periodic() {
+            let mut x = std::mem::take(&mut self.x);
+            self.halo(&mut x);
+            self.x = x;
+        }
+        for &[s, e] in &self.spans {
+            relax_span(
+                &mut self.x,
+                &self.b,
+                &self.ddiag,
+                &self.inv[colour],
+                s as usize,
+                e as usize,
+                self.sy,
+                self.sz,
+            );
         }
     }
 
-    /// Red then black Gauss-Seidel sweep.
-    pub fn smooth_forward(&mut self, parallel: bool) {
-        let (red, n) = (self.red_rows, self.rows());
-        self.relax_range(0..red, false, parallel);
-        self.relax_range(red..n, false, parallel);
-    }
-
-    /// The adjoint of `smooth_forward`: black then red, each in reverse order.
-    pub fn smooth_backward(&mut self, parallel: bool) {
-        let (red, n) = (self.red_rows, self.rows());
-        self.relax_range(red..n, true, parallel);
-        self.relax_range(0..red, true, parallel);
-    }
-
+    /// `r = b - A x` on the spans.
     fn residual(&mut self) {
-        for row in 0..self.rows() {
-            let nb = self.nbr[row];
-            let x = &self.x;
-            self.r[row] = self.b[row] - self.diag[row] * x[row]
-                + (x[nb[0] as usize] + x[nb[1] as usize])
-                + (x[nb[2] as usize] + x[nb[3] as usize])
-                + (x[nb[4] as usize] + x[nb[5] as usize]);
+        if self.any_periodic() {
+            let mut x = std::mem::take(&mut self.x);
+            self.halo(&mut x);
+            self.x = x;
+        }
+        for &[s, e] in &self.spans {
+            stencil_span(
+                &mut self.r,
+                &self.x,
+                Some(&self.b),
+                &self.ddiag,
+                &self.mask,
+                s as usize,
+                e as usize,
+                self.sy,
+                self.sz,
+            );
+        }
+    }
+
+    /// `y = A v` on the spans (zero on non-fluid cells of the spans); `v`'s periodic ghost layers
+    /// must be filled.
+    pub fn apply(&self, v: &[f32], y: &mut [f32]) {
+        for &[s, e] in &self.spans {
+            stencil_span(
+                y,
+                v,
+                None,
+                &self.ddiag,
+                &self.mask,
+                s as usize,
+                e as usize,
+                self.sy,
+                self.sz,
+            );
+        }
+    }
+}
+
+/// Neighbour windows of cells `c..c+n` in a padded vector: (x-1, x+1, y-1, y+1, z-1, z+1).
+macro_rules! windows {
+    ($v:expr, $c:expr, $n:expr, $sy:expr, $sz:expr) => {{
+        let (c, n, sy, sz) = ($c, $n, $sy, $sz);
+        (
+            &$v[c - 1..c - 1 + n],
+            &$v[c + 1..c + 1 + n],
+            &$v[c - sy..c - sy + n],
+            &$v[c + sy..c + sy + n],
+            &$v[c - sz..c - sz + n],
+            &$v[c + sz..c + sz + n],
+        )
+    }};
+}
+
+/// Relaxes the cells of `s..e` whose `inv` is non-zero: `x += inv (b + sum of neighbours - d x)`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn relax_span(
+    x: &mut [f32],
+    b: &[f32],
+    diag: &[f32],
+    inv: &[f32],
+    s: usize,
+    e: usize,
+    sy: usize,
+    sz: usize,
+) {
+    let mut c = s;
+    let mut t = [0.0f32; CHUNK];
+    while c < e {
+        let n = (e - c).min(CHUNK);
+        {
+            let (xm, xp, ym, yp, zm, zp) = windows!(x, c, n, sy, sz);
+            let x0 = &x[c..c + n];
+            let (bb, dd, ii) = (&b[c..c + n], &diag[c..c + n], &inv[c..c + n]);
+            let t = &mut t[..n];
+            for q in 0..n {
+                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                t[q] = ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
+            }
+        }
+        for (xv, &tv) in x[c..c + n].iter_mut().zip(&t[..n]) {
+            *xv += tv;
+        }
+        c += n;
+    }
+}
+
+/// `y = mask (b - A v)` with `b`, or `y = mask A v` without, on cells `s..e`.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+fn stencil_span(
+    y: &mut [f32],
+    v: &[f32],
+    b: Option<&[f32]>,
+    diag: &[f32],
+    mask: &[f32],
+    s: usize,
+    e: usize,
+    sy: usize,
+    sz: usize,
+) {
+    let n = e - s;
+    let (xm, xp, ym, yp, zm, zp) = windows!(v, s, n, sy, sz);
+    let (v0, dd, mm) = (&v[s..e], &diag[s..e], &mask[s..e]);
+    let y = &mut y[s..e];
+    match b {
+        Some(b) => {
+            let b = &b[s..e];
+            for q in 0..n {
+                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                y[q] = mm[q] * (b[q] + nsum - dd[q] * v0[q]);
+            }
+        }
+        None => {
+            for q in 0..n {
+                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                y[q] = mm[q] * (dd[q] * v0[q] - nsum);
+            }
+        }
+    }
+}
+
+/// `coarse.b = scale * (sum of the children's residuals)` on the coarse fluid cells.
+fn restrict(fine: &Level, coarse: &mut Level, scale: f32) {
+    let (fsy, fsz) = (fine.sy, fine.sz);
+    for &[j, k, i0, i1] in &coarse.row_spans {
+        let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+        let cbase = coarse.pad(0, j, k);
+        let fbase = fine.pad(0, 2 * j, 2 * k);
+        for i in i0..i1 {
+            let f = fbase + 2 * i;
+            let r = &fine.r;
+            let s = (r[f] + r[f + 1])
+                + (r[f + fsy] + r[f + fsy + 1])
+                + ((r[f + fsz] + r[f + fsz + 1]) + (r[f + fsz + fsy] + r[f + fsz + fsy + 1]));
+            let c = cbase + i;
+            coarse.b[c] = coarse.mask[c] * scale * s;
+        }
+    }
+}
+
+/// `fine.x += coarse.x` of the parent on every fine fluid cell.
+fn prolongate(coarse: &Level, fine: &mut Level) {
+    let (fsy, fsz) = (fine.sy, fine.sz);
+    for &[j, k, i0, i1] in &coarse.row_spans {
+        let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+        let cbase = coarse.pad(0, j, k);
+        let fbase = fine.pad(0, 2 * j, 2 * k);
+        for i in i0..i1 {
+            let v = coarse.x[cbase + i];
+            let f = fbase + 2 * i;
+            for o in [0, 1, fsy, fsy + 1, fsz, fsz + 1, fsz + fsy, fsz + fsy + 1] {
+                fine.x[f + o] += fine.mask[f + o] * v;
+            }
         }
     }
 }
@@ -272,77 +487,54 @@ pub(crate) struct Multigrid {
     pub sweeps: usize,
     /// Symmetric sweeps on the coarsest level.
     pub coarsest_sweeps: usize,
-    /// Levels with at least this many rows smooth in parallel (rayon).
-    pub parallel_rows: usize,
 }
 
 impl Multigrid {
-    /// Builds the hierarchy under a finished level 0 (`levels[0]` must be built by the caller).
+    /// Builds the hierarchy under a finished level 0 (`levels[0].build_rows()` done by the caller).
     pub fn build_hierarchy(&mut self) {
         self.used = 1;
-        loop {
+        while self.used < 16 {
             let l = self.used;
             if self.levels.len() <= l {
                 self.levels.push(Level::default());
             }
             let (fine, coarse) = self.levels.split_at_mut(l);
-            let fine = &mut fine[l - 1];
-            if !fine.coarsen(&mut coarse[0]) {
-                fine.parent.clear();
+            if !fine[l - 1].coarsen(&mut coarse[0]) {
                 break;
             }
-            coarse[0].build_rows();
-            fine.link_parents(&coarse[0]);
+            coarse[0].build_dense();
             self.used += 1;
-            if self.used >= 16 {
-                break;
-            }
-        }
-        if self.used >= 16 {
-            self.levels[self.used - 1].parent.clear();
         }
     }
 
-    /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b`.
+    /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b` (dense, zero off the fluid cells).
     pub fn vcycle(&mut self) {
         let n = self.used;
+        let sweeps = self.sweeps.max(1);
         for l in 0..n - 1 {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
             let fine = &mut fine[l];
-            let coarse = &mut coarse[0];
-            fine.x.fill(0.0);
-            let par = fine.rows() >= self.parallel_rows;
-            for _ in 0..self.sweeps {
-                fine.smooth_forward(par);
+            for s in 0..sweeps {
+                fine.half_sweep(0, s == 0);
+                fine.half_sweep(1, false);
             }
             fine.residual();
-            coarse.b.fill(0.0);
-            for row in 0..fine.rows() {
-                let p = fine.parent[row];
-                if p != NONE {
-                    coarse.b[p as usize] += self.coarse_scale * fine.r[row];
-                }
-            }
+            restrict(fine, &mut coarse[0], self.coarse_scale);
         }
         let last = &mut self.levels[n - 1];
-        last.x.fill(0.0);
-        for _ in 0..self.coarsest_sweeps {
-            last.smooth_forward(false);
-            last.smooth_backward(false);
+        for s in 0..self.coarsest_sweeps.max(1) {
+            last.half_sweep(0, s == 0);
+            last.half_sweep(1, false);
+            last.half_sweep(1, false);
+            last.half_sweep(0, false);
         }
         for l in (0..n - 1).rev() {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
             let fine = &mut fine[l];
-            let coarse = &coarse[0];
-            for row in 0..fine.rows() {
-                let p = fine.parent[row];
-                if p != NONE {
-                    fine.x[row] += coarse.x[p as usize];
-                }
-            }
-            let par = fine.rows() >= self.parallel_rows;
-            for _ in 0..self.sweeps {
-                fine.smooth_backward(par);
+            prolongate(&coarse[0], fine);
+            for _ in 0..sweeps {
+                fine.half_sweep(1, false);
+                fine.half_sweep(0, false);
             }
         }
     }
@@ -353,10 +545,10 @@ mod tests {
     use super::*;
 
     /// An irregular label grid: a ball of fluid with an open cap and a solid inclusion.
-    fn ball(n: usize) -> Level {
+    fn ball(n: usize, periodic: [bool; 3]) -> Level {
         let mut l = Level {
             dims: [n, n, n],
-            periodic: [false; 3],
+            periodic,
             ..Default::default()
         };
         let c = (n as f64 - 1.0) / 2.0;
@@ -392,16 +584,71 @@ mod tests {
             coarsest_sweeps: 16,
             ..Default::default()
         };
-        m.levels.push(ball(n));
+        m.levels.push(ball(n, [false; 3]));
         m.build_hierarchy();
         m
     }
 
+    /// `M b` in compressed rows.
     fn apply(m: &mut Multigrid, b: &[f32]) -> Vec<f32> {
-        let n = m.levels[0].rows();
-        m.levels[0].b[..n].copy_from_slice(b);
+        let l0 = &mut m.levels[0];
+        l0.b.fill(0.0);
+        for (row, &v) in b.iter().enumerate() {
+            let p = l0.pad_of_row[row] as usize;
+            l0.b[p] = v;
+        }
         m.vcycle();
-        m.levels[0].x[..n].to_vec()
+        let l0 = &m.levels[0];
+        l0.pad_of_row.iter().map(|&p| l0.x[p as usize]).collect()
+    }
+
+    /// `A x` from the compressed rows (the reference the dense operator must match).
+    fn matvec(l: &Level, x: &[f32]) -> Vec<f32> {
+        (0..l.rows())
+            .map(|r| {
+                let mut s = l.diag[r] * x[r];
+                for &nb in &l.nbr[r] {
+                    if (nb as usize) < l.rows() {
+                        s -= x[nb as usize];
+                    }
+                }
+                s
+            })
+            .collect()
+    }
+
+    #[test]
+    fn dense_operator_equals_the_compressed_rows() {
+        // Non-periodic and periodic (odd and one-cell axes included) grids.
+        for (n, periodic) in [
+            (9, [false; 3]),
+            (8, [true, false, true]),
+            (7, [true, true, false]),
+        ] {
+            let mut l = ball(n, periodic);
+            if periodic[2] {
+                // A fully fluid periodic slab so wrap-around neighbours exist.
+                l.label.iter_mut().for_each(|v| *v = L_FLUID);
+                l.build_rows();
+            }
+            let x: Vec<f32> = (0..l.rows())
+                .map(|i| ((i * 37) % 11) as f32 - 5.0)
+                .collect();
+            let mut v = vec![0.0f32; l.x.len()];
+            for (row, &p) in l.pad_of_row.iter().enumerate() {
+                v[p as usize] = x[row];
+            }
+            l.halo(&mut v);
+            let mut y = vec![0.0f32; v.len()];
+            l.apply(&v, &mut y);
+            let reference = matvec(&l, &x);
+            for (row, &p) in l.pad_of_row.iter().enumerate() {
+                assert_eq!(y[p as usize], reference[row], "n {n} periodic {periodic:?}");
+            }
+            // Nothing leaks onto non-fluid cells.
+            let fluid_sum: f32 = l.pad_of_row.iter().map(|&p| y[p as usize].abs()).sum();
+            assert_eq!(y.iter().map(|v| v.abs()).sum::<f32>(), fluid_sum);
+        }
     }
 
     #[test]
@@ -432,37 +679,12 @@ mod tests {
     }
 
     #[test]
-    fn parallel_sweeps_equal_serial_sweeps() {
-        let mut serial = mg(17);
-        let mut parallel = mg(17);
-        parallel.parallel_rows = 0;
-        assert!(parallel.levels[0].exact_colouring);
-        let n = serial.levels[0].rows();
-        let b: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
-        assert_eq!(apply(&mut serial, &b), apply(&mut parallel, &b));
-    }
-
-    #[test]
     fn vcycle_reduces_the_error_of_the_poisson_problem() {
         // As a stationary iteration x <- x + M (b - A x), one V-cycle must contract the error well.
         let mut m = mg(17);
         let n = m.levels[0].rows();
-        let l0 = &m.levels[0];
         let exact: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
-        let matvec = |l: &Level, x: &[f32]| -> Vec<f32> {
-            (0..l.rows())
-                .map(|r| {
-                    let mut s = l.diag[r] * x[r];
-                    for &nb in &l.nbr[r] {
-                        if (nb as usize) < l.rows() {
-                            s -= x[nb as usize];
-                        }
-                    }
-                    s
-                })
-                .collect()
-        };
-        let b = matvec(l0, &exact);
+        let b = matvec(&m.levels[0], &exact);
         let mut x = vec![0.0f32; n];
         for _ in 0..2 {
             let ax = matvec(&m.levels[0], &x);

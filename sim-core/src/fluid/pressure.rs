@@ -48,6 +48,13 @@ pub(crate) struct PressureSolver {
     z: Vec<f64>,
     p: Vec<f64>,
     ap: Vec<f64>,
+    /// Dense (padded) vectors of the multigrid-PCG: the warm start in f64, and the increment, search
+    /// direction and its product in f32 (the residual and the preconditioned residual live in level
+    /// 0's `b` and `x`).
+    dq: Vec<f64>,
+    dd: Vec<f32>,
+    dp: Vec<f32>,
+    dap: Vec<f32>,
     /// Rows above which the matrix-vector product runs on rayon.
     pub parallel_rows: usize,
 }
@@ -83,6 +90,65 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width body).
+const LANES: usize = 8;
+
+/// `sum a b` over the spans, accumulated in f64.
+fn dot_spans(spans: &[[u32; 2]], a: &[f32], b: &[f32]) -> f64 {
+    let mut acc = [0.0f64; LANES];
+    for &[s, e] in spans {
+        let (a, b) = (&a[s as usize..e as usize], &b[s as usize..e as usize]);
+        let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+        for (&x, &y) in ac.remainder().iter().zip(bc.remainder()) {
+            acc[0] += x as f64 * y as f64;
+        }
+        for (x, y) in ac.zip(bc) {
+            for k in 0..LANES {
+                acc[k] += x[k] as f64 * y[k] as f64;
+            }
+        }
+    }
+    acc.iter().sum()
+}
+
+/// `d += alpha p`, `r -= alpha ap` over the spans; returns `max |r|`.
+fn update_spans(
+    spans: &[[u32; 2]],
+    alpha: f32,
+    p: &[f32],
+    ap: &[f32],
+    d: &mut [f32],
+    r: &mut [f32],
+) -> f32 {
+    let mut m = [0.0f32; LANES];
+    for &[s, e] in spans {
+        let (s, e) = (s as usize, e as usize);
+        let (p, ap, d, r) = (&p[s..e], &ap[s..e], &mut d[s..e], &mut r[s..e]);
+        let mut pc = p.chunks_exact(LANES);
+        let mut apc = ap.chunks_exact(LANES);
+        let mut dc = d.chunks_exact_mut(LANES);
+        let mut rc = r.chunks_exact_mut(LANES);
+        for (((p, ap), d), r) in (&mut pc).zip(&mut apc).zip(&mut dc).zip(&mut rc) {
+            for k in 0..LANES {
+                d[k] += alpha * p[k];
+                r[k] -= alpha * ap[k];
+                m[k] = m[k].max(r[k].abs());
+            }
+        }
+        let tail = pc
+            .remainder()
+            .iter()
+            .zip(apc.remainder())
+            .zip(dc.into_remainder().iter_mut().zip(rc.into_remainder()));
+        for ((&p, &ap), (d, r)) in tail {
+            *d += alpha * p;
+            *r -= alpha * ap;
+            m[0] = m[0].max(r.abs());
+        }
+    }
+    m.iter().fold(0.0f32, |a, &b| a.max(b))
+}
+
 fn max_abs(a: &[f64]) -> f64 {
     a.iter().fold(0.0f64, |m, &x| m.max(x.abs()))
 }
@@ -103,32 +169,26 @@ impl PressureSolver {
             v.resize(n, 0.0);
         }
         self.regions.build(&self.mg.levels[0]);
+        let len = self.mg.levels[0].x.len();
+        self.dq.clear();
+        self.dq.resize(len, 0.0);
+        for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
+            v.clear();
+            v.resize(len, 0.0);
+        }
     }
 
-    fn precondition(&mut self, method: ProjectionMethod) {
-        match method {
-            ProjectionMethod::MultigridPcg => {
-                let l0 = &mut self.mg.levels[0];
-                for (bv, &rv) in l0.b.iter_mut().zip(&self.r) {
-                    *bv = rv as f32;
-                }
-                self.mg.vcycle();
-                let l0 = &self.mg.levels[0];
-                for (zv, &xv) in self.z.iter_mut().zip(&l0.x) {
-                    *zv = xv as f64;
-                }
-            }
-            _ => {
-                let l0 = &self.mg.levels[0];
-                for ((zv, &rv), &d) in self.z.iter_mut().zip(&self.r).zip(&l0.inv_diag) {
-                    *zv = rv * d as f64;
-                }
-            }
+    /// Jacobi preconditioner of the reference solver.
+    fn precondition(&mut self) {
+        let l0 = &self.mg.levels[0];
+        for ((zv, &rv), &d) in self.z.iter_mut().zip(&self.r).zip(&l0.inv_diag) {
+            *zv = rv * d as f64;
         }
         self.regions.remove_closed_means(&mut self.z);
     }
 
-    /// Solves `A q = b` from the current `q` until `max |r| <= tol_abs` or `max_iterations`.
+    /// Solves `A q = b` from the current `q` until `max |r| <= tol_abs` or `max_iterations` (the
+    /// recurrence residual: the caller measures the true one).
     pub fn solve(
         &mut self,
         method: ProjectionMethod,
@@ -142,11 +202,12 @@ impl PressureSolver {
                 converged: true,
             };
         }
-        if let ProjectionMethod::GaussSeidel { sweeps } = method {
-            return self.gauss_seidel(sweeps, tol_abs);
+        match method {
+            ProjectionMethod::GaussSeidel { sweeps } => return self.gauss_seidel(sweeps, tol_abs),
+            ProjectionMethod::MultigridPcg => return self.solve_multigrid(tol_abs, max_iterations),
+            ProjectionMethod::JacobiPcg => {}
         }
         let parallel = n >= self.parallel_rows;
-        self.mg.parallel_rows = self.parallel_rows;
         self.regions.remove_closed_means(&mut self.q);
         matvec(&self.mg.levels[0], &self.q, &mut self.r, parallel);
         for (r, &b) in self.r.iter_mut().zip(&self.b) {
@@ -159,7 +220,7 @@ impl PressureSolver {
                 converged: true,
             };
         }
-        self.precondition(method);
+        self.precondition();
         self.p.copy_from_slice(&self.z);
         let mut rz = dot(&self.r, &self.z);
         for it in 1..=max_iterations {
@@ -187,7 +248,7 @@ impl PressureSolver {
                     converged: true,
                 };
             }
-            self.precondition(method);
+            self.precondition();
             let rz_new = dot(&self.r, &self.z);
             let beta = rz_new / rz;
             rz = rz_new;
@@ -199,6 +260,113 @@ impl PressureSolver {
             iterations: max_iterations,
             converged: false,
         }
+    }
+
+    /// Multigrid-preconditioned CG on the dense operator, for the increment `d` of the warm start
+    /// `q`: the residual of the warm start is formed in f64, the increment is solved in f32 (dot
+    /// products accumulated in f64), and `q += d` in f64, so the f32 rounding only ever applies to
+    /// the (small) correction.
+    fn solve_multigrid(&mut self, tol_abs: f64, max_iterations: usize) -> SolveOutcome {
+        // Closed regions: pressure is defined up to a constant; keeping it mean-free keeps it small.
+        self.regions.remove_closed_means(&mut self.q);
+        let PressureSolver {
+            mg,
+            regions,
+            q,
+            b,
+            dq,
+            dd,
+            dp,
+            dap,
+            ..
+        } = self;
+        let periodic = mg.levels[0].periodic.iter().any(|&p| p);
+        {
+            let l0 = &mut mg.levels[0];
+            for (&qv, &p) in q.iter().zip(&l0.pad_of_row) {
+                dq[p as usize] = qv;
+            }
+            if periodic {
+                l0.halo(dq);
+            }
+            let (sy, sz) = (l0.sy, l0.sz);
+            for (&bv, &p) in b.iter().zip(&l0.pad_of_row) {
+                let p = p as usize;
+                let nsum =
+                    (dq[p - 1] + dq[p + 1]) + (dq[p - sy] + dq[p + sy]) + (dq[p - sz] + dq[p + sz]);
+                l0.b[p] = (bv - (l0.ddiag[p] as f64 * dq[p] - nsum)) as f32;
+            }
+            regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
+        }
+        let tol = tol_abs as f32;
+        let mut outcome = SolveOutcome {
+            iterations: 0,
+            converged: false,
+        };
+        let l0max = {
+            let l0 = &mg.levels[0];
+            l0.pad_of_row
+                .iter()
+                .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
+        };
+        if l0max <= tol {
+            outcome.converged = true;
+            return outcome;
+        }
+        for &[s, e] in &mg.levels[0].spans {
+            dd[s as usize..e as usize].fill(0.0);
+        }
+        let precondition = |mg: &mut Multigrid, regions: &mut Regions| {
+            mg.vcycle();
+            let l0 = &mut mg.levels[0];
+            regions.remove_closed_means_dense(&mut l0.x, &l0.pad_of_row);
+        };
+        precondition(mg, regions);
+        let l0 = &mg.levels[0];
+        dp.copy_from_slice(&l0.x);
+        let mut rz = dot_spans(&l0.spans, &l0.b, &l0.x);
+        for it in 1..=max_iterations {
+            outcome.iterations = it;
+            let l0 = &mut mg.levels[0];
+            if periodic {
+                l0.halo(dp);
+            }
+            l0.apply(dp, dap);
+            let pap = dot_spans(&l0.spans, dp, dap);
+            if pap.is_nan() || pap <= 0.0 || !rz.is_finite() {
+                break;
+            }
+            let alpha = (rz / pap) as f32;
+            let mut rmax = update_spans(&l0.spans, alpha, dp, dap, dd, &mut l0.b);
+            if regions.any_closed() {
+                // In f32 the rounding of `r -= alpha A p` accumulates a region mean no pressure
+                // can remove, on which CG would stagnate: keep r in the range of A.
+                regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
+                rmax = l0
+                    .pad_of_row
+                    .iter()
+                    .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()));
+            }
+            if rmax <= tol {
+                outcome.converged = true;
+                break;
+            }
+            precondition(mg, regions);
+            let l0 = &mg.levels[0];
+            let rz_new = dot_spans(&l0.spans, &l0.b, &l0.x);
+            let beta = (rz_new / rz) as f32;
+            rz = rz_new;
+            for &[s, e] in &l0.spans {
+                let (s, e) = (s as usize, e as usize);
+                for (p, &z) in dp[s..e].iter_mut().zip(&l0.x[s..e]) {
+                    *p = z + beta * *p;
+                }
+            }
+        }
+        for (qv, &p) in q.iter_mut().zip(&mg.levels[0].pad_of_row) {
+            *qv += dd[p as usize] as f64;
+        }
+        outcome
     }
 
     /// The baseline: `sweeps` lexicographic Gauss-Seidel sweeps from q = 0.

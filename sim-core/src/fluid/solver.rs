@@ -656,32 +656,58 @@ impl FluidSolver {
             *q = p * to_q;
         }
         self.pressure.parallel_rows = self.params.parallel_threshold_cells;
-        let out = self.pressure.solve(
-            self.params.projection,
-            // Half the tolerance: the velocity update is rounded to f32, and the divergence measured
-            // afterwards from the f32 faces must still meet the tolerance.
-            0.5 * self.params.tolerance * u_ref,
-            self.params.max_iterations,
-        );
-        stats.projection_iterations += out.iterations;
-        stats.projection_converged &= out.converged;
-        for (p, &q) in self.pressure_pa.iter_mut().zip(&self.pressure.q) {
-            *p = q / to_q;
-        }
-        let q = &self.pressure.q;
-        for c in 0..3 {
-            let set = &self.faces[c];
-            for (&idx, &[lo, up]) in set.active.iter().zip(&set.rows) {
-                let ql = if lo == NONE { 0.0 } else { q[lo as usize] };
-                let qu = if up == NONE { 0.0 } else { q[up as usize] };
-                self.u[c][idx as usize] -= (qu - ql) as f32;
+        let method = self.params.projection;
+        let tol_abs = self.params.tolerance * u_ref;
+        let mut iterations_left = self.params.max_iterations;
+        let mut max_div = f64::INFINITY;
+        // The CG stops on its recurrence residual at half the tolerance (the velocity update is
+        // rounded to f32, and the divergence measured afterwards from the f32 faces must still meet
+        // the tolerance). That measured divergence is the true residual: if it misses the
+        // tolerance (f32 inner solves, or a warm start far off), it is the right-hand side of a
+        // correction solve from zero, at most twice.
+        for round in 0..3 {
+            if round > 0 {
+                if max_div <= tol_abs
+                    || iterations_left == 0
+                    || matches!(method, ProjectionMethod::GaussSeidel { .. })
+                {
+                    break;
+                }
+                self.pressure.q.fill(0.0);
             }
+            let out = self
+                .pressure
+                .solve(method, 0.5 * tol_abs, iterations_left.max(1));
+            iterations_left = iterations_left.saturating_sub(out.iterations);
+            stats.projection_iterations += out.iterations;
+            if matches!(method, ProjectionMethod::GaussSeidel { .. }) {
+                stats.projection_converged &= out.converged;
+            }
+            let q = &self.pressure.q;
+            for (p, &qv) in self.pressure_pa.iter_mut().zip(q) {
+                *p = if round == 0 {
+                    qv / to_q
+                } else {
+                    *p + qv / to_q
+                };
+            }
+            for c in 0..3 {
+                let set = &self.faces[c];
+                for (&idx, &[lo, up]) in set.active.iter().zip(&set.rows) {
+                    let ql = if lo == NONE { 0.0 } else { q[lo as usize] };
+                    let qu = if up == NONE { 0.0 } else { q[up as usize] };
+                    self.u[c][idx as usize] -= (qu - ql) as f32;
+                }
+            }
+            self.divergence_rhs();
+            self.pressure
+                .regions
+                .remove_closed_means(&mut self.pressure.b);
+            max_div = self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
         }
-        self.divergence_rhs();
-        self.pressure
-            .regions
-            .remove_closed_means(&mut self.pressure.b);
-        let max_div = self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
+        if max_div > tol_abs && !matches!(method, ProjectionMethod::GaussSeidel { .. }) {
+            stats.projection_converged = false;
+        }
         stats.max_div_rel = max_div / u_ref;
     }
 
