@@ -32,6 +32,160 @@ const CHUNK: usize = 128;
 /// a little work on non-fluid cells for longer vector loops).
 const SPAN_GAP: usize = 12;
 
+/// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies).
+const LANES: usize = 8;
+
+/// A vector kernel over the spans of a level (`sy`, `sz`: the strides of the padded box).
+pub(crate) enum SpanOp<'a> {
+    /// `x = inv b` (a colour's half-sweep from x = 0).
+    Init {
+        x: &'a mut [f32],
+        b: &'a [f32],
+        inv: &'a [f32],
+    },
+    /// `x += inv (b - A x)` on the cells where `inv` is non-zero (one colour).
+    Relax {
+        x: &'a mut [f32],
+        b: &'a [f32],
+        diag: &'a [f32],
+        inv: &'a [f32],
+    },
+    /// `y = mask (b - A v)` with `b`, `y = mask A v` without.
+    Stencil {
+        y: &'a mut [f32],
+        v: &'a [f32],
+        b: Option<&'a [f32]>,
+        diag: &'a [f32],
+        mask: &'a [f32],
+    },
+    /// `sum a b` accumulated in f64.
+    Dot { a: &'a [f32], b: &'a [f32] },
+    /// `d += alpha p`, `r -= alpha ap`; returns `max |r|`.
+    Update {
+        alpha: f32,
+        p: &'a [f32],
+        ap: &'a [f32],
+        d: &'a mut [f32],
+        r: &'a mut [f32],
+    },
+    /// `p = z + beta p`.
+    Xpby {
+        p: &'a mut [f32],
+        z: &'a [f32],
+        beta: f32,
+    },
+}
+
+struct SpanRun<'a> {
+    op: SpanOp<'a>,
+    spans: &'a [[u32; 2]],
+    sy: usize,
+    sz: usize,
+}
+
+impl pulp::WithSimd for SpanRun<'_> {
+    type Output = f64;
+
+    // Everything below is inlined into pulp's per-instruction-set entry points, so it is compiled
+    // (and auto-vectorised) once for AVX2 + FMA and once for the SSE2 baseline.
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
+        let (sy, sz) = (self.sy, self.sz);
+        let spans = self.spans.iter().map(|&[s, e]| (s as usize, e as usize));
+        match self.op {
+            SpanOp::Init { x, b, inv } => {
+                for (s, e) in spans {
+                    for ((x, &b), &d) in x[s..e].iter_mut().zip(&b[s..e]).zip(&inv[s..e]) {
+                        *x = b * d;
+                    }
+                }
+                0.0
+            }
+            SpanOp::Relax { x, b, diag, inv } => {
+                for (s, e) in spans {
+                    relax_span(x, b, diag, inv, s, e, sy, sz);
+                }
+                0.0
+            }
+            SpanOp::Stencil {
+                y,
+                v,
+                b,
+                diag,
+                mask,
+            } => {
+                for (s, e) in spans {
+                    stencil_span(y, v, b, diag, mask, s, e, sy, sz);
+                }
+                0.0
+            }
+            SpanOp::Dot { a, b } => {
+                let mut acc = [0.0f64; LANES];
+                for (s, e) in spans {
+                    let (ac, bc) = (a[s..e].chunks_exact(LANES), b[s..e].chunks_exact(LANES));
+                    for (&x, &y) in ac.remainder().iter().zip(bc.remainder()) {
+                        acc[0] += x as f64 * y as f64;
+                    }
+                    for (x, y) in ac.zip(bc) {
+                        for k in 0..LANES {
+                            acc[k] += x[k] as f64 * y[k] as f64;
+                        }
+                    }
+                }
+                acc.iter().sum()
+            }
+            SpanOp::Update { alpha, p, ap, d, r } => {
+                let mut m = [0.0f32; LANES];
+                for (s, e) in spans {
+                    let (p, ap, d, r) = (&p[s..e], &ap[s..e], &mut d[s..e], &mut r[s..e]);
+                    let mut pc = p.chunks_exact(LANES);
+                    let mut apc = ap.chunks_exact(LANES);
+                    let mut dc = d.chunks_exact_mut(LANES);
+                    let mut rc = r.chunks_exact_mut(LANES);
+                    for (((p, ap), d), r) in (&mut pc).zip(&mut apc).zip(&mut dc).zip(&mut rc) {
+                        for k in 0..LANES {
+                            d[k] += alpha * p[k];
+                            r[k] -= alpha * ap[k];
+                            m[k] = m[k].max(r[k].abs());
+                        }
+                    }
+                    let tail = pc
+                        .remainder()
+                        .iter()
+                        .zip(apc.remainder())
+                        .zip(dc.into_remainder().iter_mut().zip(rc.into_remainder()));
+                    for ((&p, &ap), (d, r)) in tail {
+                        *d += alpha * p;
+                        *r -= alpha * ap;
+                        m[0] = m[0].max(r.abs());
+                    }
+                }
+                m.iter().fold(0.0f32, |a, &b| a.max(b)) as f64
+            }
+            SpanOp::Xpby { p, z, beta } => {
+                for (s, e) in spans {
+                    for (p, &z) in p[s..e].iter_mut().zip(&z[s..e]) {
+                        *p = z + beta * *p;
+                    }
+                }
+                0.0
+            }
+        }
+    }
+}
+
+/// Runs `op` over `level`'s spans, compiled for the best instruction set of this CPU (AVX2 + FMA
+/// where present, else the SSE2 baseline of the generic x86-64 binary). Element-wise kernels give
+/// bit-identical results either way; the reductions use fixed lanes, so they do too.
+pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
+    pulp::Arch::new().dispatch(SpanRun {
+        op,
+        spans: &level.spans,
+        sy: level.sy,
+        sz: level.sz,
+    })
+}
+
 /// One multigrid level.
 #[derive(Default, Debug)]
 pub(crate) struct Level {
@@ -285,73 +439,67 @@ impl Level {
     /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
     /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
     fn half_sweep(&mut self, colour: usize, init: bool) {
+        let mut x = std::mem::take(&mut self.x);
         if init {
-            let inv = &self.inv[colour];
-            for &[s, e] in &self.spans {
-                let (s, e) = (s as usize, e as usize);
-                for ((x, &b), &d) in self.x[s..e].iter_mut().zip(&self.b[s..e]).zip(&inv[s..e]) {
-                    *x = b * d;
-                }
+            run(
+                self,
+                SpanOp::Init {
+                    x: &mut x,
+                    b: &self.b,
+                    inv: &self.inv[colour],
+                },
+            );
+        } else {
+            if self.any_periodic() {
+                self.halo(&mut x);
             }
-            return;
-        }
-        if self.any_periodic() {
-            let mut x = std::mem::take(&mut self.x);
-            self.halo(&mut x);
-            self.x = x;
-        }
-        for &[s, e] in &self.spans {
-            relax_span(
-                &mut self.x,
-                &self.b,
-                &self.ddiag,
-                &self.inv[colour],
-                s as usize,
-                e as usize,
-                self.sy,
-                self.sz,
+            run(
+                self,
+                SpanOp::Relax {
+                    x: &mut x,
+                    b: &self.b,
+                    diag: &self.ddiag,
+                    inv: &self.inv[colour],
+                },
             );
         }
+        self.x = x;
     }
 
     /// `r = b - A x` on the spans.
     fn residual(&mut self) {
+        let mut x = std::mem::take(&mut self.x);
+        let mut r = std::mem::take(&mut self.r);
         if self.any_periodic() {
-            let mut x = std::mem::take(&mut self.x);
             self.halo(&mut x);
-            self.x = x;
         }
-        for &[s, e] in &self.spans {
-            stencil_span(
-                &mut self.r,
-                &self.x,
-                Some(&self.b),
-                &self.ddiag,
-                &self.mask,
-                s as usize,
-                e as usize,
-                self.sy,
-                self.sz,
-            );
-        }
+        run(
+            self,
+            SpanOp::Stencil {
+                y: &mut r,
+                v: &x,
+                b: Some(&self.b),
+                diag: &self.ddiag,
+                mask: &self.mask,
+            },
+        );
+        self.x = x;
+        self.r = r;
     }
 
     /// `y = A v` on the spans (zero on non-fluid cells of the spans); `v`'s periodic ghost layers
     /// must be filled.
     pub fn apply(&self, v: &[f32], y: &mut [f32]) {
-        for &[s, e] in &self.spans {
-            stencil_span(
+        run(
+            self,
+            SpanOp::Stencil {
                 y,
                 v,
-                None,
-                &self.ddiag,
-                &self.mask,
-                s as usize,
-                e as usize,
-                self.sy,
-                self.sz,
-            );
-        }
+                b: None,
+                diag: &self.ddiag,
+                mask: &self.mask,
+            },
+        );
     }
 }
 
@@ -372,7 +520,7 @@ macro_rules! windows {
 
 /// Relaxes the cells of `s..e` whose `inv` is non-zero: `x += inv (b + sum of neighbours - d x)`.
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 fn relax_span(
     x: &mut [f32],
     b: &[f32],
@@ -406,7 +554,7 @@ fn relax_span(
 
 /// `y = mask (b - A v)` with `b`, or `y = mask A v` without, on cells `s..e`.
 #[allow(clippy::too_many_arguments)]
-#[inline]
+#[inline(always)]
 fn stencil_span(
     y: &mut [f32],
     v: &[f32],

@@ -9,7 +9,7 @@
 
 use rayon::prelude::*;
 
-use super::multigrid::{Level, Multigrid};
+use super::multigrid::{run, Level, Multigrid, SpanOp};
 use super::regions::Regions;
 use super::topology::NONE;
 use serde::{Deserialize, Serialize};
@@ -57,6 +57,10 @@ pub(crate) struct PressureSolver {
     dap: Vec<f32>,
     /// Rows above which the matrix-vector product runs on rayon.
     pub parallel_rows: usize,
+    /// Full face indices of each row's faces (lower x, upper x, lower y, ...), for the divergence;
+    /// rebuilt by the solver when `faces_stale`.
+    pub faces_of_row: Vec<[u32; 6]>,
+    pub faces_stale: bool,
 }
 
 const CHUNK: usize = 2048;
@@ -90,65 +94,6 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
-/// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width body).
-const LANES: usize = 8;
-
-/// `sum a b` over the spans, accumulated in f64.
-fn dot_spans(spans: &[[u32; 2]], a: &[f32], b: &[f32]) -> f64 {
-    let mut acc = [0.0f64; LANES];
-    for &[s, e] in spans {
-        let (a, b) = (&a[s as usize..e as usize], &b[s as usize..e as usize]);
-        let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
-        for (&x, &y) in ac.remainder().iter().zip(bc.remainder()) {
-            acc[0] += x as f64 * y as f64;
-        }
-        for (x, y) in ac.zip(bc) {
-            for k in 0..LANES {
-                acc[k] += x[k] as f64 * y[k] as f64;
-            }
-        }
-    }
-    acc.iter().sum()
-}
-
-/// `d += alpha p`, `r -= alpha ap` over the spans; returns `max |r|`.
-fn update_spans(
-    spans: &[[u32; 2]],
-    alpha: f32,
-    p: &[f32],
-    ap: &[f32],
-    d: &mut [f32],
-    r: &mut [f32],
-) -> f32 {
-    let mut m = [0.0f32; LANES];
-    for &[s, e] in spans {
-        let (s, e) = (s as usize, e as usize);
-        let (p, ap, d, r) = (&p[s..e], &ap[s..e], &mut d[s..e], &mut r[s..e]);
-        let mut pc = p.chunks_exact(LANES);
-        let mut apc = ap.chunks_exact(LANES);
-        let mut dc = d.chunks_exact_mut(LANES);
-        let mut rc = r.chunks_exact_mut(LANES);
-        for (((p, ap), d), r) in (&mut pc).zip(&mut apc).zip(&mut dc).zip(&mut rc) {
-            for k in 0..LANES {
-                d[k] += alpha * p[k];
-                r[k] -= alpha * ap[k];
-                m[k] = m[k].max(r[k].abs());
-            }
-        }
-        let tail = pc
-            .remainder()
-            .iter()
-            .zip(apc.remainder())
-            .zip(dc.into_remainder().iter_mut().zip(rc.into_remainder()));
-        for ((&p, &ap), (d, r)) in tail {
-            *d += alpha * p;
-            *r -= alpha * ap;
-            m[0] = m[0].max(r.abs());
-        }
-    }
-    m.iter().fold(0.0f32, |a, &b| a.max(b))
-}
-
 fn max_abs(a: &[f64]) -> f64 {
     a.iter().fold(0.0f64, |m, &x| m.max(x.abs()))
 }
@@ -169,6 +114,7 @@ impl PressureSolver {
             v.resize(n, 0.0);
         }
         self.regions.build(&self.mg.levels[0]);
+        self.faces_stale = true;
         let len = self.mg.levels[0].x.len();
         self.dq.clear();
         self.dq.resize(len, 0.0);
@@ -324,7 +270,7 @@ impl PressureSolver {
         precondition(mg, regions);
         let l0 = &mg.levels[0];
         dp.copy_from_slice(&l0.x);
-        let mut rz = dot_spans(&l0.spans, &l0.b, &l0.x);
+        let mut rz = run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x });
         for it in 1..=max_iterations {
             outcome.iterations = it;
             let l0 = &mut mg.levels[0];
@@ -332,12 +278,23 @@ impl PressureSolver {
                 l0.halo(dp);
             }
             l0.apply(dp, dap);
-            let pap = dot_spans(&l0.spans, dp, dap);
+            let pap = run(l0, SpanOp::Dot { a: dp, b: dap });
             if pap.is_nan() || pap <= 0.0 || !rz.is_finite() {
                 break;
             }
             let alpha = (rz / pap) as f32;
-            let mut rmax = update_spans(&l0.spans, alpha, dp, dap, dd, &mut l0.b);
+            let mut r = std::mem::take(&mut l0.b);
+            let mut rmax = run(
+                l0,
+                SpanOp::Update {
+                    alpha,
+                    p: dp,
+                    ap: dap,
+                    d: dd,
+                    r: &mut r,
+                },
+            ) as f32;
+            l0.b = r;
             if regions.any_closed() {
                 // In f32 the rounding of `r -= alpha A p` accumulates a region mean no pressure
                 // can remove, on which CG would stagnate: keep r in the range of A.
@@ -353,15 +310,17 @@ impl PressureSolver {
             }
             precondition(mg, regions);
             let l0 = &mg.levels[0];
-            let rz_new = dot_spans(&l0.spans, &l0.b, &l0.x);
+            let rz_new = run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x });
             let beta = (rz_new / rz) as f32;
             rz = rz_new;
-            for &[s, e] in &l0.spans {
-                let (s, e) = (s as usize, e as usize);
-                for (p, &z) in dp[s..e].iter_mut().zip(&l0.x[s..e]) {
-                    *p = z + beta * *p;
-                }
-            }
+            run(
+                l0,
+                SpanOp::Xpby {
+                    p: dp,
+                    z: &l0.x,
+                    beta,
+                },
+            );
         }
         for (qv, &p) in q.iter_mut().zip(&mg.levels[0].pad_of_row) {
             *qv += dd[p as usize] as f64;
