@@ -1,5 +1,6 @@
 //! Our solver alone on the benchmark cavity, for profiling the projection:
-//! `cargo run -p hydrometra-sim --example fluid_projection -- [voxel_mm] [steps] [warmup]`.
+//! `cargo run -p hydrometra-sim --example fluid_projection -- [voxel_mm] [steps] [warmup]
+//! [parallel_threshold_cells]`.
 //! Prints the fluid cells, the step and projection means (ms), the CG iterations per step and the
 //! worst `max |div u| h / U`.
 
@@ -21,7 +22,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let voxel_mm = arg(0, 1.2)?;
     let steps = arg(1, 200.0)? as usize;
     let warmup = arg(2, 40.0)? as usize;
+    let threshold = arg(3, FluidParams::default().parallel_threshold_cells as f64)? as usize;
     let params = FluidParams {
+        parallel_threshold_cells: threshold,
         projection: ProjectionMethod::MultigridPcg,
         tolerance: 1e-5,
         ..Default::default()

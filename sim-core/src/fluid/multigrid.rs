@@ -35,7 +35,23 @@ const SPAN_GAP: usize = 12;
 /// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies).
 const LANES: usize = 8;
 
-/// A vector kernel over the spans of a level (`sy`, `sz`: the strides of the padded box).
+/// Neighbour windows of cells `c..c+n` in a padded vector: (x-1, x+1, y-1, y+1, z-1, z+1).
+macro_rules! windows {
+    ($v:expr, $c:expr, $n:expr, $sy:expr, $sz:expr) => {{
+        let (c, n, sy, sz) = ($c, $n, $sy, $sz);
+        (
+            &$v[c - 1..c - 1 + n],
+            &$v[c + 1..c + 1 + n],
+            &$v[c - sy..c - sy + n],
+            &$v[c + sy..c + sy + n],
+            &$v[c - sz..c - sz + n],
+            &$v[c + sz..c + sz + n],
+        )
+    }};
+}
+
+/// A vector kernel over the spans of a level. Outputs (`&mut`) are indexed relative to the offset
+/// the kernel runs with (so a thread can own a piece of them); inputs are whole vectors.
 pub(crate) enum SpanOp<'a> {
     /// `x = inv b` (a colour's half-sweep from x = 0).
     Init {
@@ -43,13 +59,23 @@ pub(crate) enum SpanOp<'a> {
         b: &'a [f32],
         inv: &'a [f32],
     },
-    /// `x += inv (b - A x)` on the cells where `inv` is non-zero (one colour).
+    /// `x += inv (b - A x)` on the cells where `inv` is non-zero (one colour), in place (serial).
     Relax {
         x: &'a mut [f32],
         b: &'a [f32],
         diag: &'a [f32],
         inv: &'a [f32],
     },
+    /// `t = inv (b - A x)`: the increment of `Relax`, into a separate vector (parallel).
+    RelaxInto {
+        t: &'a mut [f32],
+        x: &'a [f32],
+        b: &'a [f32],
+        diag: &'a [f32],
+        inv: &'a [f32],
+    },
+    /// `x += t`.
+    Add { x: &'a mut [f32], t: &'a [f32] },
     /// `y = mask (b - A v)` with `b`, `y = mask A v` without.
     Stencil {
         y: &'a mut [f32],
@@ -76,9 +102,100 @@ pub(crate) enum SpanOp<'a> {
     },
 }
 
+impl<'a> SpanOp<'a> {
+    /// Splits the outputs at padded index `mid`: the first op keeps `..mid`, the second gets
+    /// `mid..` (to run with offset `mid`).
+    fn split(self, mid: usize) -> (SpanOp<'a>, SpanOp<'a>) {
+        use SpanOp::*;
+        match self {
+            Init { x, b, inv } => {
+                let (xa, xb) = x.split_at_mut(mid);
+                (Init { x: xa, b, inv }, Init { x: xb, b, inv })
+            }
+            RelaxInto { t, x, b, diag, inv } => {
+                let (ta, tb) = t.split_at_mut(mid);
+                (
+                    RelaxInto {
+                        t: ta,
+                        x,
+                        b,
+                        diag,
+                        inv,
+                    },
+                    RelaxInto {
+                        t: tb,
+                        x,
+                        b,
+                        diag,
+                        inv,
+                    },
+                )
+            }
+            Add { x, t } => {
+                let (xa, xb) = x.split_at_mut(mid);
+                (Add { x: xa, t }, Add { x: xb, t })
+            }
+            Stencil {
+                y,
+                v,
+                b,
+                diag,
+                mask,
+            } => {
+                let (ya, yb) = y.split_at_mut(mid);
+                (
+                    Stencil {
+                        y: ya,
+                        v,
+                        b,
+                        diag,
+                        mask,
+                    },
+                    Stencil {
+                        y: yb,
+                        v,
+                        b,
+                        diag,
+                        mask,
+                    },
+                )
+            }
+            Dot { a, b } => (Dot { a, b }, Dot { a, b }),
+            Update { alpha, p, ap, d, r } => {
+                let (da, db) = d.split_at_mut(mid);
+                let (ra, rb) = r.split_at_mut(mid);
+                (
+                    Update {
+                        alpha,
+                        p,
+                        ap,
+                        d: da,
+                        r: ra,
+                    },
+                    Update {
+                        alpha,
+                        p,
+                        ap,
+                        d: db,
+                        r: rb,
+                    },
+                )
+            }
+            Xpby { p, z, beta } => {
+                let (pa, pb) = p.split_at_mut(mid);
+                (Xpby { p: pa, z, beta }, Xpby { p: pb, z, beta })
+            }
+            // In place: cannot be split (run_level uses RelaxInto + Add instead).
+            op @ Relax { .. } => (op, Dot { a: &[], b: &[] }),
+        }
+    }
+}
+
 struct SpanRun<'a> {
     op: SpanOp<'a>,
     spans: &'a [[u32; 2]],
+    /// Padded index of element 0 of the outputs.
+    off: usize,
     sy: usize,
     sz: usize,
 }
@@ -90,20 +207,43 @@ impl pulp::WithSimd for SpanRun<'_> {
     // (and auto-vectorised) once for AVX2 + FMA and once for the SSE2 baseline.
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
-        let (sy, sz) = (self.sy, self.sz);
+        let (sy, sz, off) = (self.sy, self.sz, self.off);
         let spans = self.spans.iter().map(|&[s, e]| (s as usize, e as usize));
         match self.op {
             SpanOp::Init { x, b, inv } => {
                 for (s, e) in spans {
-                    for ((x, &b), &d) in x[s..e].iter_mut().zip(&b[s..e]).zip(&inv[s..e]) {
+                    let x = &mut x[s - off..e - off];
+                    for ((x, &b), &d) in x.iter_mut().zip(&b[s..e]).zip(&inv[s..e]) {
                         *x = b * d;
                     }
                 }
                 0.0
             }
             SpanOp::Relax { x, b, diag, inv } => {
+                debug_assert_eq!(off, 0);
                 for (s, e) in spans {
                     relax_span(x, b, diag, inv, s, e, sy, sz);
+                }
+                0.0
+            }
+            SpanOp::RelaxInto { t, x, b, diag, inv } => {
+                for (s, e) in spans {
+                    let n = e - s;
+                    let (xm, xp, ym, yp, zm, zp) = windows!(x, s, n, sy, sz);
+                    let (x0, bb, dd, ii) = (&x[s..e], &b[s..e], &diag[s..e], &inv[s..e]);
+                    let t = &mut t[s - off..e - off];
+                    for q in 0..n {
+                        let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                        t[q] = ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
+                    }
+                }
+                0.0
+            }
+            SpanOp::Add { x, t } => {
+                for (s, e) in spans {
+                    for (x, &t) in x[s - off..e - off].iter_mut().zip(&t[s..e]) {
+                        *x += t;
+                    }
                 }
                 0.0
             }
@@ -115,7 +255,7 @@ impl pulp::WithSimd for SpanRun<'_> {
                 mask,
             } => {
                 for (s, e) in spans {
-                    stencil_span(y, v, b, diag, mask, s, e, sy, sz);
+                    stencil_span(&mut y[s - off..e - off], v, b, diag, mask, s, e, sy, sz);
                 }
                 0.0
             }
@@ -137,7 +277,8 @@ impl pulp::WithSimd for SpanRun<'_> {
             SpanOp::Update { alpha, p, ap, d, r } => {
                 let mut m = [0.0f32; LANES];
                 for (s, e) in spans {
-                    let (p, ap, d, r) = (&p[s..e], &ap[s..e], &mut d[s..e], &mut r[s..e]);
+                    let (p, ap) = (&p[s..e], &ap[s..e]);
+                    let (d, r) = (&mut d[s - off..e - off], &mut r[s - off..e - off]);
                     let mut pc = p.chunks_exact(LANES);
                     let mut apc = ap.chunks_exact(LANES);
                     let mut dc = d.chunks_exact_mut(LANES);
@@ -164,7 +305,7 @@ impl pulp::WithSimd for SpanRun<'_> {
             }
             SpanOp::Xpby { p, z, beta } => {
                 for (s, e) in spans {
-                    for (p, &z) in p[s..e].iter_mut().zip(&z[s..e]) {
+                    for (p, &z) in p[s - off..e - off].iter_mut().zip(&z[s..e]) {
                         *p = z + beta * *p;
                     }
                 }
@@ -174,16 +315,38 @@ impl pulp::WithSimd for SpanRun<'_> {
     }
 }
 
-/// Runs `op` over `level`'s spans, compiled for the best instruction set of this CPU (AVX2 + FMA
-/// where present, else the SSE2 baseline of the generic x86-64 binary). Element-wise kernels give
-/// bit-identical results either way; the reductions use fixed lanes, so they do too.
-pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
+fn dispatch(level: &Level, spans: &[[u32; 2]], off: usize, op: SpanOp<'_>) -> f64 {
     pulp::Arch::new().dispatch(SpanRun {
         op,
-        spans: &level.spans,
+        spans,
+        off,
         sy: level.sy,
         sz: level.sz,
     })
+}
+
+/// Runs `op` over `level`'s spans, compiled for the best instruction set of this CPU (AVX2 + FMA
+/// where present, else the SSE2 baseline of the generic x86-64 binary; element-wise kernels give
+/// bit-identical results either way, and the reductions use fixed lanes). On a level marked
+/// `parallel` the spans run in two halves on rayon (one fork-join per call).
+pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
+    let k = level.split_span;
+    if !level.parallel || k == 0 || k >= level.spans.len() {
+        return dispatch(level, &level.spans, 0, op);
+    }
+    let is_max = matches!(op, SpanOp::Update { .. });
+    let mid = level.spans[k][0] as usize;
+    let (sa, sb) = level.spans.split_at(k);
+    let (oa, ob) = op.split(mid);
+    let (ra, rb) = rayon::join(
+        || dispatch(level, sa, 0, oa),
+        || dispatch(level, sb, mid, ob),
+    );
+    if is_max {
+        ra.max(rb)
+    } else {
+        ra + rb
+    }
 }
 
 /// One multigrid level.
@@ -209,6 +372,10 @@ pub(crate) struct Level {
     pub fluid: usize,
     /// Padded-index ranges `[start, end)` that cover every fluid cell.
     pub spans: Vec<[u32; 2]>,
+    /// First span of the second half (by cells) when the level runs on two threads.
+    pub split_span: usize,
+    /// Whether the kernels of this level run on rayon (set by the solver from its threshold).
+    pub parallel: bool,
     /// Interior rows holding fluid: `[j, k, i_first, i_end)`.
     pub row_spans: Vec<[u32; 4]>,
     /// Dense diagonal (fluid cells; 0 elsewhere), fluid mask, and the inverse diagonal on red
@@ -372,6 +539,16 @@ impl Level {
                 }
             }
         }
+        let total: u32 = self.spans.iter().map(|&[s, e]| e - s).sum();
+        let mut acc = 0;
+        self.split_span = self.spans.len();
+        for (n, &[s, e]) in self.spans.iter().enumerate() {
+            if 2 * acc >= total {
+                self.split_span = n;
+                break;
+            }
+            acc += e - s;
+        }
     }
 
     /// Labels of the next coarser level, or false when this level should be the coarsest.
@@ -453,15 +630,33 @@ impl Level {
             if self.any_periodic() {
                 self.halo(&mut x);
             }
-            run(
-                self,
-                SpanOp::Relax {
-                    x: &mut x,
-                    b: &self.b,
-                    diag: &self.ddiag,
-                    inv: &self.inv[colour],
-                },
-            );
+            if self.parallel {
+                // Two threads cannot update `x` in place: the increments go to the residual
+                // vector (free during smoothing) and are added after.
+                let mut t = std::mem::take(&mut self.r);
+                run(
+                    self,
+                    SpanOp::RelaxInto {
+                        t: &mut t,
+                        x: &x,
+                        b: &self.b,
+                        diag: &self.ddiag,
+                        inv: &self.inv[colour],
+                    },
+                );
+                run(self, SpanOp::Add { x: &mut x, t: &t });
+                self.r = t;
+            } else {
+                run(
+                    self,
+                    SpanOp::Relax {
+                        x: &mut x,
+                        b: &self.b,
+                        diag: &self.ddiag,
+                        inv: &self.inv[colour],
+                    },
+                );
+            }
         }
         self.x = x;
     }
@@ -503,21 +698,6 @@ impl Level {
     }
 }
 
-/// Neighbour windows of cells `c..c+n` in a padded vector: (x-1, x+1, y-1, y+1, z-1, z+1).
-macro_rules! windows {
-    ($v:expr, $c:expr, $n:expr, $sy:expr, $sz:expr) => {{
-        let (c, n, sy, sz) = ($c, $n, $sy, $sz);
-        (
-            &$v[c - 1..c - 1 + n],
-            &$v[c + 1..c + 1 + n],
-            &$v[c - sy..c - sy + n],
-            &$v[c + sy..c + sy + n],
-            &$v[c - sz..c - sz + n],
-            &$v[c + sz..c + sz + n],
-        )
-    }};
-}
-
 /// Relaxes the cells of `s..e` whose `inv` is non-zero: `x += inv (b + sum of neighbours - d x)`.
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
@@ -552,7 +732,8 @@ fn relax_span(
     }
 }
 
-/// `y = mask (b - A v)` with `b`, or `y = mask A v` without, on cells `s..e`.
+/// `y = mask (b - A v)` with `b`, or `y = mask A v` without, on cells `s..e` (`y` holds just
+/// those cells).
 #[allow(clippy::too_many_arguments)]
 #[inline(always)]
 fn stencil_span(
@@ -569,7 +750,7 @@ fn stencil_span(
     let n = e - s;
     let (xm, xp, ym, yp, zm, zp) = windows!(v, s, n, sy, sz);
     let (v0, dd, mm) = (&v[s..e], &diag[s..e], &mask[s..e]);
-    let y = &mut y[s..e];
+    let y = &mut y[..n];
     match b {
         Some(b) => {
             let b = &b[s..e];
@@ -824,6 +1005,20 @@ mod tests {
             "<Ma,b> = {ab}, <a,Mb> = {ba}"
         );
         assert!(dot(&ma, &a) > 0.0 && dot(&mb, &b) > 0.0);
+    }
+
+    #[test]
+    fn parallel_vcycle_equals_the_serial_one() {
+        let mut serial = mg(17);
+        let mut parallel = mg(17);
+        for l in &mut parallel.levels {
+            l.parallel = true;
+        }
+        let l0 = &parallel.levels[0];
+        assert!(l0.split_span > 0 && l0.split_span < l0.spans.len());
+        let n = serial.levels[0].rows();
+        let b: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
+        assert_eq!(apply(&mut serial, &b), apply(&mut parallel, &b));
     }
 
     #[test]

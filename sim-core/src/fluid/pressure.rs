@@ -224,9 +224,13 @@ impl PressureSolver {
             dd,
             dp,
             dap,
+            parallel_rows,
             ..
         } = self;
         let periodic = mg.levels[0].periodic.iter().any(|&p| p);
+        for l in &mut mg.levels[..mg.used] {
+            l.parallel = l.fluid >= *parallel_rows;
+        }
         {
             let l0 = &mut mg.levels[0];
             for (&qv, &p) in q.iter().zip(&l0.pad_of_row) {
