@@ -768,40 +768,80 @@ fn stencil_span(
     }
 }
 
-/// `coarse.b = scale * (sum of the children's residuals)` on the coarse fluid cells.
-fn restrict(fine: &Level, coarse: &mut Level, scale: f32) {
-    let (fsy, fsz) = (fine.sy, fine.sz);
-    for &[j, k, i0, i1] in &coarse.row_spans {
-        let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
-        let cbase = coarse.pad(0, j, k);
-        let fbase = fine.pad(0, 2 * j, 2 * k);
-        for i in i0..i1 {
-            let f = fbase + 2 * i;
-            let r = &fine.r;
-            let s = (r[f] + r[f + 1])
-                + (r[f + fsy] + r[f + fsy + 1])
-                + ((r[f + fsz] + r[f + fsz + 1]) + (r[f + fsz + fsy] + r[f + fsz + fsy + 1]));
-            let c = cbase + i;
-            coarse.b[c] = coarse.mask[c] * scale * s;
+/// The grid transfers between a level and the next coarser one, dispatched like [`SpanOp`]: each
+/// coarse row of fluid cells meets four fine rows, whose cells pair up along x.
+struct Transfer<'a> {
+    fine: &'a Level,
+    coarse: &'a Level,
+    /// Restriction: the coarse right-hand side to write (`Some(scale, b)`); prolongation: the fine
+    /// unknowns to correct.
+    restrict: Option<(f32, &'a mut [f32])>,
+    fine_x: Option<&'a mut [f32]>,
+}
+
+impl pulp::WithSimd for Transfer<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let (fine, coarse) = (self.fine, self.coarse);
+        let (fsy, fsz) = (fine.sy, fine.sz);
+        let (mut restrict, mut fine_x) = (self.restrict, self.fine_x);
+        for &[j, k, i0, i1] in &coarse.row_spans {
+            let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+            let c = coarse.pad(i0, j, k)..coarse.pad(i1, j, k);
+            let f0 = fine.pad(2 * i0, 2 * j, 2 * k);
+            let n2 = 2 * (i1 - i0);
+            let rows = [f0, f0 + fsy, f0 + fsz, f0 + fsz + fsy];
+            if let Some((scale, b)) = restrict.as_mut() {
+                let b = &mut b[c.clone()];
+                b.fill(0.0);
+                for f in rows {
+                    for (bv, r2) in b.iter_mut().zip(fine.r[f..f + n2].chunks_exact(2)) {
+                        *bv += r2[0] + r2[1];
+                    }
+                }
+                for (bv, &m) in b.iter_mut().zip(&coarse.mask[c.clone()]) {
+                    *bv *= m * *scale;
+                }
+            }
+            if let Some(x) = fine_x.as_mut() {
+                let xc = &coarse.x[c.clone()];
+                for f in rows {
+                    let xs = x[f..f + n2].chunks_exact_mut(2);
+                    let ms = fine.mask[f..f + n2].chunks_exact(2);
+                    for ((x2, m2), &v) in xs.zip(ms).zip(xc) {
+                        x2[0] += m2[0] * v;
+                        x2[1] += m2[1] * v;
+                    }
+                }
+            }
         }
     }
 }
 
+/// `coarse.b = scale * (sum of the children's residuals)` on the coarse fluid cells.
+fn restrict(fine: &Level, coarse: &mut Level, scale: f32) {
+    let mut b = std::mem::take(&mut coarse.b);
+    pulp::Arch::new().dispatch(Transfer {
+        fine,
+        coarse,
+        restrict: Some((scale, &mut b)),
+        fine_x: None,
+    });
+    coarse.b = b;
+}
+
 /// `fine.x += coarse.x` of the parent on every fine fluid cell.
 fn prolongate(coarse: &Level, fine: &mut Level) {
-    let (fsy, fsz) = (fine.sy, fine.sz);
-    for &[j, k, i0, i1] in &coarse.row_spans {
-        let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
-        let cbase = coarse.pad(0, j, k);
-        let fbase = fine.pad(0, 2 * j, 2 * k);
-        for i in i0..i1 {
-            let v = coarse.x[cbase + i];
-            let f = fbase + 2 * i;
-            for o in [0, 1, fsy, fsy + 1, fsz, fsz + 1, fsz + fsy, fsz + fsy + 1] {
-                fine.x[f + o] += fine.mask[f + o] * v;
-            }
-        }
-    }
+    let mut x = std::mem::take(&mut fine.x);
+    pulp::Arch::new().dispatch(Transfer {
+        fine,
+        coarse,
+        restrict: None,
+        fine_x: Some(&mut x),
+    });
+    fine.x = x;
 }
 
 /// The level hierarchy.
