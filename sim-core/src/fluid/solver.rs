@@ -205,7 +205,7 @@ impl FluidSolver {
         // 0.6-1.2 mm (0.5: 7-8, 0.7: 7-8, 0.8: 9).
         s.pressure.mg.coarse_scale = 0.6;
         s.pressure.mg.sweeps = 2;
-        s.pressure.mg.coarsest_sweeps = 16;
+        s.pressure.mg.coarsest_sweeps = 4; // 16 gives the same iteration counts
         s.rebuild_topology();
         Ok(s)
     }
