@@ -1,6 +1,8 @@
 //! Our solver alone on the benchmark cavity, for profiling the projection:
 //! `cargo run -p hydrometra-sim --example fluid_projection -- [voxel_mm] [steps] [warmup]
 //! [parallel_threshold_cells]`.
+//! `parallel_threshold_cells` is `FluidParams::parallel_threshold_cells` (the multigrid splits levels
+//! of at least 4x that many fluid cells over two threads: 8000 puts the 0.6 mm level 0 on rayon).
 //! Prints the fluid cells, the step and projection means (ms), the CG iterations per step and the
 //! worst `max |div u| h / U`.
 
