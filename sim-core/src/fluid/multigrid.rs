@@ -1,23 +1,353 @@
 //! Geometric multigrid V-cycle on voxelized (irregular) domains, used as the CG preconditioner.
 //!
 //! Each level is a 7-point Poisson operator on the "fluid" cells of a label grid (0 = solid wall,
-//! Neumann; 1 = fluid, unknown; 2 = open, Dirichlet p = 0), stored as compressed rows with neighbour
-//! lists (periodic axes wrap). A coarse cell is open if any child is open, else fluid if any child
-//! is fluid, else solid. Restriction sums the children's residuals (times a scale), prolongation
-//! injects the coarse value into every child (its transpose). Smoothing is red-black Gauss-Seidel,
-//! forward before and reversed after the coarse correction, so the V-cycle is a symmetric operator and
-//! CG preconditioned by it stays valid.
-
-use rayon::prelude::*;
+//! Neumann; 1 = fluid, unknown; 2 = open, Dirichlet p = 0). A coarse cell is open if any child is
+//! open, else fluid if any child is fluid, else solid. Restriction sums the children's residuals
+//! (times a scale), prolongation injects the coarse value into every child (its transpose).
+//! Smoothing is red-black Gauss-Seidel, red then black before and black then red after the coarse
+//! correction, so the V-cycle is a symmetric operator and CG preconditioned by it stays valid.
+//!
+//! The levels are stored matrix-free on the dense box padded by one ghost layer per side: vectors
+//! hold zero on every non-fluid cell (solid walls contribute nothing, open cells are p = 0), the
+//! labels only decide the diagonal, so every kernel is a branch-free loop over contiguous spans of
+//! cells with fixed strides that the compiler vectorises. Periodic axes fill their ghost layers from
+//! the opposite side before each stencil application (`halo`). A colour's half-sweep reads only the
+//! other colour, so it computes a chunk into a stack buffer and adds it back (exact Gauss-Seidel;
+//! where an odd periodic axis or a one-cell periodic axis makes a cell its own colour's neighbour it
+//! is a Jacobi update within the colour, still symmetric, and the half-sweeps stay convergent).
+//!
+//! Level 0 also keeps the compressed rows (fluid cells numbered in order, with neighbour lists) that
+//! the reference solvers, the baseline and the region search use.
 
 use super::topology::NONE;
-
-const CHUNK: usize = 2048;
 
 /// Label codes of a level.
 pub(crate) const L_SOLID: u8 = 0;
 pub(crate) const L_FLUID: u8 = 1;
 pub(crate) const L_OPEN: u8 = 2;
+
+/// Cells per stack buffer of the smoother (a few cache lines; any length is correct).
+const CHUNK: usize = 128;
+/// Spans closer than this many cells merge (the cells between are masked out, so this only trades
+/// a little work on non-fluid cells for longer vector loops).
+const SPAN_GAP: usize = 12;
+
+/// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies).
+const LANES: usize = 8;
+
+/// Neighbour windows of cells `c..c+n` in a padded vector: (x-1, x+1, y-1, y+1, z-1, z+1).
+macro_rules! windows {
+    ($v:expr, $c:expr, $n:expr, $sy:expr, $sz:expr) => {{
+        let (c, n, sy, sz) = ($c, $n, $sy, $sz);
+        (
+            &$v[c - 1..c - 1 + n],
+            &$v[c + 1..c + 1 + n],
+            &$v[c - sy..c - sy + n],
+            &$v[c + sy..c + sy + n],
+            &$v[c - sz..c - sz + n],
+            &$v[c + sz..c + sz + n],
+        )
+    }};
+}
+
+/// A vector kernel over the spans of a level. Outputs (`&mut`) are indexed relative to the offset
+/// the kernel runs with (so a thread can own a piece of them); inputs are whole vectors.
+pub(crate) enum SpanOp<'a> {
+    /// `x = inv b` (a colour's half-sweep from x = 0).
+    Init {
+        x: &'a mut [f32],
+        b: &'a [f32],
+        inv: &'a [f32],
+    },
+    /// `x += inv (b - A x)` on the cells where `inv` is non-zero (one colour), in place (serial).
+    Relax {
+        x: &'a mut [f32],
+        b: &'a [f32],
+        diag: &'a [f32],
+        inv: &'a [f32],
+    },
+    /// `t = inv (b - A x)`: the increment of `Relax`, into a separate vector (parallel).
+    RelaxInto {
+        t: &'a mut [f32],
+        x: &'a [f32],
+        b: &'a [f32],
+        diag: &'a [f32],
+        inv: &'a [f32],
+    },
+    /// `x += t`.
+    Add { x: &'a mut [f32], t: &'a [f32] },
+    /// `y = mask (b - A v)` with `b`, `y = mask A v` without.
+    Stencil {
+        y: &'a mut [f32],
+        v: &'a [f32],
+        b: Option<&'a [f32]>,
+        diag: &'a [f32],
+        mask: &'a [f32],
+    },
+    /// `sum a b` accumulated in f64.
+    Dot { a: &'a [f32], b: &'a [f32] },
+    /// `d += alpha p`, `r -= alpha ap`; returns `max |r|`.
+    Update {
+        alpha: f32,
+        p: &'a [f32],
+        ap: &'a [f32],
+        d: &'a mut [f32],
+        r: &'a mut [f32],
+    },
+    /// `p = z + beta p`.
+    Xpby {
+        p: &'a mut [f32],
+        z: &'a [f32],
+        beta: f32,
+    },
+}
+
+impl<'a> SpanOp<'a> {
+    /// Splits the outputs at padded index `mid`: the first op keeps `..mid`, the second gets
+    /// `mid..` (to run with offset `mid`).
+    fn split(self, mid: usize) -> (SpanOp<'a>, SpanOp<'a>) {
+        use SpanOp::*;
+        match self {
+            Init { x, b, inv } => {
+                let (xa, xb) = x.split_at_mut(mid);
+                (Init { x: xa, b, inv }, Init { x: xb, b, inv })
+            }
+            RelaxInto { t, x, b, diag, inv } => {
+                let (ta, tb) = t.split_at_mut(mid);
+                (
+                    RelaxInto {
+                        t: ta,
+                        x,
+                        b,
+                        diag,
+                        inv,
+                    },
+                    RelaxInto {
+                        t: tb,
+                        x,
+                        b,
+                        diag,
+                        inv,
+                    },
+                )
+            }
+            Add { x, t } => {
+                let (xa, xb) = x.split_at_mut(mid);
+                (Add { x: xa, t }, Add { x: xb, t })
+            }
+            Stencil {
+                y,
+                v,
+                b,
+                diag,
+                mask,
+            } => {
+                let (ya, yb) = y.split_at_mut(mid);
+                (
+                    Stencil {
+                        y: ya,
+                        v,
+                        b,
+                        diag,
+                        mask,
+                    },
+                    Stencil {
+                        y: yb,
+                        v,
+                        b,
+                        diag,
+                        mask,
+                    },
+                )
+            }
+            Dot { a, b } => (Dot { a, b }, Dot { a, b }),
+            Update { alpha, p, ap, d, r } => {
+                let (da, db) = d.split_at_mut(mid);
+                let (ra, rb) = r.split_at_mut(mid);
+                (
+                    Update {
+                        alpha,
+                        p,
+                        ap,
+                        d: da,
+                        r: ra,
+                    },
+                    Update {
+                        alpha,
+                        p,
+                        ap,
+                        d: db,
+                        r: rb,
+                    },
+                )
+            }
+            Xpby { p, z, beta } => {
+                let (pa, pb) = p.split_at_mut(mid);
+                (Xpby { p: pa, z, beta }, Xpby { p: pb, z, beta })
+            }
+            // In place: cannot be split (run_level uses RelaxInto + Add instead).
+            op @ Relax { .. } => (op, Dot { a: &[], b: &[] }),
+        }
+    }
+}
+
+struct SpanRun<'a> {
+    op: SpanOp<'a>,
+    spans: &'a [[u32; 2]],
+    /// Padded index of element 0 of the outputs.
+    off: usize,
+    sy: usize,
+    sz: usize,
+}
+
+impl pulp::WithSimd for SpanRun<'_> {
+    type Output = f64;
+
+    // Everything below is inlined into pulp's per-instruction-set entry points, so it is compiled
+    // (and auto-vectorised) once for AVX2 + FMA and once for the SSE2 baseline.
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
+        let (sy, sz, off) = (self.sy, self.sz, self.off);
+        let spans = self.spans.iter().map(|&[s, e]| (s as usize, e as usize));
+        match self.op {
+            SpanOp::Init { x, b, inv } => {
+                for (s, e) in spans {
+                    let x = &mut x[s - off..e - off];
+                    for ((x, &b), &d) in x.iter_mut().zip(&b[s..e]).zip(&inv[s..e]) {
+                        *x = b * d;
+                    }
+                }
+                0.0
+            }
+            SpanOp::Relax { x, b, diag, inv } => {
+                debug_assert_eq!(off, 0);
+                for (s, e) in spans {
+                    relax_span(x, b, diag, inv, s, e, sy, sz);
+                }
+                0.0
+            }
+            SpanOp::RelaxInto { t, x, b, diag, inv } => {
+                for (s, e) in spans {
+                    let n = e - s;
+                    let (xm, xp, ym, yp, zm, zp) = windows!(x, s, n, sy, sz);
+                    let (x0, bb, dd, ii) = (&x[s..e], &b[s..e], &diag[s..e], &inv[s..e]);
+                    let t = &mut t[s - off..e - off];
+                    for q in 0..n {
+                        let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                        t[q] = ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
+                    }
+                }
+                0.0
+            }
+            SpanOp::Add { x, t } => {
+                for (s, e) in spans {
+                    for (x, &t) in x[s - off..e - off].iter_mut().zip(&t[s..e]) {
+                        *x += t;
+                    }
+                }
+                0.0
+            }
+            SpanOp::Stencil {
+                y,
+                v,
+                b,
+                diag,
+                mask,
+            } => {
+                for (s, e) in spans {
+                    stencil_span(&mut y[s - off..e - off], v, b, diag, mask, s, e, sy, sz);
+                }
+                0.0
+            }
+            SpanOp::Dot { a, b } => {
+                let mut acc = [0.0f64; LANES];
+                for (s, e) in spans {
+                    let (ac, bc) = (a[s..e].chunks_exact(LANES), b[s..e].chunks_exact(LANES));
+                    for (&x, &y) in ac.remainder().iter().zip(bc.remainder()) {
+                        acc[0] += x as f64 * y as f64;
+                    }
+                    for (x, y) in ac.zip(bc) {
+                        for k in 0..LANES {
+                            acc[k] += x[k] as f64 * y[k] as f64;
+                        }
+                    }
+                }
+                acc.iter().sum()
+            }
+            SpanOp::Update { alpha, p, ap, d, r } => {
+                let mut m = [0.0f32; LANES];
+                for (s, e) in spans {
+                    let (p, ap) = (&p[s..e], &ap[s..e]);
+                    let (d, r) = (&mut d[s - off..e - off], &mut r[s - off..e - off]);
+                    let mut pc = p.chunks_exact(LANES);
+                    let mut apc = ap.chunks_exact(LANES);
+                    let mut dc = d.chunks_exact_mut(LANES);
+                    let mut rc = r.chunks_exact_mut(LANES);
+                    for (((p, ap), d), r) in (&mut pc).zip(&mut apc).zip(&mut dc).zip(&mut rc) {
+                        for k in 0..LANES {
+                            d[k] += alpha * p[k];
+                            r[k] -= alpha * ap[k];
+                            m[k] = m[k].max(r[k].abs());
+                        }
+                    }
+                    let tail = pc
+                        .remainder()
+                        .iter()
+                        .zip(apc.remainder())
+                        .zip(dc.into_remainder().iter_mut().zip(rc.into_remainder()));
+                    for ((&p, &ap), (d, r)) in tail {
+                        *d += alpha * p;
+                        *r -= alpha * ap;
+                        m[0] = m[0].max(r.abs());
+                    }
+                }
+                m.iter().fold(0.0f32, |a, &b| a.max(b)) as f64
+            }
+            SpanOp::Xpby { p, z, beta } => {
+                for (s, e) in spans {
+                    for (p, &z) in p[s - off..e - off].iter_mut().zip(&z[s..e]) {
+                        *p = z + beta * *p;
+                    }
+                }
+                0.0
+            }
+        }
+    }
+}
+
+fn dispatch(level: &Level, spans: &[[u32; 2]], off: usize, op: SpanOp<'_>) -> f64 {
+    pulp::Arch::new().dispatch(SpanRun {
+        op,
+        spans,
+        off,
+        sy: level.sy,
+        sz: level.sz,
+    })
+}
+
+/// Runs `op` over `level`'s spans, compiled for the best instruction set of this CPU (AVX2 + FMA
+/// where present, else the SSE2 baseline of the generic x86-64 binary; element-wise kernels give
+/// bit-identical results either way, and the reductions use fixed lanes). On a level marked
+/// `parallel` the spans run in two halves on rayon (one fork-join per call).
+pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
+    let k = level.split_span;
+    if !level.parallel || k == 0 || k >= level.spans.len() {
+        return dispatch(level, &level.spans, 0, op);
+    }
+    let is_max = matches!(op, SpanOp::Update { .. });
+    let mid = level.spans[k][0] as usize;
+    let (sa, sb) = level.spans.split_at(k);
+    let (oa, ob) = op.split(mid);
+    let (ra, rb) = rayon::join(
+        || dispatch(level, sa, 0, oa),
+        || dispatch(level, sb, mid, ob),
+    );
+    if is_max {
+        ra.max(rb)
+    } else {
+        ra + rb
+    }
+}
 
 /// One multigrid level.
 #[derive(Default, Debug)]
@@ -25,28 +355,42 @@ pub(crate) struct Level {
     pub dims: [usize; 3],
     pub periodic: [bool; 3],
     pub label: Vec<u8>,
+    /// Compressed rows (level 0 only): row of each cell (NONE if not fluid), cell of each row.
     pub row_of_cell: Vec<u32>,
     pub cell_of_row: Vec<u32>,
-    /// Neighbour rows, order -x +x -y +y -z +z; a wall or open neighbour points at the extra slot
-    /// `rows()` of `x`, which is always zero, so the smoother needs no branches.
+    /// Neighbour rows, order -x +x -y +y -z +z; a wall or open neighbour is `rows()` (level 0 only).
     pub nbr: Vec<[u32; 6]>,
-    /// Number of fluid or open neighbours.
+    /// Number of fluid or open neighbours, per row (level 0 only).
     pub diag: Vec<f32>,
     pub inv_diag: Vec<f32>,
-    /// Rows `0..red_rows` are red (even i+j+k), the rest black.
-    pub red_rows: usize,
-    /// True when no row has a neighbour of its own colour (parallel sweeps are then exact).
-    pub exact_colouring: bool,
-    /// Scratch for parallel sweeps.
-    pub scratch: Vec<f32>,
-    /// Coarse row of each row's parent cell (NONE when the parent is open).
-    pub parent: Vec<u32>,
+    /// Dense (padded) index of each compressed row (level 0 only).
+    pub pad_of_row: Vec<u32>,
+    /// Strides of the padded box along y and z (x is 1).
+    pub sy: usize,
+    pub sz: usize,
+    /// Fluid cells.
+    pub fluid: usize,
+    /// Padded-index ranges `[start, end)` that cover every fluid cell.
+    pub spans: Vec<[u32; 2]>,
+    /// First span of the second half (by cells) when the level runs on two threads.
+    pub split_span: usize,
+    /// Whether the kernels of this level run on rayon (set by the solver from its threshold).
+    pub parallel: bool,
+    /// Interior rows holding fluid: `[j, k, i_first, i_end)`.
+    pub row_spans: Vec<[u32; 4]>,
+    /// Dense diagonal (fluid cells; 0 elsewhere), fluid mask, and the inverse diagonal on red
+    /// (`inv[0]`, even i+j+k) and black (`inv[1]`) fluid cells only.
+    pub ddiag: Vec<f32>,
+    pub mask: Vec<f32>,
+    pub inv: [Vec<f32>; 2],
+    /// Dense unknowns, right-hand side and residual.
     pub x: Vec<f32>,
     pub b: Vec<f32>,
     pub r: Vec<f32>,
 }
 
 impl Level {
+    /// Compressed rows (fluid cells).
     pub fn rows(&self) -> usize {
         self.cell_of_row.len()
     }
@@ -74,75 +418,142 @@ impl Level {
         Some(g[0] + self.dims[0] * (g[1] + self.dims[1] * g[2]))
     }
 
-    /// Builds rows, stencils and colours from `self.label`, `dims`, `periodic`.
+    /// Padded index of interior cell (i, j, k).
+    #[inline]
+    pub fn pad(&self, i: usize, j: usize, k: usize) -> usize {
+        (i + 1) + self.sy * (j + 1) + self.sz * (k + 1)
+    }
+
+    /// Number of fluid or open neighbours of a fluid cell.
+    fn count_diag(&self, c: [usize; 3]) -> f32 {
+        let mut diag = 0.0f32;
+        for axis in 0..3 {
+            for dir in [-1i32, 1] {
+                if let Some(g) = self.neighbour_cell(c, axis, dir) {
+                    if matches!(self.label[g], L_FLUID | L_OPEN) {
+                        diag += 1.0;
+                    }
+                }
+            }
+        }
+        diag
+    }
+
+    /// Builds the compressed rows of level 0 (and then its dense form) from `label`, `dims`,
+    /// `periodic`.
     pub fn build_rows(&mut self) {
         let [nx, ny, _] = self.dims;
         let ncell = self.label.len();
         self.row_of_cell.clear();
         self.row_of_cell.resize(ncell, NONE);
         self.cell_of_row.clear();
-        // Red cells (even i+j+k) first, then black: each colour is a contiguous range of rows, so a
-        // colour can be relaxed in parallel into a scratch buffer and copied back in one piece.
-        let parity = |i: usize| (i % nx + (i / nx) % ny + i / (nx * ny)) % 2;
-        for colour in 0..2 {
-            for (i, &l) in self.label.iter().enumerate() {
-                if l == L_FLUID && parity(i) == colour {
-                    self.row_of_cell[i] = self.cell_of_row.len() as u32;
-                    self.cell_of_row.push(i as u32);
-                }
-            }
-            if colour == 0 {
-                self.red_rows = self.cell_of_row.len();
+        for (i, &l) in self.label.iter().enumerate() {
+            if l == L_FLUID {
+                self.row_of_cell[i] = self.cell_of_row.len() as u32;
+                self.cell_of_row.push(i as u32);
             }
         }
         self.nbr.clear();
         self.diag.clear();
         self.inv_diag.clear();
-        self.exact_colouring = true;
         let zero_slot = self.cell_of_row.len() as u32;
         for row in 0..self.cell_of_row.len() {
             let ci = self.cell_of_row[row] as usize;
             let c = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
             let mut nb = [zero_slot; 6];
-            let mut diag = 0.0f32;
             for axis in 0..3 {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
                     if let Some(g) = self.neighbour_cell(c, axis, dir) {
-                        match self.label[g] {
-                            L_FLUID => {
-                                nb[2 * axis + s] = self.row_of_cell[g];
-                                diag += 1.0;
-                            }
-                            L_OPEN => diag += 1.0,
-                            _ => {}
+                        if self.label[g] == L_FLUID {
+                            nb[2 * axis + s] = self.row_of_cell[g];
                         }
                     }
                 }
             }
+            let diag = self.count_diag(c);
             self.nbr.push(nb);
             self.diag.push(diag);
             self.inv_diag
                 .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
-            // Odd periodic axes make some neighbours share a colour: then only serial sweeps are
-            // Gauss-Seidel.
-            let red = row < self.red_rows;
-            if nb
-                .iter()
-                .any(|&m| m != zero_slot && ((m as usize) < self.red_rows) == red)
-            {
-                self.exact_colouring = false;
-            }
         }
-        let n = self.cell_of_row.len() + 1;
-        for v in [&mut self.x, &mut self.b, &mut self.r, &mut self.scratch] {
-            v.clear();
-            v.resize(n, 0.0);
+        self.build_dense();
+        self.pad_of_row.clear();
+        for row in 0..self.cell_of_row.len() {
+            let ci = self.cell_of_row[row] as usize;
+            self.pad_of_row
+                .push(self.pad(ci % nx, (ci / nx) % ny, ci / (nx * ny)) as u32);
         }
     }
 
-    /// Labels of the next coarser level, or None when this level should be the coarsest.
+    /// Builds the dense (padded) operator, spans and vectors from `label`.
+    pub fn build_dense(&mut self) {
+        let [nx, ny, nz] = self.dims;
+        self.sy = nx + 2;
+        self.sz = (nx + 2) * (ny + 2);
+        let len = self.sz * (nz + 2);
+        let [inv0, inv1] = &mut self.inv;
+        for v in [
+            &mut self.ddiag,
+            &mut self.mask,
+            inv0,
+            inv1,
+            &mut self.x,
+            &mut self.b,
+            &mut self.r,
+        ] {
+            v.clear();
+            v.resize(len, 0.0);
+        }
+        self.spans.clear();
+        self.row_spans.clear();
+        self.fluid = 0;
+        for k in 0..nz {
+            for j in 0..ny {
+                let mut first = None;
+                let mut end = 0;
+                for i in 0..nx {
+                    let c = i + nx * (j + ny * k);
+                    if self.label[c] != L_FLUID {
+                        continue;
+                    }
+                    self.fluid += 1;
+                    first.get_or_insert(i);
+                    end = i + 1;
+                    let d = self.count_diag([i, j, k]);
+                    let p = self.pad(i, j, k);
+                    self.ddiag[p] = d;
+                    self.mask[p] = 1.0;
+                    self.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
+                }
+                if let Some(i0) = first {
+                    self.row_spans
+                        .push([j as u32, k as u32, i0 as u32, end as u32]);
+                    let (s, e) = (
+                        self.pad(i0, j, k) as u32,
+                        self.pad(end - 1, j, k) as u32 + 1,
+                    );
+                    match self.spans.last_mut() {
+                        Some(last) if (s as usize) <= last[1] as usize + SPAN_GAP => last[1] = e,
+                        _ => self.spans.push([s, e]),
+                    }
+                }
+            }
+        }
+        let total: u32 = self.spans.iter().map(|&[s, e]| e - s).sum();
+        let mut acc = 0;
+        self.split_span = self.spans.len();
+        for (n, &[s, e]) in self.spans.iter().enumerate() {
+            if 2 * acc >= total {
+                self.split_span = n;
+                break;
+            }
+            acc += e - s;
+        }
+    }
+
+    /// Labels of the next coarser level, or false when this level should be the coarsest.
     fn coarsen(&self, coarse: &mut Level) -> bool {
-        if self.rows() <= 8 || self.dims.iter().all(|&n| n <= 1) {
+        if self.fluid <= 8 || self.dims.iter().all(|&n| n <= 1) {
             return false;
         }
         for a in 0..3 {
@@ -171,93 +582,266 @@ impl Level {
         true
     }
 
-    fn link_parents(&mut self, coarse: &Level) {
-        let [nx, ny, _] = self.dims;
-        let cd = coarse.dims;
-        self.parent.clear();
-        for row in 0..self.rows() {
-            let ci = self.cell_of_row[row] as usize;
-            let (i, j, k) = (ci % nx, (ci / nx) % ny, ci / (nx * ny));
-            let p = i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2));
-            self.parent.push(coarse.row_of_cell[p]);
+    fn any_periodic(&self) -> bool {
+        self.periodic.iter().any(|&p| p)
+    }
+
+    /// Fills the ghost layers of periodic axes of `v` from the opposite side.
+    pub fn halo<T: Copy>(&self, v: &mut [T]) {
+        let [nx, ny, nz] = self.dims;
+        let (sy, sz) = (self.sy, self.sz);
+        let (py, pz) = (ny + 2, nz + 2);
+        if self.periodic[0] {
+            for k in 0..pz {
+                for j in 0..py {
+                    let row = j * sy + k * sz;
+                    v[row] = v[row + nx];
+                    v[row + nx + 1] = v[row + 1];
+                }
+            }
+        }
+        if self.periodic[1] {
+            for k in 0..pz {
+                let plane = k * sz;
+                v.copy_within(plane + ny * sy..plane + (ny + 1) * sy, plane);
+                v.copy_within(plane + sy..plane + 2 * sy, plane + (ny + 1) * sy);
+            }
+        }
+        if self.periodic[2] {
+            v.copy_within(nz * sz..(nz + 1) * sz, 0);
+            v.copy_within(sz..2 * sz, (nz + 1) * sz);
         }
     }
 
-    #[inline]
-    fn relax(&mut self, row: usize) {
-        let nb = self.nbr[row];
-        let x = &self.x;
-        let s = self.b[row]
-            + (x[nb[0] as usize] + x[nb[1] as usize])
-            + (x[nb[2] as usize] + x[nb[3] as usize])
-            + (x[nb[4] as usize] + x[nb[5] as usize]);
-        self.x[row] = s * self.inv_diag[row];
-    }
-
-    /// Relaxes rows `range` (one colour): in parallel through the scratch buffer when `parallel` and
-    /// the colouring is exact, else in order (`reverse`: backwards).
-    fn relax_range(&mut self, range: std::ops::Range<usize>, reverse: bool, parallel: bool) {
-        if parallel && self.exact_colouring {
-            let start = range.start;
-            let Level {
-                x,
-                b,
-                nbr,
-                inv_diag,
-                scratch,
-                ..
-            } = self;
-            let x_read: &[f32] = x;
-            scratch[range.clone()]
-                .par_chunks_mut(CHUNK)
-                .enumerate()
-                .for_each(|(ci, out)| {
-                    for (o, v) in out.iter_mut().enumerate() {
-                        let row = start + ci * CHUNK + o;
-                        let nb = nbr[row];
-                        let s = b[row]
-                            + (x_read[nb[0] as usize] + x_read[nb[1] as usize])
-                            + (x_read[nb[2] as usize] + x_read[nb[3] as usize])
-                            + (x_read[nb[4] as usize] + x_read[nb[5] as usize]);
-                        *v = s * inv_diag[row];
-                    }
-                });
-            x[range.clone()].copy_from_slice(&scratch[range]);
-        } else if reverse {
-            for row in range.rev() {
-                self.relax(row);
-            }
+    /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
+    /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
+    fn half_sweep(&mut self, colour: usize, init: bool) {
+        let mut x = std::mem::take(&mut self.x);
+        if init {
+            run(
+                self,
+                SpanOp::Init {
+                    x: &mut x,
+                    b: &self.b,
+                    inv: &self.inv[colour],
+                },
+            );
         } else {
-            for row in range {
-                self.relax(row);
+            if self.any_periodic() {
+                self.halo(&mut x);
+            }
+            if self.parallel {
+                // Two threads cannot update `x` in place: the increments go to the residual
+                // vector (free during smoothing) and are added after.
+                let mut t = std::mem::take(&mut self.r);
+                run(
+                    self,
+                    SpanOp::RelaxInto {
+                        t: &mut t,
+                        x: &x,
+                        b: &self.b,
+                        diag: &self.ddiag,
+                        inv: &self.inv[colour],
+                    },
+                );
+                run(self, SpanOp::Add { x: &mut x, t: &t });
+                self.r = t;
+            } else {
+                run(
+                    self,
+                    SpanOp::Relax {
+                        x: &mut x,
+                        b: &self.b,
+                        diag: &self.ddiag,
+                        inv: &self.inv[colour],
+                    },
+                );
+            }
+        }
+        self.x = x;
+    }
+
+    /// `r = b - A x` on the spans.
+    fn residual(&mut self) {
+        let mut x = std::mem::take(&mut self.x);
+        let mut r = std::mem::take(&mut self.r);
+        if self.any_periodic() {
+            self.halo(&mut x);
+        }
+        run(
+            self,
+            SpanOp::Stencil {
+                y: &mut r,
+                v: &x,
+                b: Some(&self.b),
+                diag: &self.ddiag,
+                mask: &self.mask,
+            },
+        );
+        self.x = x;
+        self.r = r;
+    }
+
+    /// `y = A v` on the spans (zero on non-fluid cells of the spans); `v`'s periodic ghost layers
+    /// must be filled.
+    pub fn apply(&self, v: &[f32], y: &mut [f32]) {
+        run(
+            self,
+            SpanOp::Stencil {
+                y,
+                v,
+                b: None,
+                diag: &self.ddiag,
+                mask: &self.mask,
+            },
+        );
+    }
+}
+
+/// Relaxes the cells of `s..e` whose `inv` is non-zero: `x += inv (b + sum of neighbours - d x)`.
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn relax_span(
+    x: &mut [f32],
+    b: &[f32],
+    diag: &[f32],
+    inv: &[f32],
+    s: usize,
+    e: usize,
+    sy: usize,
+    sz: usize,
+) {
+    let mut c = s;
+    let mut t = [0.0f32; CHUNK];
+    while c < e {
+        let n = (e - c).min(CHUNK);
+        {
+            let (xm, xp, ym, yp, zm, zp) = windows!(x, c, n, sy, sz);
+            let x0 = &x[c..c + n];
+            let (bb, dd, ii) = (&b[c..c + n], &diag[c..c + n], &inv[c..c + n]);
+            let t = &mut t[..n];
+            for q in 0..n {
+                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                t[q] = ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
+            }
+        }
+        for (xv, &tv) in x[c..c + n].iter_mut().zip(&t[..n]) {
+            *xv += tv;
+        }
+        c += n;
+    }
+}
+
+/// `y = mask (b - A v)` with `b`, or `y = mask A v` without, on cells `s..e` (`y` holds just
+/// those cells).
+#[allow(clippy::too_many_arguments)]
+#[inline(always)]
+fn stencil_span(
+    y: &mut [f32],
+    v: &[f32],
+    b: Option<&[f32]>,
+    diag: &[f32],
+    mask: &[f32],
+    s: usize,
+    e: usize,
+    sy: usize,
+    sz: usize,
+) {
+    let n = e - s;
+    let (xm, xp, ym, yp, zm, zp) = windows!(v, s, n, sy, sz);
+    let (v0, dd, mm) = (&v[s..e], &diag[s..e], &mask[s..e]);
+    let y = &mut y[..n];
+    match b {
+        Some(b) => {
+            let b = &b[s..e];
+            for q in 0..n {
+                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                y[q] = mm[q] * (b[q] + nsum - dd[q] * v0[q]);
+            }
+        }
+        None => {
+            for q in 0..n {
+                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                y[q] = mm[q] * (dd[q] * v0[q] - nsum);
             }
         }
     }
+}
 
-    /// Red then black Gauss-Seidel sweep.
-    pub fn smooth_forward(&mut self, parallel: bool) {
-        let (red, n) = (self.red_rows, self.rows());
-        self.relax_range(0..red, false, parallel);
-        self.relax_range(red..n, false, parallel);
-    }
+/// The grid transfers between a level and the next coarser one, dispatched like [`SpanOp`]: each
+/// coarse row of fluid cells meets four fine rows, whose cells pair up along x.
+struct Transfer<'a> {
+    fine: &'a Level,
+    coarse: &'a Level,
+    /// Restriction: the coarse right-hand side to write (`Some(scale, b)`); prolongation: the fine
+    /// unknowns to correct.
+    restrict: Option<(f32, &'a mut [f32])>,
+    fine_x: Option<&'a mut [f32]>,
+}
 
-    /// The adjoint of `smooth_forward`: black then red, each in reverse order.
-    pub fn smooth_backward(&mut self, parallel: bool) {
-        let (red, n) = (self.red_rows, self.rows());
-        self.relax_range(red..n, true, parallel);
-        self.relax_range(0..red, true, parallel);
-    }
+impl pulp::WithSimd for Transfer<'_> {
+    type Output = ();
 
-    fn residual(&mut self) {
-        for row in 0..self.rows() {
-            let nb = self.nbr[row];
-            let x = &self.x;
-            self.r[row] = self.b[row] - self.diag[row] * x[row]
-                + (x[nb[0] as usize] + x[nb[1] as usize])
-                + (x[nb[2] as usize] + x[nb[3] as usize])
-                + (x[nb[4] as usize] + x[nb[5] as usize]);
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _simd: S) {
+        let (fine, coarse) = (self.fine, self.coarse);
+        let (fsy, fsz) = (fine.sy, fine.sz);
+        let (mut restrict, mut fine_x) = (self.restrict, self.fine_x);
+        for &[j, k, i0, i1] in &coarse.row_spans {
+            let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+            let c = coarse.pad(i0, j, k)..coarse.pad(i1, j, k);
+            let f0 = fine.pad(2 * i0, 2 * j, 2 * k);
+            let n2 = 2 * (i1 - i0);
+            let rows = [f0, f0 + fsy, f0 + fsz, f0 + fsz + fsy];
+            if let Some((scale, b)) = restrict.as_mut() {
+                let b = &mut b[c.clone()];
+                b.fill(0.0);
+                for f in rows {
+                    for (bv, r2) in b.iter_mut().zip(fine.r[f..f + n2].chunks_exact(2)) {
+                        *bv += r2[0] + r2[1];
+                    }
+                }
+                for (bv, &m) in b.iter_mut().zip(&coarse.mask[c.clone()]) {
+                    *bv *= m * *scale;
+                }
+            }
+            if let Some(x) = fine_x.as_mut() {
+                let xc = &coarse.x[c.clone()];
+                for f in rows {
+                    let xs = x[f..f + n2].chunks_exact_mut(2);
+                    let ms = fine.mask[f..f + n2].chunks_exact(2);
+                    for ((x2, m2), &v) in xs.zip(ms).zip(xc) {
+                        x2[0] += m2[0] * v;
+                        x2[1] += m2[1] * v;
+                    }
+                }
+            }
         }
     }
+}
+
+/// `coarse.b = scale * (sum of the children's residuals)` on the coarse fluid cells.
+fn restrict(fine: &Level, coarse: &mut Level, scale: f32) {
+    let mut b = std::mem::take(&mut coarse.b);
+    pulp::Arch::new().dispatch(Transfer {
+        fine,
+        coarse,
+        restrict: Some((scale, &mut b)),
+        fine_x: None,
+    });
+    coarse.b = b;
+}
+
+/// `fine.x += coarse.x` of the parent on every fine fluid cell.
+fn prolongate(coarse: &Level, fine: &mut Level) {
+    let mut x = std::mem::take(&mut fine.x);
+    pulp::Arch::new().dispatch(Transfer {
+        fine,
+        coarse,
+        restrict: None,
+        fine_x: Some(&mut x),
+    });
+    fine.x = x;
 }
 
 /// The level hierarchy.
@@ -272,77 +856,54 @@ pub(crate) struct Multigrid {
     pub sweeps: usize,
     /// Symmetric sweeps on the coarsest level.
     pub coarsest_sweeps: usize,
-    /// Levels with at least this many rows smooth in parallel (rayon).
-    pub parallel_rows: usize,
 }
 
 impl Multigrid {
-    /// Builds the hierarchy under a finished level 0 (`levels[0]` must be built by the caller).
+    /// Builds the hierarchy under a finished level 0 (`levels[0].build_rows()` done by the caller).
     pub fn build_hierarchy(&mut self) {
         self.used = 1;
-        loop {
+        while self.used < 16 {
             let l = self.used;
             if self.levels.len() <= l {
                 self.levels.push(Level::default());
             }
             let (fine, coarse) = self.levels.split_at_mut(l);
-            let fine = &mut fine[l - 1];
-            if !fine.coarsen(&mut coarse[0]) {
-                fine.parent.clear();
+            if !fine[l - 1].coarsen(&mut coarse[0]) {
                 break;
             }
-            coarse[0].build_rows();
-            fine.link_parents(&coarse[0]);
+            coarse[0].build_dense();
             self.used += 1;
-            if self.used >= 16 {
-                break;
-            }
-        }
-        if self.used >= 16 {
-            self.levels[self.used - 1].parent.clear();
         }
     }
 
-    /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b`.
+    /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b` (dense, zero off the fluid cells).
     pub fn vcycle(&mut self) {
         let n = self.used;
+        let sweeps = self.sweeps.max(1);
         for l in 0..n - 1 {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
             let fine = &mut fine[l];
-            let coarse = &mut coarse[0];
-            fine.x.fill(0.0);
-            let par = fine.rows() >= self.parallel_rows;
-            for _ in 0..self.sweeps {
-                fine.smooth_forward(par);
+            for s in 0..sweeps {
+                fine.half_sweep(0, s == 0);
+                fine.half_sweep(1, false);
             }
             fine.residual();
-            coarse.b.fill(0.0);
-            for row in 0..fine.rows() {
-                let p = fine.parent[row];
-                if p != NONE {
-                    coarse.b[p as usize] += self.coarse_scale * fine.r[row];
-                }
-            }
+            restrict(fine, &mut coarse[0], self.coarse_scale);
         }
         let last = &mut self.levels[n - 1];
-        last.x.fill(0.0);
-        for _ in 0..self.coarsest_sweeps {
-            last.smooth_forward(false);
-            last.smooth_backward(false);
+        for s in 0..self.coarsest_sweeps.max(1) {
+            last.half_sweep(0, s == 0);
+            last.half_sweep(1, false);
+            last.half_sweep(1, false);
+            last.half_sweep(0, false);
         }
         for l in (0..n - 1).rev() {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
             let fine = &mut fine[l];
-            let coarse = &coarse[0];
-            for row in 0..fine.rows() {
-                let p = fine.parent[row];
-                if p != NONE {
-                    fine.x[row] += coarse.x[p as usize];
-                }
-            }
-            let par = fine.rows() >= self.parallel_rows;
-            for _ in 0..self.sweeps {
-                fine.smooth_backward(par);
+            prolongate(&coarse[0], fine);
+            for _ in 0..sweeps {
+                fine.half_sweep(1, false);
+                fine.half_sweep(0, false);
             }
         }
     }
@@ -353,10 +914,10 @@ mod tests {
     use super::*;
 
     /// An irregular label grid: a ball of fluid with an open cap and a solid inclusion.
-    fn ball(n: usize) -> Level {
+    fn ball(n: usize, periodic: [bool; 3]) -> Level {
         let mut l = Level {
             dims: [n, n, n],
-            periodic: [false; 3],
+            periodic,
             ..Default::default()
         };
         let c = (n as f64 - 1.0) / 2.0;
@@ -392,16 +953,71 @@ mod tests {
             coarsest_sweeps: 16,
             ..Default::default()
         };
-        m.levels.push(ball(n));
+        m.levels.push(ball(n, [false; 3]));
         m.build_hierarchy();
         m
     }
 
+    /// `M b` in compressed rows.
     fn apply(m: &mut Multigrid, b: &[f32]) -> Vec<f32> {
-        let n = m.levels[0].rows();
-        m.levels[0].b[..n].copy_from_slice(b);
+        let l0 = &mut m.levels[0];
+        l0.b.fill(0.0);
+        for (row, &v) in b.iter().enumerate() {
+            let p = l0.pad_of_row[row] as usize;
+            l0.b[p] = v;
+        }
         m.vcycle();
-        m.levels[0].x[..n].to_vec()
+        let l0 = &m.levels[0];
+        l0.pad_of_row.iter().map(|&p| l0.x[p as usize]).collect()
+    }
+
+    /// `A x` from the compressed rows (the reference the dense operator must match).
+    fn matvec(l: &Level, x: &[f32]) -> Vec<f32> {
+        (0..l.rows())
+            .map(|r| {
+                let mut s = l.diag[r] * x[r];
+                for &nb in &l.nbr[r] {
+                    if (nb as usize) < l.rows() {
+                        s -= x[nb as usize];
+                    }
+                }
+                s
+            })
+            .collect()
+    }
+
+    #[test]
+    fn dense_operator_equals_the_compressed_rows() {
+        // Non-periodic and periodic (odd and one-cell axes included) grids.
+        for (n, periodic) in [
+            (9, [false; 3]),
+            (8, [true, false, true]),
+            (7, [true, true, false]),
+        ] {
+            let mut l = ball(n, periodic);
+            if periodic[2] {
+                // A fully fluid periodic slab so wrap-around neighbours exist.
+                l.label.iter_mut().for_each(|v| *v = L_FLUID);
+                l.build_rows();
+            }
+            let x: Vec<f32> = (0..l.rows())
+                .map(|i| ((i * 37) % 11) as f32 - 5.0)
+                .collect();
+            let mut v = vec![0.0f32; l.x.len()];
+            for (row, &p) in l.pad_of_row.iter().enumerate() {
+                v[p as usize] = x[row];
+            }
+            l.halo(&mut v);
+            let mut y = vec![0.0f32; v.len()];
+            l.apply(&v, &mut y);
+            let reference = matvec(&l, &x);
+            for (row, &p) in l.pad_of_row.iter().enumerate() {
+                assert_eq!(y[p as usize], reference[row], "n {n} periodic {periodic:?}");
+            }
+            // Nothing leaks onto non-fluid cells.
+            let fluid_sum: f32 = l.pad_of_row.iter().map(|&p| y[p as usize].abs()).sum();
+            assert_eq!(y.iter().map(|v| v.abs()).sum::<f32>(), fluid_sum);
+        }
     }
 
     #[test]
@@ -432,11 +1048,14 @@ mod tests {
     }
 
     #[test]
-    fn parallel_sweeps_equal_serial_sweeps() {
+    fn parallel_vcycle_equals_the_serial_one() {
         let mut serial = mg(17);
         let mut parallel = mg(17);
-        parallel.parallel_rows = 0;
-        assert!(parallel.levels[0].exact_colouring);
+        for l in &mut parallel.levels {
+            l.parallel = true;
+        }
+        let l0 = &parallel.levels[0];
+        assert!(l0.split_span > 0 && l0.split_span < l0.spans.len());
         let n = serial.levels[0].rows();
         let b: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
         assert_eq!(apply(&mut serial, &b), apply(&mut parallel, &b));
@@ -447,22 +1066,8 @@ mod tests {
         // As a stationary iteration x <- x + M (b - A x), one V-cycle must contract the error well.
         let mut m = mg(17);
         let n = m.levels[0].rows();
-        let l0 = &m.levels[0];
         let exact: Vec<f32> = (0..n).map(|i| (i as f32 * 0.37).sin()).collect();
-        let matvec = |l: &Level, x: &[f32]| -> Vec<f32> {
-            (0..l.rows())
-                .map(|r| {
-                    let mut s = l.diag[r] * x[r];
-                    for &nb in &l.nbr[r] {
-                        if (nb as usize) < l.rows() {
-                            s -= x[nb as usize];
-                        }
-                    }
-                    s
-                })
-                .collect()
-        };
-        let b = matvec(l0, &exact);
+        let b = matvec(&m.levels[0], &exact);
         let mut x = vec![0.0f32; n];
         for _ in 0..2 {
             let ax = matvec(&m.levels[0], &x);

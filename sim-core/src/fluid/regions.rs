@@ -95,4 +95,30 @@ impl Regions {
         }
         worst
     }
+
+    /// As [`Regions::remove_closed_means`] for a dense (padded) f32 vector whose rows sit at
+    /// `pad_of_row`; the means are accumulated in f64.
+    pub fn remove_closed_means_dense(&mut self, v: &mut [f32], pad_of_row: &[u32]) -> f64 {
+        if !self.any_closed() {
+            return 0.0;
+        }
+        self.sum.fill(0.0);
+        for (r, &p) in pad_of_row.iter().enumerate() {
+            self.sum[self.of_row[r] as usize] += v[p as usize] as f64;
+        }
+        let mut worst = 0.0f64;
+        for (id, s) in self.sum.iter_mut().enumerate() {
+            *s = if self.closed[id] {
+                *s / self.size[id] as f64
+            } else {
+                0.0
+            };
+            worst = worst.max(s.abs());
+        }
+        for (r, &p) in pad_of_row.iter().enumerate() {
+            let x = &mut v[p as usize];
+            *x = (*x as f64 - self.sum[self.of_row[r] as usize]) as f32;
+        }
+        worst
+    }
 }

@@ -210,11 +210,12 @@ impl FluidSolver {
             pressure_pa: Vec::new(),
             time_s: 0.0,
         };
-        // Measured on the benchmark cavity: 2 sweeps and a coarse scale of 1/2 (twice Galerkin,
-        // compensating piecewise-constant prolongation) give ~8 iterations to 1e-6.
-        s.pressure.mg.coarse_scale = 0.5;
+        // Measured on the benchmark cavity: 2 sweeps and a coarse scale of 0.6 (over twice
+        // Galerkin, compensating piecewise-constant prolongation) give 7 iterations to 5e-6 at
+        // 0.6-1.2 mm (0.5: 7-8, 0.7: 7-8, 0.8: 9).
+        s.pressure.mg.coarse_scale = 0.6;
         s.pressure.mg.sweeps = 2;
-        s.pressure.mg.coarsest_sweeps = 16;
+        s.pressure.mg.coarsest_sweeps = 4; // 16 gives the same iteration counts
         s.rebuild_topology();
         Ok(s)
     }
@@ -600,25 +601,37 @@ impl FluidSolver {
 
     /// `-h div u` per pressure row, from the face velocities.
     fn divergence_rhs(&mut self) {
-        let l0 = &self.pressure.mg.levels[0];
-        let dims = self.grid.dims();
-        let periodic = self.grid.periodic();
-        let [nx, ny, _] = dims;
-        for (row, b) in self.pressure.b.iter_mut().enumerate() {
-            let ci = l0.cell_of_row[row] as usize;
-            let cell = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
-            let mut div = 0.0f64;
-            for c in 0..3 {
-                let lo = self.layout.face_index(c, cell);
-                let mut up = cell;
-                up[c] += 1;
-                if periodic[c] && up[c] == dims[c] {
-                    up[c] = 0;
+        let ps = &mut self.pressure;
+        if ps.faces_stale {
+            // Each row's six faces, found once per topology (the per-step loop is then gathers).
+            let l0 = &ps.mg.levels[0];
+            let dims = self.grid.dims();
+            let periodic = self.grid.periodic();
+            let [nx, ny, _] = dims;
+            ps.faces_of_row.clear();
+            for &ci in &l0.cell_of_row {
+                let ci = ci as usize;
+                let cell = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
+                let mut f = [0u32; 6];
+                for c in 0..3 {
+                    f[2 * c] = self.layout.face_index(c, cell) as u32;
+                    let mut up = cell;
+                    up[c] += 1;
+                    if periodic[c] && up[c] == dims[c] {
+                        up[c] = 0;
+                    }
+                    f[2 * c + 1] = self.layout.face_index(c, up) as u32;
                 }
-                let hi = self.layout.face_index(c, up);
-                div += self.u[c][hi] as f64 - self.u[c][lo] as f64;
+                ps.faces_of_row.push(f);
             }
-            *b = -div;
+            ps.faces_stale = false;
+        }
+        let [u0, u1, u2] = &self.u;
+        for (b, f) in ps.b.iter_mut().zip(&ps.faces_of_row) {
+            let dx = u0[f[1] as usize] as f64 - u0[f[0] as usize] as f64;
+            let dy = u1[f[3] as usize] as f64 - u1[f[2] as usize] as f64;
+            let dz = u2[f[5] as usize] as f64 - u2[f[4] as usize] as f64;
+            *b = -(dx + dy + dz);
         }
     }
 
@@ -645,32 +658,58 @@ impl FluidSolver {
             *q = p * to_q;
         }
         self.pressure.parallel_rows = self.params.parallel_threshold_cells;
-        let out = self.pressure.solve(
-            self.params.projection,
-            // Half the tolerance: the velocity update is rounded to f32, and the divergence measured
-            // afterwards from the f32 faces must still meet the tolerance.
-            0.5 * self.params.tolerance * u_ref,
-            self.params.max_iterations,
-        );
-        stats.projection_iterations += out.iterations;
-        stats.projection_converged &= out.converged;
-        for (p, &q) in self.pressure_pa.iter_mut().zip(&self.pressure.q) {
-            *p = q / to_q;
-        }
-        let q = &self.pressure.q;
-        for c in 0..3 {
-            let set = &self.faces[c];
-            for (&idx, &[lo, up]) in set.active.iter().zip(&set.rows) {
-                let ql = if lo == NONE { 0.0 } else { q[lo as usize] };
-                let qu = if up == NONE { 0.0 } else { q[up as usize] };
-                self.u[c][idx as usize] -= (qu - ql) as f32;
+        let method = self.params.projection;
+        let tol_abs = self.params.tolerance * u_ref;
+        let mut iterations_left = self.params.max_iterations;
+        let mut max_div = f64::INFINITY;
+        // The CG stops on its recurrence residual at half the tolerance (the velocity update is
+        // rounded to f32, and the divergence measured afterwards from the f32 faces must still meet
+        // the tolerance). That measured divergence is the true residual: if it misses the
+        // tolerance (f32 inner solves, or a warm start far off), it is the right-hand side of a
+        // correction solve from zero, at most twice.
+        for round in 0..3 {
+            if round > 0 {
+                if max_div <= tol_abs
+                    || iterations_left == 0
+                    || matches!(method, ProjectionMethod::GaussSeidel { .. })
+                {
+                    break;
+                }
+                self.pressure.q.fill(0.0);
             }
+            let out = self
+                .pressure
+                .solve(method, 0.5 * tol_abs, iterations_left.max(1));
+            iterations_left = iterations_left.saturating_sub(out.iterations);
+            stats.projection_iterations += out.iterations;
+            if matches!(method, ProjectionMethod::GaussSeidel { .. }) {
+                stats.projection_converged &= out.converged;
+            }
+            let q = &self.pressure.q;
+            for (p, &qv) in self.pressure_pa.iter_mut().zip(q) {
+                *p = if round == 0 {
+                    qv / to_q
+                } else {
+                    *p + qv / to_q
+                };
+            }
+            for c in 0..3 {
+                let set = &self.faces[c];
+                for (&idx, &[lo, up]) in set.active.iter().zip(&set.rows) {
+                    let ql = if lo == NONE { 0.0 } else { q[lo as usize] };
+                    let qu = if up == NONE { 0.0 } else { q[up as usize] };
+                    self.u[c][idx as usize] -= (qu - ql) as f32;
+                }
+            }
+            self.divergence_rhs();
+            self.pressure
+                .regions
+                .remove_closed_means(&mut self.pressure.b);
+            max_div = self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
         }
-        self.divergence_rhs();
-        self.pressure
-            .regions
-            .remove_closed_means(&mut self.pressure.b);
-        let max_div = self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
+        if max_div > tol_abs && !matches!(method, ProjectionMethod::GaussSeidel { .. }) {
+            stats.projection_converged = false;
+        }
         stats.max_div_rel = max_div / u_ref;
     }
 
