@@ -33,6 +33,7 @@ pub mod ordering;
 pub mod pressure;
 pub mod system;
 pub mod testmesh;
+pub mod tet10;
 
 pub use model::FemModel;
 pub use newton::{Equilibrium, Solver, SolverCounters, SolverOptions};
