@@ -32,10 +32,11 @@ pub mod newton;
 pub mod ordering;
 pub mod pressure;
 pub mod system;
+pub mod system10;
 pub mod testmesh;
 pub mod tet10;
 
-pub use model::FemModel;
+pub use model::{Element, FemModel};
 pub use newton::{Equilibrium, Solver, SolverCounters, SolverOptions};
 
 /// Errors of the FEM.
