@@ -129,7 +129,7 @@ fn shoot(material: &Material, inner: f64, outer: f64, la: f64, pressure: f64, st
     let mut s = -pressure * la * la * inner * inner;
     let mut guess = 1.0 / (la * la);
     let h = (outer - inner) / steps as f64;
-    let mut rhs = |rr: f64, r: f64, s: f64, guess: &mut f64| -> Option<(f64, f64)> {
+    let rhs = |rr: f64, r: f64, s: f64, guess: &mut f64| -> Option<(f64, f64)> {
         let lt = r / rr;
         let l1 = radial_stretch(material, lt, s / (rr * rr), *guess)?;
         *guess = l1;

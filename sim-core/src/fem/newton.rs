@@ -354,6 +354,20 @@ impl<'m> Solver<'m> {
             if rel <= self.options.tolerance {
                 return Ok((x, p, it));
             }
+            // Diverging: after three corrections the residual is still above twice the start.
+            // Cutting the load step now is cheaper than exhausting the iterations (each one a
+            // factorization).
+            if it >= 3 && rel > 2.0 * history[0] {
+                return Err((
+                    FemError::Diverged {
+                        reason: format!(
+                            "residual grew from {:.3e} to {rel:.3e} in {it} iterations",
+                            history[0]
+                        ),
+                    },
+                    history,
+                ));
+            }
             let mut stale = !fresh;
             let mut a: Vec<f64> = ev.residual.iter().map(|r| -r).collect();
             if fresh {
