@@ -75,7 +75,11 @@ fn tet10_sphere_is_within_half_a_percent_at_h_eighth_and_converges_at_second_ord
         coarse * 100.0,
         fine * 100.0
     );
-    assert!(fine.abs() <= 0.005, "error at h=(B-A)/8: {:.4} %", fine * 100.0);
+    assert!(
+        fine.abs() <= 0.005,
+        "error at h=(B-A)/8: {:.4} %",
+        fine * 100.0
+    );
     assert!(order >= 2.0, "convergence order {order:.2}");
 }
 
@@ -91,7 +95,11 @@ fn tet4_sphere_converges_at_second_order_to_the_finite_kappa_solution() {
         coarse * 100.0,
         fine * 100.0
     );
-    assert!(fine.abs() < 0.015, "error at h=(B-A)/8: {:.3} %", fine * 100.0);
+    assert!(
+        fine.abs() < 0.015,
+        "error at h=(B-A)/8: {:.3} %",
+        fine * 100.0
+    );
     let order = (coarse / fine).abs().log2();
     assert!(order > 1.6, "convergence order {order:.2}");
 }

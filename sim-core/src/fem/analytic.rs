@@ -123,7 +123,14 @@ fn radial_stretch(material: &Material, lt: f64, target: f64, guess: f64) -> Opti
 /// Radial shooting for the compressible thick sphere: with `r(A) = la A` and the radial
 /// nominal stress `-P la^2` at `A`, integrates `d(R^2 W_1)/dR = 2 R W_2`, `dr/dR = l1`
 /// (RK4, `steps` steps) and returns `R^2 W_1` at `R = B` (zero for the equilibrium).
-fn shoot(material: &Material, inner: f64, outer: f64, la: f64, pressure: f64, steps: usize) -> Option<f64> {
+fn shoot(
+    material: &Material,
+    inner: f64,
+    outer: f64,
+    la: f64,
+    pressure: f64,
+    steps: usize,
+) -> Option<f64> {
     let mut rr = inner;
     let mut r = la * inner;
     let mut s = -pressure * la * la * inner * inner;
@@ -137,8 +144,18 @@ fn shoot(material: &Material, inner: f64, outer: f64, la: f64, pressure: f64, st
     };
     for _ in 0..steps {
         let (k1r, k1s) = rhs(rr, r, s, &mut guess)?;
-        let (k2r, k2s) = rhs(rr + 0.5 * h, r + 0.5 * h * k1r, s + 0.5 * h * k1s, &mut guess)?;
-        let (k3r, k3s) = rhs(rr + 0.5 * h, r + 0.5 * h * k2r, s + 0.5 * h * k2s, &mut guess)?;
+        let (k2r, k2s) = rhs(
+            rr + 0.5 * h,
+            r + 0.5 * h * k1r,
+            s + 0.5 * h * k1s,
+            &mut guess,
+        )?;
+        let (k3r, k3s) = rhs(
+            rr + 0.5 * h,
+            r + 0.5 * h * k2r,
+            s + 0.5 * h * k2s,
+            &mut guess,
+        )?;
         let (k4r, k4s) = rhs(rr + h, r + h * k3r, s + h * k3s, &mut guess)?;
         r += h / 6.0 * (k1r + 2.0 * k2r + 2.0 * k3r + k4r);
         s += h / 6.0 * (k1s + 2.0 * k2s + 2.0 * k3s + k4s);
@@ -167,10 +184,17 @@ fn bisect(mut lo: f64, mut hi: f64, f: impl Fn(f64) -> Option<f64>) -> Option<f6
 
 /// Internal pressure (Pa) of the *compressible* thick sphere (the material's finite `kappa`) at
 /// inner stretch `la`, by radial shooting: the exact solution the FEM converges to.
-pub fn sphere_pressure_compressible(material: &Material, inner: f64, outer: f64, la: f64) -> Option<f64> {
+pub fn sphere_pressure_compressible(
+    material: &Material,
+    inner: f64,
+    outer: f64,
+    la: f64,
+) -> Option<f64> {
     let steps = 400;
     // The incompressible pressure brackets the answer within a factor of two for kappa/mu >= 10.
-    let p_inc = sphere_pressure(material, inner, outer, la).abs().max(1e-12 * material.kappa_pa);
+    let p_inc = sphere_pressure(material, inner, outer, la)
+        .abs()
+        .max(1e-12 * material.kappa_pa);
     let f = |p: f64| shoot(material, inner, outer, la, p, steps);
     let (lo, hi) = (0.0, 4.0 * p_inc);
     let (flo, fhi) = (f(lo)?, f(hi)?);
@@ -191,11 +215,13 @@ pub fn sphere_inner_stretch_compressible(
     if pressure_pa <= 0.0 {
         return Some(1.0);
     }
-    let f = |la: f64| sphere_pressure_compressible(material, inner, outer, la).map(|p| p - pressure_pa);
+    // Shoot on la directly: the first sign change of the outer radial stress from la = 1.
+    let f = |la: f64| shoot(material, inner, outer, la, pressure_pa, 400);
+    let f1 = f(1.0)?;
     let (mut lo, mut step) = (1.0, 1e-3);
     loop {
         let hi = lo + step;
-        if f(hi)? >= 0.0 {
+        if (f(hi)? > 0.0) != (f1 > 0.0) {
             return bisect(lo, hi, f);
         }
         lo = hi;

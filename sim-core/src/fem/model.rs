@@ -217,7 +217,10 @@ impl FemModel {
     /// vertices, placed by `place(a, b)` from the rest positions of the edge's ends (the chord
     /// midpoint, or a point on the exact curved boundary). A mid node's coordinate is fixed when it
     /// is fixed at both ends of its edge. Already quadratic models are returned unchanged.
-    pub fn to_tet10(&self, place: impl Fn([f64; 3], [f64; 3]) -> [f64; 3]) -> Result<Self, FemError> {
+    pub fn to_tet10(
+        &self,
+        place: impl Fn([f64; 3], [f64; 3]) -> [f64; 3],
+    ) -> Result<Self, FemError> {
         if self.element() == Element::Tet10 {
             return Ok(self.clone());
         }

@@ -147,7 +147,13 @@ impl Tet10System {
         }
     }
 
-    fn element(&self, model: &FemModel, x: &[[f64; 3]], t: usize, want_k: bool) -> Result<ElemOut, FemError> {
+    fn element(
+        &self,
+        model: &FemModel,
+        x: &[[f64; 3]],
+        t: usize,
+        want_k: bool,
+    ) -> Result<ElemOut, FemError> {
         let nodes = model.tet10_nodes(t);
         let xs = nodes.map(|i| x[i as usize]);
         let r = &self.refs[t];

@@ -431,10 +431,6 @@ mod tests {
                 }
             }
         }
-        assert!(
-            (sum - rc.volume0).abs() < 1e-13,
-            "{sum} vs {}",
-            rc.volume0
-        );
+        assert!((sum - rc.volume0).abs() < 1e-13, "{sum} vs {}", rc.volume0);
     }
 }
