@@ -236,8 +236,7 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         })
         .collect();
     let step = if args.holdout { 2 } else { 1 };
-    let states: Vec<Equilibrium> =
-        all_states.iter().step_by(step).cloned().collect();
+    let states: Vec<Equilibrium> = all_states.iter().step_by(step).cloned().collect();
     let held: Vec<&Equilibrium> = if args.holdout {
         all_states.iter().skip(1).step_by(2).collect()
     } else {

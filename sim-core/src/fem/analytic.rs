@@ -107,7 +107,7 @@ fn radial_stretch(material: &Material, lt: f64, target: f64, guess: f64) -> Opti
         let df = (principal_stress(material, l + h, lt, lt)
             - principal_stress(material, l - h, lt, lt))
             / (2.0 * h);
-        if !(df > 0.0) {
+        if df.is_nan() || df <= 0.0 {
             return None;
         }
         let step = f / df;
