@@ -202,7 +202,7 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
     let mut solver = Solver::new(&model, options.clone())?;
     let (nnz, factor_nnz) = solver.sizes();
     tracing::info!(
-        dofs = 3 * mesh.positions_m.len(),
+        dofs = 3 * model.rest_positions_m.len(),
         nnz,
         factor_nnz,
         "symbolic factorization done"
