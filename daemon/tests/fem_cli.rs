@@ -73,6 +73,89 @@ fn fem_sphere_json_reports_stretch_near_the_integral_oracle() {
 }
 
 #[test]
+fn fem_sphere_volume_control_passes_the_neo_hookean_pressure_maximum() {
+    // P(la) of the neo-Hookean thick sphere (A/B = 0.5) peaks near la = 1.85: pressure control
+    // cannot pass it, cavity-volume control can, and the pressure then falls.
+    let dir = out_dir("volume");
+    let mat = dir.join("nh.toml");
+    std::fs::write(&mat, "[myometrium]\nmu_pa = [0.5]\nkappa_pa = 1000.0\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .args([
+            "fem",
+            "sphere",
+            "--inner",
+            "1",
+            "--outer",
+            "2",
+            "--element",
+            "tet10",
+            "--resolution",
+            "3",
+            "--divisions",
+            "6",
+            "--control",
+            "volume",
+            "--stretches",
+            "1.3,1.6,1.85,2.0",
+            "--json",
+        ])
+        .arg("--material")
+        .arg(&mat)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["element"], "tet10");
+    let rows = v["results"].as_array().unwrap();
+    let p: Vec<f64> = rows
+        .iter()
+        .map(|r| r["pressure"].as_f64().unwrap())
+        .collect();
+    eprintln!("P at la 1.3, 1.6, 1.85, 2.0: {p:?}");
+    assert!(
+        p[1] > p[0] && p[2] > p[1],
+        "rising before the maximum: {p:?}"
+    );
+    assert!(p[3] < p[2], "falling after the maximum: {p:?}");
+    for r in rows {
+        let err = r["relative_error_of_pressure"].as_f64().unwrap();
+        assert!(
+            err.abs() < 0.01,
+            "pressure error {err} at la {}",
+            r["inner_stretch"]
+        );
+        assert!(
+            (r["inner_stretch"].as_f64().unwrap() - r["exact_inner_stretch"].as_f64().unwrap())
+                .abs()
+                < 1e-6
+        );
+    }
+    // Stretches with pressure control is a mistake that names the flag.
+    let bad = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .args([
+            "fem",
+            "sphere",
+            "--inner",
+            "1",
+            "--outer",
+            "2",
+            "--stretches",
+            "1.2",
+        ])
+        .arg("--material")
+        .arg(&mat)
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--stretches"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn precompute_writes_a_loadable_atlas_csv_and_paraview_series() {
     let dir = out_dir("precompute");
     let anatomy = dir.join("anatomy.toml");

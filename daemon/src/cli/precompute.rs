@@ -6,7 +6,7 @@ use clap::Args;
 use hydrometra_sim::anatomy::{self, AnatomyParams};
 use hydrometra_sim::atlas::{self, Atlas, AtlasLevel};
 use hydrometra_sim::fem::material::MaterialSet;
-use hydrometra_sim::fem::{FemModel, Solver, SolverOptions};
+use hydrometra_sim::fem::{Element, Equilibrium, FemModel, Solver, SolverOptions};
 use hydrometra_sim::mesh::TetMesh;
 use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
 use std::io::Write as _;
@@ -40,13 +40,20 @@ pub struct PrecomputeArgs {
     /// error (Hermite and linear) against these held-out states in summary.json.
     #[arg(long)]
     pub holdout: bool,
+    /// Finite element: tet4 (linear tets, nodally averaged J: the fast default) or tet10
+    /// (quadratic, mean dilatation; mid-edge nodes on the chords, since the anatomy mesh carries
+    /// no curved geometry): the accurate reference, several times slower. The atlas, VTU and
+    /// CSV describe the mesh vertices (tet10 mid-edge nodes are solved but not written); the
+    /// cavity volume is the solved (curved, for tet10) one.
+    #[arg(long, default_value_t = Element::Tet4)]
+    pub element: Element,
 }
 
 /// Replay error of the atlas against held-out FEM states.
 fn holdout_errors(
     atlas: &Atlas,
     mesh: &TetMesh,
-    held: &[&hydrometra_sim::fem::Equilibrium],
+    held: &[&Equilibrium],
 ) -> Result<serde_json::Value> {
     let n = atlas.vertex_count();
     let mut out = vec![[0.0f32; 3]; n];
@@ -76,12 +83,16 @@ fn holdout_errors(
                 sum_sq += e * e;
                 count += 1;
             }
-            let v = hydrometra_sim::mesh::cavity_volume_m3(
-                &replayed,
-                &mesh.cavity_triangles,
-                &mesh.cavity_opening_loop,
-            );
-            max_vol_err = max_vol_err.max((v / s.cavity_volume_m3 - 1.0).abs());
+            let closure = |x: &[[f64; 3]]| {
+                hydrometra_sim::mesh::cavity_volume_m3(
+                    x,
+                    &mesh.cavity_triangles,
+                    &mesh.cavity_opening_loop,
+                )
+            };
+            // Both on the vertex mesh (tet10 states carry a curved volume of their own).
+            let v = closure(&replayed);
+            max_vol_err = max_vol_err.max((v / closure(&s.positions_m) - 1.0).abs());
         }
         report.insert(
             name.to_string(),
@@ -182,13 +193,16 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
 
-    let model = FemModel::from_mesh(&mesh, &materials)?;
+    let mut model = FemModel::from_mesh(&mesh, &materials)?;
+    if args.element == Element::Tet10 {
+        model = model.to_tet10(|a, b| std::array::from_fn(|k| 0.5 * (a[k] + b[k])))?;
+    }
     let t0 = Instant::now();
     let options = SolverOptions::default();
     let mut solver = Solver::new(&model, options.clone())?;
     let (nnz, factor_nnz) = solver.sizes();
     tracing::info!(
-        dofs = 3 * mesh.positions_m.len(),
+        dofs = 3 * model.rest_positions_m.len(),
         nnz,
         factor_nnz,
         "symbolic factorization done"
@@ -211,10 +225,19 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         )
     })?;
     let sweep_s = t0.elapsed().as_secs_f64();
+    // The mesh vertices of every state (tet10 mid-edge nodes follow them and are dropped).
+    let n_vertices = mesh.positions_m.len();
+    let all_states: Vec<Equilibrium> = all_states
+        .into_iter()
+        .map(|mut s| {
+            s.positions_m.truncate(n_vertices);
+            s.dxdp_m_per_pa.truncate(n_vertices);
+            s
+        })
+        .collect();
     let step = if args.holdout { 2 } else { 1 };
-    let states: Vec<hydrometra_sim::fem::Equilibrium> =
-        all_states.iter().step_by(step).cloned().collect();
-    let held: Vec<&hydrometra_sim::fem::Equilibrium> = if args.holdout {
+    let states: Vec<Equilibrium> = all_states.iter().step_by(step).cloned().collect();
+    let held: Vec<&Equilibrium> = if args.holdout {
         all_states.iter().skip(1).step_by(2).collect()
     } else {
         Vec::new()
@@ -245,7 +268,12 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         "mesh": {"vertices": mesh.positions_m.len(), "tets": mesh.tets.len(), "origin": mesh_meta},
         "material": materials,
         "solver": {
-            "formulation": "total Lagrangian, linear tets, nodally averaged volumetric energy, follower pressure as -p V(x), fixed vertices clamped",
+            "element": args.element.to_string(),
+            "formulation": match args.element {
+                Element::Tet4 => "total Lagrangian, linear tets, nodally averaged volumetric energy, follower pressure as -p V(x), fixed vertices clamped",
+                Element::Tet10 => "total Lagrangian, 10-node tets (straight-sided at rest), mean-dilatation volumetric energy, follower pressure as -p V(x) on 6-node cavity triangles, fixed vertices clamped",
+            },
+            "nodes": model.rest_positions_m.len(),
             "tolerance": options.tolerance,
             "newton_iterations": solver.counters.newton_iterations,
             "factorizations": solver.counters.factorizations,
@@ -322,6 +350,8 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
         "vertices": mesh.positions_m.len(),
         "tets": mesh.tets.len(),
         "threads": rayon::current_num_threads(),
+        "element": args.element.to_string(),
+        "nodes": model.rest_positions_m.len(),
         "pv_curve_monotone": monotone,
         "krylov_iterations": solver.counters.krylov_iterations,
         "replay_holdout": holdout,

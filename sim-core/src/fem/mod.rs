@@ -4,10 +4,14 @@
 //! - [`material`]: `Psi = sum_p mu_p (I1bar - 3)^p + kappa/2 (J - 1)^2`, per region, from TOML.
 //! - [`element`]: linear tetrahedron kinematics; [`system`]: assembly with a nodally averaged
 //!   volumetric energy (locking-free for near-incompressible material).
+//! - [`tet10`] and [`system10`]: the quadratic 10-node tetrahedron with a mean-dilatation
+//!   (P2/P0) volumetric energy, the accurate element ([`Element::Tet10`],
+//!   [`FemModel::to_tet10`]).
 //! - [`pressure`]: the follower pressure as the potential `-p V_cavity(x)` of the closed cavity.
 //! - [`newton`]: Newton with line search, tangent predictor, adaptive steps, volume control.
 //! - [`linear`]: faer sparse LDL^T with the symbolic analysis reused.
-//! - [`testmesh`] and [`analytic`]: thick sphere and cylinder meshes and their exact solutions.
+//! - [`testmesh`] and [`analytic`]: thick sphere and cylinder meshes and their exact solutions
+//!   (incompressible integrals and the finite-kappa sphere by radial shooting).
 //!
 //! ```
 //! use hydrometra_sim::fem::{analytic, material::{Material, MaterialSet}, testmesh, FemModel, Solver};
@@ -18,6 +22,11 @@
 //! let rest = solver.rest_state();
 //! let loaded = solver.solve_to_pressure(&rest, 0.05).unwrap();
 //! assert!(loaded.cavity_volume_m3 > rest.cavity_volume_m3);
+//! // The same problem on quadratic tetrahedra with mid-edge nodes on the spheres.
+//! let quadratic = model.to_tet10(testmesh::spherical_midpoint).unwrap();
+//! let mut solver10 = Solver::new(&quadratic, Default::default()).unwrap();
+//! let loaded10 = solver10.solve_to_pressure(&solver10.rest_state(), 0.05).unwrap();
+//! assert!(loaded10.cavity_volume_m3 > solver10.rest_state().cavity_volume_m3);
 //! ```
 
 // Index loops mirror the tensor notation (F_iJ, A_iJkL) of the formulas they implement.
@@ -32,9 +41,11 @@ pub mod newton;
 pub mod ordering;
 pub mod pressure;
 pub mod system;
+pub mod system10;
 pub mod testmesh;
+pub mod tet10;
 
-pub use model::FemModel;
+pub use model::{Element, FemModel};
 pub use newton::{Equilibrium, Solver, SolverCounters, SolverOptions};
 
 /// Errors of the FEM.

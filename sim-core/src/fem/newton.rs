@@ -137,8 +137,8 @@ impl<'m> Solver<'m> {
         let order = system.elimination_order(model);
         let linear = LdltSolver::new(
             n,
-            system.col_ptr.clone(),
-            system.row_idx.clone(),
+            system.col_ptr().to_vec(),
+            system.row_idx().to_vec(),
             Some(order),
         )?;
         let values = vec![0.0; system.nnz()];
@@ -147,7 +147,7 @@ impl<'m> Solver<'m> {
             .iter()
             .map(|m| m.shear_modulus_pa())
             .fold(0.0, f64::max);
-        let vol: f64 = system.rest_volumes().sum();
+        let vol = system.rest_volume();
         let force_floor = 1e-9 * mu_max * vol.abs().powf(2.0 / 3.0);
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         for p in &model.rest_positions_m {
@@ -353,6 +353,20 @@ impl<'m> Solver<'m> {
             tracing::trace!(it, rel, fresh, "newton");
             if rel <= self.options.tolerance {
                 return Ok((x, p, it));
+            }
+            // Diverging: after three corrections the residual is still above twice the start.
+            // Cutting the load step now is cheaper than exhausting the iterations (each one a
+            // factorization).
+            if it >= 3 && rel > 2.0 * history[0] {
+                return Err((
+                    FemError::Diverged {
+                        reason: format!(
+                            "residual grew from {:.3e} to {rel:.3e} in {it} iterations",
+                            history[0]
+                        ),
+                    },
+                    history,
+                ));
             }
             let mut stale = !fresh;
             let mut a: Vec<f64> = ev.residual.iter().map(|r| -r).collect();

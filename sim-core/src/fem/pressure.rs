@@ -35,6 +35,9 @@ pub struct CavitySurface {
     pub triangles: Vec<[u32; 3]>,
     /// Caps closing the openings.
     pub caps: Vec<Cap>,
+    /// Quadratic (6-node) cavity triangles `[v0, v1, v2, m01, m12, m20]` of a 10-node mesh; when
+    /// present they replace `triangles` (their corners) in the volume and its derivatives.
+    pub quadratic: Vec<[u32; 6]>,
 }
 
 #[derive(Clone, Copy)]
@@ -42,6 +45,92 @@ enum Operand<'a> {
     Node(u32),
     Centroid(&'a [u32]),
     Fixed([f64; 3]),
+    /// A fixed linear combination of six nodes (a quadratic triangle at a quadrature point).
+    Combo([u32; 6], [f64; 6]),
+}
+
+/// 6-point degree-4 rule on the triangle (Dunavant): barycentric points and weights summing to 1.
+const TRI6: [([f64; 3], f64); 6] = [
+    (
+        [
+            0.445_948_490_915_965,
+            0.445_948_490_915_965,
+            0.108_103_018_168_07,
+        ],
+        0.223_381_589_678_011,
+    ),
+    (
+        [
+            0.445_948_490_915_965,
+            0.108_103_018_168_07,
+            0.445_948_490_915_965,
+        ],
+        0.223_381_589_678_011,
+    ),
+    (
+        [
+            0.108_103_018_168_07,
+            0.445_948_490_915_965,
+            0.445_948_490_915_965,
+        ],
+        0.223_381_589_678_011,
+    ),
+    (
+        [
+            0.091_576_213_509_771,
+            0.091_576_213_509_771,
+            0.816_847_572_980_459,
+        ],
+        0.109_951_743_655_322,
+    ),
+    (
+        [
+            0.091_576_213_509_771,
+            0.816_847_572_980_459,
+            0.091_576_213_509_771,
+        ],
+        0.109_951_743_655_322,
+    ),
+    (
+        [
+            0.816_847_572_980_459,
+            0.091_576_213_509_771,
+            0.091_576_213_509_771,
+        ],
+        0.109_951_743_655_322,
+    ),
+];
+
+/// Weights of `x`, `dx/dxi`, `dx/deta` of a 6-node triangle at barycentric point `l`
+/// (`xi = l1`, `eta = l2`), nodes `[v0, v1, v2, m01, m12, m20]`.
+fn quadratic_triangle_weights(l: [f64; 3]) -> [[f64; 6]; 3] {
+    let [l0, l1, l2] = l;
+    let n = [
+        l0 * (2.0 * l0 - 1.0),
+        l1 * (2.0 * l1 - 1.0),
+        l2 * (2.0 * l2 - 1.0),
+        4.0 * l0 * l1,
+        4.0 * l1 * l2,
+        4.0 * l2 * l0,
+    ];
+    // d/dxi: dl0 = -1, dl1 = 1; d/deta: dl0 = -1, dl2 = 1.
+    let dxi = [
+        -(4.0 * l0 - 1.0),
+        4.0 * l1 - 1.0,
+        0.0,
+        4.0 * (l0 - l1),
+        4.0 * l2,
+        -4.0 * l2,
+    ];
+    let deta = [
+        -(4.0 * l0 - 1.0),
+        0.0,
+        4.0 * l2 - 1.0,
+        -4.0 * l1,
+        4.0 * l1,
+        4.0 * (l0 - l2),
+    ];
+    [n, dxi, deta]
 }
 
 impl Operand<'_> {
@@ -49,6 +138,15 @@ impl Operand<'_> {
         match *self {
             Operand::Node(i) => x[i as usize],
             Operand::Fixed(p) => p,
+            Operand::Combo(ids, w) => {
+                let mut c = [0.0; 3];
+                for a in 0..6 {
+                    for k in 0..3 {
+                        c[k] += w[a] * x[ids[a] as usize][k];
+                    }
+                }
+                c
+            }
             Operand::Centroid(ids) => {
                 let mut c = [0.0; 3];
                 for &i in ids {
@@ -65,6 +163,11 @@ impl Operand<'_> {
         match *self {
             Operand::Node(i) => f(i, 1.0),
             Operand::Fixed(_) => {}
+            Operand::Combo(ids, w) => {
+                for a in 0..6 {
+                    f(ids[a], w[a]);
+                }
+            }
             Operand::Centroid(ids) => {
                 let w = 1.0 / ids.len().max(1) as f64;
                 for &i in ids {
@@ -112,6 +215,7 @@ impl CavitySurface {
         Self {
             triangles: mesh.cavity_triangles.clone(),
             caps,
+            quadratic: Vec::new(),
         }
     }
 
@@ -126,7 +230,11 @@ impl CavitySurface {
                 edges,
             }]
         };
-        Self { triangles, caps }
+        Self {
+            triangles,
+            caps,
+            quadratic: Vec::new(),
+        }
     }
 
     /// Triangles whose openings (connected groups of boundary edges) are each closed by a fan from
@@ -175,11 +283,72 @@ impl CavitySurface {
             })
             .collect();
         caps.sort_by_key(|c| c.edges.first().copied());
-        Self { triangles, caps }
+        Self {
+            triangles,
+            caps,
+            quadratic: Vec::new(),
+        }
+    }
+
+    /// The same cavity on a 10-node mesh: each triangle becomes a 6-node triangle with the
+    /// mid-edge nodes `mid(a, b)` (keys with `a < b`), and each cap edge `a -> b` is split at its
+    /// mid node so the fan follows the curved boundary through it. `None` if an edge has no mid
+    /// node.
+    pub fn to_quadratic(&self, mid: &HashMap<(u32, u32), u32>) -> Option<Self> {
+        let m = |a: u32, b: u32| mid.get(&(a.min(b), a.max(b))).copied();
+        let mut quadratic = Vec::with_capacity(self.triangles.len());
+        for t in &self.triangles {
+            quadratic.push([
+                t[0],
+                t[1],
+                t[2],
+                m(t[0], t[1])?,
+                m(t[1], t[2])?,
+                m(t[2], t[0])?,
+            ]);
+        }
+        let mut caps = Vec::with_capacity(self.caps.len());
+        for cap in &self.caps {
+            let mut edges = Vec::with_capacity(2 * cap.edges.len());
+            for &(a, b) in &cap.edges {
+                let c = m(a, b)?;
+                edges.push((a, c));
+                edges.push((c, b));
+            }
+            caps.push(Cap {
+                centre: cap.centre.clone(),
+                edges,
+            });
+        }
+        Some(Self {
+            triangles: self.triangles.clone(),
+            caps,
+            quadratic,
+        })
     }
 
     fn for_each_term(&self, mut f: impl FnMut(Operand<'_>, Operand<'_>, Operand<'_>)) {
-        for t in &self.triangles {
+        // A curved triangle contributes -(1/3) int x . (x_xi x x_eta) = -(1/6) sum_q
+        // det[2 w_q x_q, x_xi, x_eta] (the flat terms below are -(1/6) det[x0, x1, x2]).
+        for t in &self.quadratic {
+            for (l, w) in TRI6 {
+                let [mut n, dxi, deta] = quadratic_triangle_weights(l);
+                for v in n.iter_mut() {
+                    *v *= w;
+                }
+                f(
+                    Operand::Combo(*t, n),
+                    Operand::Combo(*t, dxi),
+                    Operand::Combo(*t, deta),
+                );
+            }
+        }
+        let flat = if self.quadratic.is_empty() {
+            &self.triangles[..]
+        } else {
+            &[]
+        };
+        for t in flat {
             f(
                 Operand::Node(t[0]),
                 Operand::Node(t[1]),
@@ -320,9 +489,77 @@ mod tests {
         assert!((s.volume(&unit) - 1.0).abs() < 1e-14);
     }
 
+    /// The open box on 6-node triangles, mid nodes pushed off the chords (a curved surface).
+    fn curved_open_box() -> (Vec<[f64; 3]>, CavitySurface, CavitySurface) {
+        let (mut x, s) = open_box();
+        let mut mid = HashMap::new();
+        for t in &s.triangles {
+            for k in 0..3 {
+                let (a, b) = (t[k].min(t[(k + 1) % 3]), t[k].max(t[(k + 1) % 3]));
+                mid.entry((a, b)).or_insert_with(|| {
+                    x.push(std::array::from_fn(|c| {
+                        0.5 * (x[a as usize][c] + x[b as usize][c])
+                    }));
+                    x.len() as u32 - 1
+                });
+            }
+        }
+        let q = s.to_quadratic(&mid).unwrap();
+        (x, s, q)
+    }
+
+    #[test]
+    fn quadratic_surface_encloses_the_flat_volume_and_an_exact_bulge() {
+        let (x, flat, quad) = curved_open_box();
+        assert!((quad.volume(&x) - flat.volume(&x)).abs() < 1e-14);
+        // Unit box with every mid node of the bottom face (z = 0) lowered by d: the bottom becomes
+        // z = -d sum_m N_m, whose integral is d per unit area (int 4 L_i L_j = A/3, 3 per
+        // triangle), so the enclosed volume is exactly 1 + d (the sides stay closed through the
+        // shared mid nodes).
+        let mut u: Vec<[f64; 3]> = (0..8)
+            .map(|i| [(i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64])
+            .collect();
+        for t in &quad.quadratic {
+            for (k, &m) in t[3..].iter().enumerate() {
+                let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
+                if u.len() <= m as usize {
+                    u.resize(m as usize + 1, [0.0; 3]);
+                }
+                u[m as usize] = std::array::from_fn(|c| 0.5 * (u[a][c] + u[b][c]));
+            }
+        }
+        assert!((quad.volume(&u) - 1.0).abs() < 1e-14);
+        let d = 0.05;
+        for p in u.iter_mut().skip(8) {
+            if p[2] == 0.0 {
+                p[2] = -d;
+            }
+        }
+        assert!(
+            (quad.volume(&u) - (1.0 + d)).abs() < 1e-14,
+            "{}",
+            quad.volume(&u)
+        );
+    }
+
+    #[test]
+    fn quadratic_pressure_load_matches_finite_differences() {
+        let (mut x, _, q) = curved_open_box();
+        for (i, p) in x.iter_mut().enumerate().skip(8) {
+            p[0] += 0.04 * (i as f64).cos();
+            p[2] -= 0.03 * (0.7 * i as f64).sin();
+        }
+        check_derivatives(&x, &q);
+    }
+
     #[test]
     fn pressure_load_gradient_and_hessian_match_finite_differences() {
         let (x, s) = open_box();
+        check_derivatives(&x, &s);
+    }
+
+    fn check_derivatives(x: &[[f64; 3]], s: &CavitySurface) {
+        let x = x.to_vec();
         let n = x.len();
         let mut g = vec![0.0; 3 * n];
         s.add_gradient(&x, 1.0, &mut g);

@@ -15,12 +15,160 @@
 //! while `K_xx` is positive definite, so LDL^T needs no pivoting.
 
 use super::element::{add_tet_volume_hessian, tet_volume, tet_volume_gradient, TetReference};
-use super::model::FemModel;
+use super::model::{Element, FemModel};
+use super::system10::Tet10System;
 use super::FemError;
 use rayon::prelude::*;
 
-/// Sparsity pattern, reference data and nodal averaging data of one model.
-pub struct System {
+/// The assembled problem of either element: what the Newton solver sees.
+pub enum System {
+    /// Linear tetrahedra, nodally averaged `J`, expanded system with nodal pressures.
+    Nodal(NodalSystem),
+    /// 10-node tetrahedra, mean dilatation per element.
+    Tet10(Tet10System),
+}
+
+impl System {
+    /// The system of `model`'s element ([`FemModel::element`]).
+    pub fn new(model: &FemModel) -> Result<Self, FemError> {
+        Ok(match model.element() {
+            Element::Tet4 => Self::Nodal(NodalSystem::new(model)?),
+            Element::Tet10 => Self::Tet10(Tet10System::new(model)?),
+        })
+    }
+
+    /// Number of displacement unknowns.
+    pub fn n_dofs(&self) -> usize {
+        match self {
+            Self::Nodal(s) => s.n_dofs(),
+            Self::Tet10(s) => s.n_dofs(),
+        }
+    }
+
+    /// Size of the linear system (displacements, plus nodal pressures for `Nodal`).
+    pub fn n_linear(&self) -> usize {
+        match self {
+            Self::Nodal(s) => s.n_linear(),
+            Self::Tet10(s) => s.n_dofs(),
+        }
+    }
+
+    /// Stored entries of the matrix.
+    pub fn nnz(&self) -> usize {
+        match self {
+            Self::Nodal(s) => s.nnz(),
+            Self::Tet10(s) => s.nnz(),
+        }
+    }
+
+    /// Column pointers of the full symmetric matrix.
+    pub fn col_ptr(&self) -> &[usize] {
+        match self {
+            Self::Nodal(s) => &s.col_ptr,
+            Self::Tet10(s) => s.col_ptr(),
+        }
+    }
+
+    /// Row indices, sorted within each column.
+    pub fn row_idx(&self) -> &[usize] {
+        match self {
+            Self::Nodal(s) => &s.row_idx,
+            Self::Tet10(s) => s.row_idx(),
+        }
+    }
+
+    /// Fill-reducing elimination order.
+    pub fn elimination_order(&self, model: &FemModel) -> Vec<usize> {
+        match self {
+            Self::Nodal(s) => s.elimination_order(model),
+            Self::Tet10(s) => s.elimination_order(model),
+        }
+    }
+
+    /// Fixed degree-of-freedom flags.
+    pub fn fixed(&self) -> &[bool] {
+        match self {
+            Self::Nodal(s) => s.fixed(),
+            Self::Tet10(s) => s.fixed(),
+        }
+    }
+
+    /// Total reference volume of the elements.
+    pub fn rest_volume(&self) -> f64 {
+        match self {
+            Self::Nodal(s) => s.rest_volumes().sum(),
+            Self::Tet10(s) => s.rest_volume(),
+        }
+    }
+
+    /// Potential, residual and (optionally) tangent at `x`; see [`NodalSystem::evaluate`].
+    pub fn evaluate(
+        &self,
+        model: &FemModel,
+        x: &[[f64; 3]],
+        pressure_pa: f64,
+        tangent: Option<&mut [f64]>,
+    ) -> Result<Evaluation, FemError> {
+        match self {
+            Self::Nodal(s) => s.evaluate(model, x, pressure_pa, tangent),
+            Self::Tet10(s) => s.evaluate(model, x, pressure_pa, tangent),
+        }
+    }
+
+    /// The Hessian of the potential applied to a displacement vector.
+    pub fn multiply(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+        match self {
+            Self::Nodal(s) => s.multiply(values, x),
+            Self::Tet10(s) => s.multiply(values, x),
+        }
+    }
+
+    /// `dV/dx` of the cavity at `x`, zero at fixed degrees of freedom.
+    pub fn volume_gradient(&self, model: &FemModel, x: &[[f64; 3]]) -> Vec<f64> {
+        let mut g = vec![0.0; self.n_dofs()];
+        model.cavity.add_gradient(x, 1.0, &mut g);
+        for (v, &f) in g.iter_mut().zip(self.fixed()) {
+            if f {
+                *v = 0.0;
+            }
+        }
+        g
+    }
+}
+
+/// Replaces the rows and columns of fixed displacement unknowns by identity rows scaled to the
+/// mean absolute diagonal of the free ones (columns past `fixed.len()` are never fixed).
+pub(crate) fn apply_fixed(
+    k: &mut [f64],
+    col_ptr: &[usize],
+    row_idx: &[usize],
+    diag_pos: &[usize],
+    fixed: &[bool],
+) {
+    let nx = fixed.len();
+    let free: Vec<f64> = (0..nx)
+        .filter(|&d| !fixed[d])
+        .map(|d| k[diag_pos[d]].abs())
+        .collect();
+    let scale = if free.is_empty() {
+        1.0
+    } else {
+        free.iter().sum::<f64>() / free.len() as f64
+    };
+    let is_fixed = |d: usize| d < nx && fixed[d];
+    for j in 0..col_ptr.len() - 1 {
+        let fj = is_fixed(j);
+        for p in col_ptr[j]..col_ptr[j + 1] {
+            let r = row_idx[p];
+            if fj || is_fixed(r) {
+                k[p] = if r == j { scale } else { 0.0 };
+            }
+        }
+    }
+}
+
+/// Sparsity pattern, reference data and nodal averaging data of a linear-tetrahedron model.
+pub struct NodalSystem {
     n_nodes: usize,
     refs: Vec<TetReference>,
     node_tet_ptr: Vec<usize>,
@@ -55,7 +203,7 @@ pub struct Evaluation {
 
 const CHUNK: usize = 2048;
 
-impl System {
+impl NodalSystem {
     /// Precomputes reference data and the tangent's sparsity pattern.
     pub fn new(model: &FemModel) -> Result<Self, FemError> {
         model.validate()?;
@@ -407,7 +555,7 @@ impl System {
             }
         }
         if let Some(k) = tangent {
-            self.apply_fixed(k);
+            apply_fixed(k, &self.col_ptr, &self.row_idx, &self.diag_pos, &self.fixed);
         }
         Ok(Evaluation {
             energy_j: energy,
@@ -415,41 +563,6 @@ impl System {
             min_volume_ratio: min_ratio,
             min_nodal_j: min_j,
         })
-    }
-
-    fn apply_fixed(&self, k: &mut [f64]) {
-        let free_diag: Vec<f64> = (0..self.n_dofs())
-            .filter(|&d| !self.fixed[d])
-            .map(|d| k[self.diag_pos[d]].abs())
-            .collect();
-        let scale = if free_diag.is_empty() {
-            1.0
-        } else {
-            free_diag.iter().sum::<f64>() / free_diag.len() as f64
-        };
-        let nx = self.n_dofs();
-        let is_fixed = |d: usize| d < nx && self.fixed[d];
-        for j in 0..self.n_linear() {
-            let fj = is_fixed(j);
-            for p in self.col_ptr[j]..self.col_ptr[j + 1] {
-                let r = self.row_idx[p];
-                if fj || is_fixed(r) {
-                    k[p] = if r == j { scale } else { 0.0 };
-                }
-            }
-        }
-    }
-
-    /// `dV/dx` of the cavity at `x`, zero at fixed degrees of freedom.
-    pub fn volume_gradient(&self, model: &FemModel, x: &[[f64; 3]]) -> Vec<f64> {
-        let mut g = vec![0.0; self.n_dofs()];
-        model.cavity.add_gradient(x, 1.0, &mut g);
-        for (v, &f) in g.iter_mut().zip(&self.fixed) {
-            if f {
-                *v = 0.0;
-            }
-        }
-        g
     }
 
     fn multiply_expanded(&self, values: &[f64], x: &[f64]) -> Vec<f64> {

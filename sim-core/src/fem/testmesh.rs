@@ -121,6 +121,27 @@ pub fn thick_sphere_octant(
     }
 }
 
+/// Mid-edge node of a sphere mesh centred at the origin, on the exact geometry: direction the
+/// normalised mean of the ends' directions, radius the mean of their radii (a surface edge's node
+/// lies on its sphere; symmetry-plane edges stay in their plane). For
+/// [`crate::fem::FemModel::to_tet10`].
+pub fn spherical_midpoint(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    let (ra, rb) = (dot(a, a).sqrt(), dot(b, b).sqrt());
+    let d: [f64; 3] = std::array::from_fn(|k| a[k] / ra + b[k] / rb);
+    let len = dot(d, d).sqrt();
+    d.map(|c| c / len * 0.5 * (ra + rb))
+}
+
+/// Mid-edge node of a cylinder mesh around the z axis, on the exact geometry (angle and radius
+/// averaged, z linear).
+pub fn cylindrical_midpoint(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    let (ra, rb) = (a[0].hypot(a[1]), b[0].hypot(b[1]));
+    let (dx, dy) = (a[0] / ra + b[0] / rb, a[1] / ra + b[1] / rb);
+    let len = dx.hypot(dy);
+    let r = 0.5 * (ra + rb);
+    [dx / len * r, dy / len * r, 0.5 * (a[2] + b[2])]
+}
+
 /// A full ring of a thick cylinder (radii `inner`, `outer`), one element layer of height
 /// `height` in z with every z fixed (plane strain); `ux = 0` on the plane x = 0 and `uy = 0` on
 /// y = 0 remove the rigid modes without constraining the axisymmetric solution. The cavity is the
