@@ -545,3 +545,11 @@ fn random_parameter_sets_mesh_validly_or_are_refused_by_name() {
     }
     assert!(meshed >= 10, "only {meshed} of 40 random sets meshed");
 }
+
+#[test]
+fn zz_debug_dims() {
+    for (name, p) in spread_sets() {
+        let a = generate(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+        println!("{name}: {:#?} q {:?}", a.summary.dimensions, a.summary.quality);
+    }
+}

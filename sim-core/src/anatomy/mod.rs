@@ -224,7 +224,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
     let mut chi_zero = chi_zero;
     chi_zero.resize(m.pos.len(), true);
     let mut psi = rim.values;
-    snap_cornua(&mut m, &mut chi_zero, &mut psi, &geo);
+    snap_landmarks(&mut m, &mut chi_zero, &mut psi, &geo);
     let chi_vals: Vec<f64> = (0..m.pos.len())
         .map(|v| if chi_zero[v] { 0.0 } else { chi.values[v] })
         .collect();
@@ -371,12 +371,13 @@ fn label_vertices(m: &WorkMesh, cavity: &[[u32; 3]], geo: &Geometry) -> Vec<Vert
     labels
 }
 
-/// Puts a rim vertex exactly on each cornu's lateral extreme, so the cavity's width between the
-/// cornua is represented exactly rather than by a chord of the rounded corner: the nearest rim
-/// vertex is moved there if it is close (a third of its rim edge), otherwise the rim edge passing
-/// the extreme is split there. A change is kept only if every element around the vertex keeps a
-/// dihedral angle of at least 8 degrees.
-fn snap_cornua(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo: &Geometry) {
+/// Puts rim vertices exactly on the landmarks the measurement relies on, so they are represented
+/// exactly rather than by a chord: each cornu's lateral extreme (the fundal width) and the middle
+/// of the isthmus on both sides (the internal os width, even where the isthmus is shorter than a
+/// lattice spacing). The nearest rim vertex is moved there if it is close (a third of its rim
+/// edge), otherwise the rim edge passing the target is split there. A change is kept only if
+/// every element around the vertex keeps a dihedral angle of at least 8 degrees.
+fn snap_landmarks(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo: &Geometry) {
     let Some(top) = geo
         .polygon
         .iter()
@@ -391,8 +392,13 @@ fn snap_cornua(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo
                 && tet_quality(tet.map(|w| m.pos[w as usize])).min_dihedral_deg >= 8.0
         })
     };
+    let isthmus_z = 0.5 * (geo.histological_os_z_m + geo.internal_os_z_m);
+    let mut targets = Vec::new();
     for sign in [1.0, -1.0] {
-        let target = [sign * (top[0] + geo.rounding_m), 0.0, top[1]];
+        targets.push([sign * (top[0] + geo.rounding_m), 0.0, top[1]]);
+        targets.push([sign * geo.os_half_width_m, 0.0, isthmus_z]);
+    }
+    for target in targets {
         let is_rim = |v: u32| {
             let v = v as usize;
             on_mid[v] && psi[v] == 0.0 && m.pos[v][1] == 0.0
