@@ -160,7 +160,6 @@ fn assert_valid(name: &str, a: &Anatomy, min_dih: f64, max_dih: f64) {
     assert_eq!(m.tet_regions.len(), m.tets.len());
     assert_eq!(m.vertex_labels.len(), m.positions_m.len());
     let q = &a.summary.quality;
-    eprintln!("QUAL {name}: {:.2} {:.2} {:.2}", q.min_dihedral_deg, q.max_dihedral_deg, q.max_aspect);
     assert!(
         q.max_aspect <= MAX_ASPECT,
         "{name}: max aspect {}",
@@ -261,10 +260,8 @@ fn presets_and_spread_parameter_sets_give_valid_meshes_with_the_requested_dimens
         }
         // The isthmus is what the four lengths leave.
         let isthmus = d.isthmus_length_mm.unwrap_or(f64::NAN);
-        let expected = p.uterine_length_mm
-            - p.fundal_wall_mm
-            - p.cavity_length_mm
-            - p.cervix_length_mm;
+        let expected =
+            p.uterine_length_mm - p.fundal_wall_mm - p.cavity_length_mm - p.cervix_length_mm;
         assert!(
             (isthmus - expected).abs() < 0.02 * p.cervix_length_mm,
             "{name}: isthmus {isthmus} mm, expected {expected} mm"
@@ -336,6 +333,7 @@ fn myoma(figo: u8) -> AnatomyParams {
         diameters_mm: [12.0, 10.0, 12.0],
         figo: Some(figo),
         depth_mm: None,
+        angle_deg: None,
     });
     p
 }
@@ -358,6 +356,109 @@ fn a_myoma_of_each_figo_type_meshes_and_measures_as_requested() {
         );
         assert!(a.mesh.tet_regions.contains(&Region::Fibroid));
     }
+}
+
+#[test]
+fn lateral_fundal_and_oblique_myomas_measure_as_requested() {
+    let cases = [
+        (WallSide::Left, None, 0.0, 16.0),
+        (WallSide::Right, None, 0.0, 16.0),
+        (WallSide::Fundal, None, 0.0, 0.0),
+        (WallSide::Oblique, Some(45.0), 0.0, 16.0),
+        (WallSide::Oblique, Some(250.0), 0.0, 16.0),
+    ];
+    for (wall, angle_deg, x_mm, from_fundus_mm) in cases {
+        for figo in [3u8, 4] {
+            let name = format!("{wall:?} {angle_deg:?} FIGO {figo}");
+            // A large parous uterus: its lateral and fundal walls hold an intramural myoma of
+            // 9 mm (3 lattice spacings) with the type-4 clearance and the serosa margin.
+            let mut p = AnatomyParams {
+                corpus_width_mm: 66.0,
+                ap_depth_mm: 50.0,
+                fundal_cavity_width_mm: 28.0,
+                fundal_wall_mm: 18.0,
+                uterine_length_mm: 85.0,
+                ..AnatomyParams::default()
+            };
+            p.mesh.target_tets = 50_000;
+            p.myomas.push(MyomaParams {
+                wall,
+                x_mm,
+                from_fundus_mm,
+                diameters_mm: [9.0, 9.0, 9.0],
+                figo: Some(figo),
+                depth_mm: None,
+                angle_deg,
+            });
+            let a = generate(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_valid(&name, &a, MIN_DIHEDRAL_DEG, MAX_DIHEDRAL_DEG);
+            let r = &a.summary.myomas[0];
+            assert_eq!(r.figo_measured, figo, "{name}: {r:?}");
+            // 4/3 pi 4.5^3 mm^3 within the staircase of one element layer on a small myoma.
+            let exact = 4.0 / 3.0 * std::f64::consts::PI * 4.5f64.powi(3) * 1e-3;
+            assert!(
+                r.volume_ml > 0.6 * exact && r.volume_ml < 1.5 * exact,
+                "{name}: {} ml vs {exact} ml",
+                r.volume_ml
+            );
+            // The myoma lies in the requested wall: its elements' centroid is on that side.
+            let (mut c, mut vol) = ([0.0f64; 3], 0.0);
+            for t in 0..a.mesh.tets.len() {
+                if a.mesh.tet_regions[t] != Region::Fibroid {
+                    continue;
+                }
+                let v = a.mesh.tet_volume_m3(t);
+                for &i in &a.mesh.tets[t] {
+                    let q = a.straighten(a.mesh.positions_m[i as usize]);
+                    for k in 0..3 {
+                        c[k] += 0.25 * v * q[k];
+                    }
+                }
+                vol += v;
+            }
+            let c = c.map(|x| x / vol * 1e3);
+            let top_mm = a.params.uterine_length_mm - a.params.fundal_wall_mm;
+            match (wall, angle_deg) {
+                (WallSide::Left, _) => assert!(c[0] > 8.0, "{name}: centroid {c:?} mm"),
+                (WallSide::Right, _) => assert!(c[0] < -8.0, "{name}: centroid {c:?} mm"),
+                (WallSide::Fundal, _) => assert!(c[2] > top_mm, "{name}: centroid {c:?} mm"),
+                (_, Some(deg)) => {
+                    let got = c[0].atan2(c[1]).to_degrees().rem_euclid(360.0);
+                    assert!(
+                        (got - deg).abs() < 10.0,
+                        "{name}: centroid {c:?} at {got} deg"
+                    );
+                }
+                _ => unreachable!(),
+            }
+        }
+    }
+    // Protruding types on these walls, and polyps on them, are refused by name.
+    let mut p = AnatomyParams::default();
+    p.myomas.push(MyomaParams {
+        wall: WallSide::Left,
+        x_mm: 0.0,
+        from_fundus_mm: 14.0,
+        diameters_mm: [10.0, 10.0, 10.0],
+        figo: Some(1),
+        depth_mm: None,
+        angle_deg: None,
+    });
+    let e = generate(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("myomas[0].figo") && e.contains("myomas[0].wall"),
+        "{e}"
+    );
+    let mut p = AnatomyParams::default();
+    p.polyps.push(PolypParams {
+        wall: WallSide::Fundal,
+        x_mm: 0.0,
+        from_fundus_mm: 10.0,
+        diameter_mm: 8.0,
+        kind: PolypKind::Sessile,
+    });
+    let e = generate(&p).unwrap_err().to_string();
+    assert!(e.contains("polyps[0].wall"), "{e}");
 }
 
 #[test]
@@ -571,6 +672,3 @@ fn random_parameter_sets_mesh_validly_or_are_refused_by_name() {
     }
     assert!(meshed >= 10, "only {meshed} of 40 random sets meshed");
 }
-
-
-

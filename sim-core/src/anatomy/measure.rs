@@ -202,10 +202,7 @@ impl MeasuredAxis {
             return if da <= de {
                 (n1, self.s_arc)
             } else {
-                (
-                    dot2(sub2(q, self.arc_end), perp(self.t2)),
-                    self.s_arc + len,
-                )
+                (dot2(sub2(q, self.arc_end), perp(self.t2)), self.s_arc + len)
             };
         }
         cands
@@ -245,9 +242,7 @@ fn collinear_prefix(pts: &[P2]) -> usize {
 /// sorted by distance from the external os `e`.
 fn fit_axis(e: P2, rim: &[P2]) -> Option<MeasuredAxis> {
     let mut pts: Vec<P2> = rim.to_vec();
-    pts.sort_by(|a, b| {
-        dot2(sub2(*a, e), sub2(*a, e)).total_cmp(&dot2(sub2(*b, e), sub2(*b, e)))
-    });
+    pts.sort_by(|a, b| dot2(sub2(*a, e), sub2(*a, e)).total_cmp(&dot2(sub2(*b, e), sub2(*b, e))));
     pts.dedup_by(|a, b| dot2(sub2(*a, *b), sub2(*a, *b)) < COLLINEAR_M * COLLINEAR_M);
     if pts.len() < 3 {
         return None;
@@ -362,10 +357,16 @@ fn side_landmarks(outline: &[P2], s_ext: f64) -> Option<(f64, f64, f64, f64, f64
 }
 
 /// Measures the dimensions on the mesh.
-pub(crate) fn measure_dimensions(mesh: &crate::mesh::TetMesh) -> Option<(Dimensions, MeasuredAxis)> {
+pub(crate) fn measure_dimensions(
+    mesh: &crate::mesh::TetMesh,
+) -> Option<(Dimensions, MeasuredAxis)> {
     let pos = &mesh.positions_m;
     let sag = |v: usize| [pos[v][1], pos[v][2]];
-    let loop_: Vec<usize> = mesh.cavity_opening_loop.iter().map(|&v| v as usize).collect();
+    let loop_: Vec<usize> = mesh
+        .cavity_opening_loop
+        .iter()
+        .map(|&v| v as usize)
+        .collect();
     if loop_.is_empty() {
         return None;
     }
@@ -477,7 +478,6 @@ pub struct MyomaReport {
     pub volume_ml: f64,
 }
 
-
 /// Fills the summary's volumes, counts, dimensions and myoma reports.
 pub(crate) fn fill_summary(a: &mut Anatomy) {
     let mesh = &a.mesh;
@@ -524,7 +524,13 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
             }
             let vol = mesh.tet_volume_m3(ti);
             total += vol;
-            if l.wall_sign * c[1] > plane {
+            let intramural = if l.wall_sign == 0.0 {
+                // Lateral, fundal, oblique: everything not inside the opened slit.
+                !(a.geometry.footprint(c[0], c[2]) < 0.0 && c[1].abs() < 0.5 * a.geometry.gap_at(c))
+            } else {
+                l.wall_sign * c[1] > plane
+            };
+            if intramural {
                 inside += vol;
             }
             contact |= t.iter().any(|&v| on_endometrium[v as usize]);
