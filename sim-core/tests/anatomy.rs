@@ -672,4 +672,3 @@ fn random_parameter_sets_mesh_validly_or_are_refused_by_name() {
     }
     assert!(meshed >= 10, "only {meshed} of 40 random sets meshed");
 }
-

@@ -11,7 +11,7 @@ use super::Anatomy;
 /// Dimensions measured on the mesh, mm and degrees, from the mesh alone (positions, cavity
 /// triangles, the opening loop): no generator input is used. Definitions: docs/anatomy.md,
 /// "Landmarks and how they are measured". Lengths along the axis are arc lengths along the
-/// cavity's measured mid-line (see [`MeasuredAxis`]), so they do not depend on version/flexion.
+/// cavity's mid-line measured on the mesh, so they do not depend on version/flexion.
 /// Landmark-based values are `None` when the landmark is not found (e.g. a lesion hides it).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
 pub struct Dimensions {
@@ -148,7 +148,7 @@ impl MeasuredAxis {
     }
 
     /// (offset along the local normal, arc length from the origin) of a sagittal point.
-    pub(crate) fn to_axis(&self, q: P2) -> (f64, f64) {
+    pub(crate) fn locate(&self, q: P2) -> (f64, f64) {
         let s1 = dot2(sub2(q, self.origin), self.t1);
         let n1 = dot2(sub2(q, self.origin), perp(self.t1));
         if self.theta == 0.0 || s1 <= self.s_arc {
@@ -213,7 +213,7 @@ impl MeasuredAxis {
 
     /// Sum of squared distances of the points from the axis.
     fn residual(&self, pts: &[P2]) -> f64 {
-        pts.iter().map(|&q| self.to_axis(q).0.powi(2)).sum()
+        pts.iter().map(|&q| self.locate(q).0.powi(2)).sum()
     }
 }
 
@@ -357,9 +357,7 @@ fn side_landmarks(outline: &[P2], s_ext: f64) -> Option<(f64, f64, f64, f64, f64
 }
 
 /// Measures the dimensions on the mesh.
-pub(crate) fn measure_dimensions(
-    mesh: &crate::mesh::TetMesh,
-) -> Option<(Dimensions, MeasuredAxis)> {
+pub(crate) fn measure_dimensions(mesh: &crate::mesh::TetMesh) -> Option<Dimensions> {
     let pos = &mesh.positions_m;
     let sag = |v: usize| [pos[v][1], pos[v][2]];
     let loop_: Vec<usize> = mesh
@@ -401,7 +399,7 @@ pub(crate) fn measure_dimensions(
     let axis = fit_axis(e, &rim.iter().map(|&v| sag(v)).collect::<Vec<_>>())?;
     let straight: Vec<[f64; 3]> = (0..pos.len())
         .map(|v| {
-            let (n, s) = axis.to_axis(sag(v));
+            let (n, s) = axis.locate(sag(v));
             [pos[v][0], n, s]
         })
         .collect();
@@ -456,7 +454,7 @@ pub(crate) fn measure_dimensions(
         version_deg: sagittal_angle(axis.t1).to_degrees(),
         flexion_deg: axis.theta.to_degrees(),
     };
-    Some((dims, axis))
+    Some(dims)
 }
 
 /// A myoma's FIGO type: requested, as placed in the geometry, and measured on the mesh.
@@ -493,7 +491,7 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
     let tissue = mesh.volume_m3();
     let cavity = mesh.cavity_volume_m3();
     let mm = 1e3;
-    let dims = measure_dimensions(mesh).map(|d| d.0).unwrap_or_default();
+    let dims = measure_dimensions(mesh).unwrap_or_default();
     // FIGO per myoma.
     let mut on_endometrium = vec![false; straight.len()];
     for t in &mesh.cavity_triangles {
