@@ -53,6 +53,8 @@ pub(crate) struct Geometry {
     pub internal_os_z_m: f64,
     /// Half-width of the isthmus (the internal os).
     pub os_half_width_m: f64,
+    /// Points (x, z; right side) on the straight part of the upper lateral wall.
+    pub upper_wall_points: Vec<[f64; 2]>,
     pub lesions: Vec<Lesion>,
     pub bend: Bend,
 }
@@ -224,6 +226,27 @@ impl Geometry {
             outline.push([-q[0], q[1]]);
         }
         let polygon = inset_polygon(&outline, rounding);
+        // Three points on the straight part of the upper lateral wall (between the roundings of
+        // the knee, if convex, and of the cornu): rim vertices are put there so the cornual
+        // angle is measurable even where that part is short against the lattice spacing.
+        let slope_c = (knee[0] - 0.5 * wos) / (knee[1] - z_io);
+        let turn_knee = slope_c.atan() - m1.atan();
+        let t_knee = if turn_knee > 0.0 {
+            rounding * (0.5 * turn_knee).tan()
+        } else {
+            0.0
+        };
+        let t_cornu = rounding / (0.5 * p.cornual_angle_deg.to_radians()).tan();
+        let u = [m1 / (1.0 + m1 * m1).sqrt(), 1.0 / (1.0 + m1 * m1).sqrt()];
+        let wall_len = ((cornu[0] - knee[0]).powi(2) + (cornu[1] - knee[1]).powi(2)).sqrt();
+        let straight = wall_len - t_knee - t_cornu;
+        let upper_wall_points: Vec<[f64; 2]> = [0.2, 0.5, 0.8]
+            .iter()
+            .map(|f| {
+                let d = t_knee + f * straight.max(0.0);
+                [knee[0] + d * u[0], knee[1] + d * u[1]]
+            })
+            .collect();
         let bend = Bend::new(p, cx, z_io, cervix_r);
         let os_half_width_m = 0.5 * wos;
         let mut g = Geometry {
@@ -243,6 +266,7 @@ impl Geometry {
             polygon,
             portio_top_z_m: 0.5 * cx,
             histological_os_z_m: cx,
+            upper_wall_points,
             internal_os_z_m: z_io,
             os_half_width_m,
             lesions: Vec::new(),
