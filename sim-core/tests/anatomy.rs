@@ -160,10 +160,6 @@ fn assert_valid(name: &str, a: &Anatomy, min_dih: f64, max_dih: f64) {
     assert_eq!(m.tet_regions.len(), m.tets.len());
     assert_eq!(m.vertex_labels.len(), m.positions_m.len());
     let q = &a.summary.quality;
-    eprintln!(
-        "QUAL {name}: {:.2} {:.2} {:.2}",
-        q.min_dihedral_deg, q.max_dihedral_deg, q.max_aspect
-    );
     assert!(
         q.max_aspect <= MAX_ASPECT,
         "{name}: max aspect {}",
