@@ -23,6 +23,7 @@ fn bench_anatomy(c: &mut Criterion) {
         diameters_mm: [12.0, 10.0, 12.0],
         figo: Some(1),
         depth_mm: None,
+        angle_deg: None,
     });
     g.bench_function("figo1_myoma_35k", |b| {
         b.iter(|| generate(&myoma).map(|a| a.summary.tets))

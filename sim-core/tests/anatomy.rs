@@ -11,12 +11,10 @@ use hydrometra_sim::anatomy::{
 use hydrometra_sim::mesh::{Region, VertexLabel};
 
 /// Quality bounds this mesher guarantees over the tested parameter space (docs/anatomy.md).
+/// One bound with and without lesions (measured over the tested family, not proven).
 const MIN_DIHEDRAL_DEG: f64 = 8.0;
-const MAX_DIHEDRAL_DEG: f64 = 160.0;
-const MAX_ASPECT: f64 = 11.0;
-/// With lesions wrapped by the slit (curvature radii down to ~2 lattice spacings).
-const MIN_DIHEDRAL_LESION_DEG: f64 = 3.0;
-const MAX_DIHEDRAL_LESION_DEG: f64 = 170.0;
+const MAX_DIHEDRAL_DEG: f64 = 165.0;
+const MAX_ASPECT: f64 = 20.0;
 
 fn spread_sets() -> Vec<(&'static str, AnatomyParams)> {
     let small = AnatomyParams {
@@ -32,8 +30,9 @@ fn spread_sets() -> Vec<(&'static str, AnatomyParams)> {
         cervix_length_mm: 25.0,
         cervix_diameter_mm: 22.0,
         canal_diameter_mm: 4.0,
+        // Strongly retroflexed.
         version_deg: -20.0,
-        flexion_deg: -30.0,
+        flexion_deg: -75.0,
         ..AnatomyParams::preset(Parity::Nulliparous)
     };
     let large = AnatomyParams {
@@ -49,8 +48,9 @@ fn spread_sets() -> Vec<(&'static str, AnatomyParams)> {
         cervix_length_mm: 30.0,
         cervix_diameter_mm: 32.0,
         canal_diameter_mm: 10.0,
+        // Strongly anteflexed.
         version_deg: 30.0,
-        flexion_deg: 60.0,
+        flexion_deg: 80.0,
         ..AnatomyParams::preset(Parity::Parous)
     };
     let straight = AnatomyParams {
@@ -161,6 +161,11 @@ fn assert_valid(name: &str, a: &Anatomy, min_dih: f64, max_dih: f64) {
     assert_eq!(m.vertex_labels.len(), m.positions_m.len());
     let q = &a.summary.quality;
     assert!(
+        q.max_aspect <= MAX_ASPECT,
+        "{name}: max aspect {}",
+        q.max_aspect
+    );
+    assert!(
         q.min_dihedral_deg >= min_dih,
         "{name}: min dihedral {}",
         q.min_dihedral_deg
@@ -202,9 +207,71 @@ fn assert_valid(name: &str, a: &Anatomy, min_dih: f64, max_dih: f64) {
 fn within(name: &str, what: &str, measured: f64, expected: f64, rel: f64) {
     assert!(
         ((measured - expected) / expected).abs() <= rel,
-        "{name}: {what} measured {measured:.3} mm, parameter {expected} mm (tolerance {:.0} %)",
+        "{name}: {what} measured {measured:.4}, parameter {expected} (tolerance {:.0} %)",
         100.0 * rel
     );
+}
+
+/// Every dimension parameter, measured on the mesh alone, within 2 % (angles within 0.5 deg);
+/// the fundal cavity width too unless `check_fundal_width` is false.
+fn assert_dimensions(name: &str, a: &Anatomy, p: &AnatomyParams, check_fundal_width: bool) {
+    let d = &a.summary.dimensions;
+    let lengths = [
+        ("uterine length", d.uterine_length_mm, p.uterine_length_mm),
+        ("corpus width", d.corpus_width_mm, p.corpus_width_mm),
+        ("AP depth", d.ap_depth_mm, p.ap_depth_mm),
+        (
+            "fundal cavity width",
+            d.fundal_cavity_width_mm,
+            p.fundal_cavity_width_mm,
+        ),
+        ("fundal wall", d.fundal_wall_mm, p.fundal_wall_mm),
+        (
+            "sounding length",
+            d.sounding_length_mm,
+            p.uterine_length_mm - p.fundal_wall_mm,
+        ),
+        ("slit gap", d.slit_gap_mm, p.slit_gap_mm),
+    ];
+    let landmarks = [
+        ("cavity length", d.cavity_length_mm, p.cavity_length_mm),
+        ("cervix length", d.cervix_length_mm, p.cervix_length_mm),
+        (
+            "internal os width",
+            d.internal_os_width_mm,
+            p.internal_os_width_mm,
+        ),
+        ("canal diameter", d.canal_diameter_mm, p.canal_diameter_mm),
+        ("cornual angle", d.cornual_angle_deg, p.cornual_angle_deg),
+    ];
+    for (what, measured, expected) in lengths {
+        if what == "fundal cavity width" && !check_fundal_width {
+            continue;
+        }
+        within(name, what, measured, expected, 0.02);
+    }
+    for (what, measured, expected) in landmarks {
+        let m = measured.unwrap_or_else(|| panic!("{name}: {what} not measured"));
+        within(name, what, m, expected, 0.02);
+    }
+    // The isthmus is what the four lengths leave.
+    let isthmus = d.isthmus_length_mm.unwrap_or(f64::NAN);
+    let expected = p.uterine_length_mm - p.fundal_wall_mm - p.cavity_length_mm - p.cervix_length_mm;
+    assert!(
+        (isthmus - expected).abs() < 0.02 * p.cervix_length_mm,
+        "{name}: isthmus {isthmus} mm, expected {expected} mm"
+    );
+    // Angles measured on the organ-frame mesh (no straightening): within 0.5 degree, a tenth
+    // of the smallest step a clinician reads on ultrasound (5 degrees).
+    for (what, measured, expected) in [
+        ("version", d.version_deg, p.version_deg),
+        ("flexion", d.flexion_deg, p.flexion_deg),
+    ] {
+        assert!(
+            (measured - expected).abs() <= 0.5,
+            "{name}: {what} measured {measured} deg, parameter {expected} deg"
+        );
+    }
 }
 
 #[test]
@@ -217,43 +284,7 @@ fn presets_and_spread_parameter_sets_give_valid_meshes_with_the_requested_dimens
             "{name}: {:?}",
             a.summary.quality
         );
-        let d = &a.summary.dimensions;
-        within(
-            name,
-            "uterine length",
-            d.uterine_length_mm,
-            p.uterine_length_mm,
-            0.02,
-        );
-        within(
-            name,
-            "corpus width",
-            d.corpus_width_mm,
-            p.corpus_width_mm,
-            0.02,
-        );
-        within(name, "AP depth", d.ap_depth_mm, p.ap_depth_mm, 0.02);
-        within(
-            name,
-            "fundal cavity width",
-            d.fundal_cavity_width_mm,
-            p.fundal_cavity_width_mm,
-            0.02,
-        );
-        within(
-            name,
-            "fundal wall",
-            d.fundal_wall_mm,
-            p.fundal_wall_mm,
-            0.02,
-        );
-        within(
-            name,
-            "sounding length (cervix + isthmus + cavity)",
-            d.sounding_length_mm,
-            p.uterine_length_mm - p.fundal_wall_mm,
-            0.02,
-        );
+        assert_dimensions(name, &a, &p, true);
         // The tet count follows the target.
         let n = a.summary.tets as f64 / p.mesh.target_tets as f64;
         assert!(
@@ -310,6 +341,7 @@ fn myoma(figo: u8) -> AnatomyParams {
         diameters_mm: [12.0, 10.0, 12.0],
         figo: Some(figo),
         depth_mm: None,
+        angle_deg: None,
     });
     p
 }
@@ -319,7 +351,7 @@ fn a_myoma_of_each_figo_type_meshes_and_measures_as_requested() {
     for figo in 0..=4u8 {
         let name = format!("FIGO {figo}");
         let a = generate(&myoma(figo)).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert_valid(&name, &a, MIN_DIHEDRAL_LESION_DEG, MAX_DIHEDRAL_LESION_DEG);
+        assert_valid(&name, &a, MIN_DIHEDRAL_DEG, MAX_DIHEDRAL_DEG);
         let r = &a.summary.myomas[0];
         assert_eq!(r.figo_measured, figo, "{name}: {r:?}");
         // The meshed myoma has the requested volume (4/3 pi 6 5 6 mm^3 = 0.754 ml) within the
@@ -332,6 +364,109 @@ fn a_myoma_of_each_figo_type_meshes_and_measures_as_requested() {
         );
         assert!(a.mesh.tet_regions.contains(&Region::Fibroid));
     }
+}
+
+#[test]
+fn lateral_fundal_and_oblique_myomas_measure_as_requested() {
+    let cases = [
+        (WallSide::Left, None, 0.0, 16.0),
+        (WallSide::Right, None, 0.0, 16.0),
+        (WallSide::Fundal, None, 0.0, 0.0),
+        (WallSide::Oblique, Some(45.0), 0.0, 16.0),
+        (WallSide::Oblique, Some(250.0), 0.0, 16.0),
+    ];
+    for (wall, angle_deg, x_mm, from_fundus_mm) in cases {
+        for figo in [3u8, 4] {
+            let name = format!("{wall:?} {angle_deg:?} FIGO {figo}");
+            // A large parous uterus: its lateral and fundal walls hold an intramural myoma of
+            // 9 mm (3 lattice spacings) with the type-4 clearance and the serosa margin.
+            let mut p = AnatomyParams {
+                corpus_width_mm: 66.0,
+                ap_depth_mm: 50.0,
+                fundal_cavity_width_mm: 28.0,
+                fundal_wall_mm: 18.0,
+                uterine_length_mm: 85.0,
+                ..AnatomyParams::default()
+            };
+            p.mesh.target_tets = 50_000;
+            p.myomas.push(MyomaParams {
+                wall,
+                x_mm,
+                from_fundus_mm,
+                diameters_mm: [9.0, 9.0, 9.0],
+                figo: Some(figo),
+                depth_mm: None,
+                angle_deg,
+            });
+            let a = generate(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
+            assert_valid(&name, &a, MIN_DIHEDRAL_DEG, MAX_DIHEDRAL_DEG);
+            let r = &a.summary.myomas[0];
+            assert_eq!(r.figo_measured, figo, "{name}: {r:?}");
+            // 4/3 pi 4.5^3 mm^3 within the staircase of one element layer on a small myoma.
+            let exact = 4.0 / 3.0 * std::f64::consts::PI * 4.5f64.powi(3) * 1e-3;
+            assert!(
+                r.volume_ml > 0.6 * exact && r.volume_ml < 1.5 * exact,
+                "{name}: {} ml vs {exact} ml",
+                r.volume_ml
+            );
+            // The myoma lies in the requested wall: its elements' centroid is on that side.
+            let (mut c, mut vol) = ([0.0f64; 3], 0.0);
+            for t in 0..a.mesh.tets.len() {
+                if a.mesh.tet_regions[t] != Region::Fibroid {
+                    continue;
+                }
+                let v = a.mesh.tet_volume_m3(t);
+                for &i in &a.mesh.tets[t] {
+                    let q = a.straighten(a.mesh.positions_m[i as usize]);
+                    for k in 0..3 {
+                        c[k] += 0.25 * v * q[k];
+                    }
+                }
+                vol += v;
+            }
+            let c = c.map(|x| x / vol * 1e3);
+            let top_mm = a.params.uterine_length_mm - a.params.fundal_wall_mm;
+            match (wall, angle_deg) {
+                (WallSide::Left, _) => assert!(c[0] > 8.0, "{name}: centroid {c:?} mm"),
+                (WallSide::Right, _) => assert!(c[0] < -8.0, "{name}: centroid {c:?} mm"),
+                (WallSide::Fundal, _) => assert!(c[2] > top_mm, "{name}: centroid {c:?} mm"),
+                (_, Some(deg)) => {
+                    let got = c[0].atan2(c[1]).to_degrees().rem_euclid(360.0);
+                    assert!(
+                        (got - deg).abs() < 10.0,
+                        "{name}: centroid {c:?} at {got} deg"
+                    );
+                }
+                _ => unreachable!(),
+            }
+        }
+    }
+    // Protruding types on these walls, and polyps on them, are refused by name.
+    let mut p = AnatomyParams::default();
+    p.myomas.push(MyomaParams {
+        wall: WallSide::Left,
+        x_mm: 0.0,
+        from_fundus_mm: 14.0,
+        diameters_mm: [10.0, 10.0, 10.0],
+        figo: Some(1),
+        depth_mm: None,
+        angle_deg: None,
+    });
+    let e = generate(&p).unwrap_err().to_string();
+    assert!(
+        e.contains("myomas[0].figo") && e.contains("myomas[0].wall"),
+        "{e}"
+    );
+    let mut p = AnatomyParams::default();
+    p.polyps.push(PolypParams {
+        wall: WallSide::Fundal,
+        x_mm: 0.0,
+        from_fundus_mm: 10.0,
+        diameter_mm: 8.0,
+        kind: PolypKind::Sessile,
+    });
+    let e = generate(&p).unwrap_err().to_string();
+    assert!(e.contains("polyps[0].wall"), "{e}");
 }
 
 #[test]
@@ -363,7 +498,7 @@ fn sessile_and_pedunculated_polyps_mesh_with_their_own_region() {
             kind,
         });
         let a = generate(&p).unwrap_or_else(|e| panic!("{name}: {e}"));
-        assert_valid(&name, &a, MIN_DIHEDRAL_LESION_DEG, MAX_DIHEDRAL_LESION_DEG);
+        assert_valid(&name, &a, MIN_DIHEDRAL_DEG, MAX_DIHEDRAL_DEG);
         let vol: f64 = (0..a.mesh.tets.len())
             .filter(|&t| a.mesh.tet_regions[t] == Region::Polyp)
             .map(|t| a.mesh.tet_volume_m3(t))
@@ -532,12 +667,17 @@ fn random_parameter_sets_mesh_validly_or_are_refused_by_name() {
             flexion_deg: rnd(-60.0, 80.0),
             ..AnatomyParams::default()
         };
-        p.mesh.target_tets = 12_000;
+        p.mesh.target_tets = 35_000;
         let name = format!("random set {i}");
         match generate(&p) {
             Ok(a) => {
                 meshed += 1;
-                assert_valid(&name, &a, 7.5, MAX_DIHEDRAL_DEG);
+                assert_valid(&name, &a, MIN_DIHEDRAL_DEG, MAX_DIHEDRAL_DEG);
+                // Known defect (docs/anatomy.md "Limits"): on some random sets the cornu's
+                // extreme vertex ends in a closed "ear" of rim-only faces and is not on the
+                // cavity surface, so the fundal width is measured up to 6 % short. Every other
+                // dimension is checked.
+                assert_dimensions(&name, &a, &p, false);
             }
             Err(AnatomyError::Conflict { .. }) | Err(AnatomyError::OutOfRange { .. }) => {}
             Err(e) => panic!("{name}: {e}"),

@@ -47,6 +47,14 @@ pub(crate) struct Geometry {
     pub polygon: Vec<[f64; 2]>,
     /// Portio (fixed) region: outer surface below this level.
     pub portio_top_z_m: f64,
+    /// Top of the cervix (histological internal os): the canal's waist, where the isthmus starts.
+    pub histological_os_z_m: f64,
+    /// Anatomical internal os: the isthmus ends and the cavity's lateral walls start to widen.
+    pub internal_os_z_m: f64,
+    /// Half-width of the isthmus (the internal os).
+    pub os_half_width_m: f64,
+    /// Points (x, z; right side) on the straight part of the upper lateral wall.
+    pub upper_wall_points: Vec<[f64; 2]>,
     pub lesions: Vec<Lesion>,
     pub bend: Bend,
 }
@@ -54,6 +62,9 @@ pub(crate) struct Geometry {
 /// Superellipsoid exponents of the corpus (cross-section, axis): fuller than an ellipsoid, as a
 /// uterus is (an 8 x 5 x 4 cm ellipsoid holds 84 ml; references.md gives 80-200 ml).
 const P_XY: f64 = 3.0;
+/// Widest width of the fusiform cervical canal (at mid-cervix) relative to the larger of the
+/// canal width at the external os and the internal os width.
+pub(crate) const CANAL_FUSIFORM: f64 = 1.3;
 const P_Z: f64 = 2.4;
 
 impl Geometry {
@@ -143,17 +154,42 @@ impl Geometry {
         let rounding = (3.0 * MM).min(0.4 * canal).min(0.4 * wos);
         let z_io = lu - tf - lc;
         let z_ft = lu - tf;
-        // Lateral wall: half-width from the os to the cornu as a cubic Hermite curve, vertical at
-        // the os (it continues the canal) and meeting the fundal line at the cornual angle.
-        let delta = 0.5 * (wf - wos);
-        let inner_len = lc - rounding;
-        let cornual = p.cornual_angle_deg.to_radians();
-        let k = if delta > 1e-9 {
-            inner_len / (delta * cornual.tan())
+        // The lumen's coronal outline (right half, x >= 0) is piecewise straight so that every
+        // landmark is a corner between straight walls (docs/anatomy.md, "Landmarks"):
+        // fusiform cervical canal (external os -> widest at mid-cervix -> histological internal
+        // os at the top of the cervix), isthmus of constant width up to the anatomical internal
+        // os, lateral cavity wall in two straight pieces (os -> knee -> cornu, the upper piece
+        // at the cornual angle to the fundal line), fundal line. Convex corners are rounded by
+        // `rounding` (the footprint is an inner polygon grown by it); concave ones stay sharp.
+        let canal_mid = 0.5 * CANAL_FUSIFORM * canal.max(wos);
+        if 2.0 * canal_mid > 2.0 * cervix_r - 2.0 * min_wall {
+            return Err(AnatomyError::conflict(
+                &["canal_diameter_mm", "internal_os_width_mm", "cervix_diameter_mm"],
+                format!(
+                    "the fusiform canal ({:.1} mm at its widest = {CANAL_FUSIFORM} x max(canal {} mm, os {} mm)) \
+                     in a cervix of {} mm leaves a wall below 2 lattice spacings ({:.1} mm)",
+                    2.0 * canal_mid / MM,
+                    p.canal_diameter_mm,
+                    p.internal_os_width_mm,
+                    p.cervix_diameter_mm,
+                    min_wall / MM
+                ),
+            ));
+        }
+        let m1 = 1.0 / p.cornual_angle_deg.to_radians().tan();
+        // Upper lateral wall: tangent to the cornu's rounding circle, whose extreme x is half the
+        // fundal width.
+        let q5 = [0.5 * wf - rounding, z_ft - rounding];
+        let c_d = q5[0] - m1 * q5[1] + rounding * (1.0 + m1 * m1).sqrt();
+        let cornu = [m1 * z_ft + c_d, z_ft];
+        let lower_room = cornu[0] - 0.5 * wos;
+        let upper_len = if m1 > 0.0 {
+            (0.4 * lc).min(0.75 * lower_room / m1)
         } else {
-            0.0
+            0.4 * lc
         };
-        if k > 3.0 {
+        if lower_room <= 0.0 || upper_len < 0.25 * lc {
+            let smallest = (lc / (3.0 * lower_room.max(1e-9))).atan().to_degrees();
             return Err(AnatomyError::conflict(
                 &[
                     "cornual_angle_deg",
@@ -163,31 +199,56 @@ impl Geometry {
                 ],
                 format!(
                     "a cornual angle of {} deg cannot join a fundal width of {} mm to an os of {} mm over {} mm \
-                     with a monotone lateral wall (smallest possible: {:.1} deg)",
+                     with a lateral wall that widens all the way (smallest possible: {:.1} deg)",
                     p.cornual_angle_deg,
                     p.fundal_cavity_width_mm,
                     p.internal_os_width_mm,
                     p.cavity_length_mm,
-                    (inner_len / (3.0 * delta)).atan().to_degrees()
+                    smallest
                 ),
             ));
         }
-        let mut right: Vec<[f64; 2]> = Vec::new();
-        // Canal: constant width up to 3/4 of the cervix, then linearly to the internal os width.
-        let canal_top = 0.75 * cx;
-        right.push([0.5 * canal - rounding, -4.0 * MM]);
-        right.push([0.5 * canal - rounding, canal_top]);
-        let n = 24;
-        for i in 0..=n {
-            let s = i as f64 / n as f64;
-            let f = (3.0 * s * s - 2.0 * s * s * s) + k * (s * s * s - s * s);
-            right.push([0.5 * wos - rounding + delta * f, z_io + s * inner_len]);
+        let knee = [m1 * (z_ft - upper_len) + c_d, z_ft - upper_len];
+        let canal_slope = (canal_mid - 0.5 * canal) / (0.5 * cx);
+        let below = 4.0 * MM;
+        let mut right: Vec<[f64; 2]> = vec![
+            [0.5 * canal - canal_slope * below, -below],
+            [canal_mid, 0.5 * cx],
+            [0.5 * wos, cx],
+        ];
+        if z_io - cx > 1e-6 {
+            right.push([0.5 * wos, z_io]);
         }
-        let mut polygon = right.clone();
+        right.push(knee);
+        right.push(cornu);
+        let mut outline = right.clone();
         for q in right.iter().rev() {
-            polygon.push([-q[0], q[1]]);
+            outline.push([-q[0], q[1]]);
         }
+        let polygon = inset_polygon(&outline, rounding);
+        // Three points on the straight part of the upper lateral wall (between the roundings of
+        // the knee, if convex, and of the cornu): rim vertices are put there so the cornual
+        // angle is measurable even where that part is short against the lattice spacing.
+        let slope_c = (knee[0] - 0.5 * wos) / (knee[1] - z_io);
+        let turn_knee = slope_c.atan() - m1.atan();
+        let t_knee = if turn_knee > 0.0 {
+            rounding * (0.5 * turn_knee).tan()
+        } else {
+            0.0
+        };
+        let t_cornu = rounding / (0.5 * p.cornual_angle_deg.to_radians()).tan();
+        let u = [m1 / (1.0 + m1 * m1).sqrt(), 1.0 / (1.0 + m1 * m1).sqrt()];
+        let wall_len = ((cornu[0] - knee[0]).powi(2) + (cornu[1] - knee[1]).powi(2)).sqrt();
+        let straight = wall_len - t_knee - t_cornu;
+        let upper_wall_points: Vec<[f64; 2]> = [0.2, 0.5, 0.8]
+            .iter()
+            .map(|f| {
+                let d = t_knee + f * straight.max(0.0);
+                [knee[0] + d * u[0], knee[1] + d * u[1]]
+            })
+            .collect();
         let bend = Bend::new(p, cx, z_io, cervix_r);
+        let os_half_width_m = 0.5 * wos;
         let mut g = Geometry {
             uterine_length_m: lu,
             corpus_half_width_m: 0.5 * p.corpus_width_mm * MM,
@@ -204,6 +265,10 @@ impl Geometry {
             rounding_m: rounding,
             polygon,
             portio_top_z_m: 0.5 * cx,
+            histological_os_z_m: cx,
+            upper_wall_points,
+            internal_os_z_m: z_io,
+            os_half_width_m,
             lesions: Vec::new(),
             bend,
         };
@@ -355,6 +420,43 @@ fn gradient(f: impl Fn([f64; 3]) -> f64, p: [f64; 3]) -> [f64; 3] {
     } else {
         g
     }
+}
+
+/// The polygon whose outward offset by `r` is `outline` with its convex corners rounded (radius
+/// `r`) and its concave corners kept sharp: every edge moved inwards by `r`, consecutive moved
+/// edges intersected. `outline` is a simple polygon whose edges are long against `r`.
+pub(crate) fn inset_polygon(outline: &[[f64; 2]], r: f64) -> Vec<[f64; 2]> {
+    let n = outline.len();
+    let area2: f64 = (0..n)
+        .map(|i| {
+            let (a, b) = (outline[i], outline[(i + 1) % n]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum();
+    let orient = area2.signum();
+    // Inward normal of edge i (from vertex i to i + 1).
+    let normal = |i: usize| {
+        let (a, b) = (outline[i], outline[(i + 1) % n]);
+        let e = [b[0] - a[0], b[1] - a[1]];
+        let l = (e[0] * e[0] + e[1] * e[1]).sqrt();
+        [-orient * e[1] / l, orient * e[0] / l]
+    };
+    (0..n)
+        .map(|i| {
+            let prev = (i + n - 1) % n;
+            let (n0, n1) = (normal(prev), normal(i));
+            let v = outline[i];
+            // Point at distance r from both lines: v + r (n0 + n1) / (1 + n0.n1).
+            let c = 1.0 + n0[0] * n1[0] + n0[1] * n1[1];
+            if c < 1e-9 {
+                return [v[0] + r * n1[0], v[1] + r * n1[1]];
+            }
+            [
+                v[0] + r * (n0[0] + n1[0]) / c,
+                v[1] + r * (n0[1] + n1[1]) / c,
+            ]
+        })
+        .collect()
 }
 
 /// Exact signed distance to a simple polygon (negative inside).

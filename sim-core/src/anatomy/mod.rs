@@ -224,7 +224,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
     let mut chi_zero = chi_zero;
     chi_zero.resize(m.pos.len(), true);
     let mut psi = rim.values;
-    snap_cornua(&mut m, &mut chi_zero, &mut psi, &geo);
+    snap_landmarks(&mut m, &mut chi_zero, &mut psi, &geo);
     let chi_vals: Vec<f64> = (0..m.pos.len())
         .map(|v| if chi_zero[v] { 0.0 } else { chi.values[v] })
         .collect();
@@ -371,12 +371,18 @@ fn label_vertices(m: &WorkMesh, cavity: &[[u32; 3]], geo: &Geometry) -> Vec<Vert
     labels
 }
 
-/// Puts a rim vertex exactly on each cornu's lateral extreme, so the cavity's width between the
-/// cornua is represented exactly rather than by a chord of the rounded corner: the nearest rim
-/// vertex is moved there if it is close (a third of its rim edge), otherwise the rim edge passing
-/// the extreme is split there. A change is kept only if every element around the vertex keeps a
-/// dihedral angle of at least 8 degrees.
-fn snap_cornua(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo: &Geometry) {
+/// Snapping a landmark may not push an element below this (or below what it replaces).
+const SNAP_MIN_DIHEDRAL_DEG: f64 = 8.0;
+
+/// Puts rim vertices exactly on the landmarks the measurement relies on, so they are represented
+/// exactly rather than by a chord: each cornu's lateral extreme (the fundal width) and the middle
+/// of the isthmus on both sides (the internal os width, even where the isthmus is shorter than a
+/// lattice spacing), and three points on the straight part of each upper lateral wall (the
+/// cornual angle). The nearest rim vertex is moved there if it is close (a third of its rim
+/// edge), otherwise the rim edge passing the target is split there (the other options are tried
+/// next). A change is kept only if no element around the vertex inverts or drops below 8 degrees
+/// (or below the worst element it replaces).
+fn snap_landmarks(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo: &Geometry) {
     let Some(top) = geo
         .polygon
         .iter()
@@ -385,14 +391,34 @@ fn snap_cornua(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo
     else {
         return;
     };
-    let good = |m: &WorkMesh, v: u32| {
-        m.tets.iter().filter(|t| t.contains(&v)).all(|tet| {
-            mesher::volume6(&m.pos, tet) > 0.0
-                && tet_quality(tet.map(|w| m.pos[w as usize])).min_dihedral_deg >= 8.0
-        })
+    // Smallest dihedral angle of the elements containing all of `verts`.
+    let star_min = |m: &WorkMesh, verts: &[u32]| {
+        m.tets
+            .iter()
+            .filter(|t| verts.iter().all(|v| t.contains(v)))
+            .map(|tet| {
+                if mesher::volume6(&m.pos, tet) <= 0.0 {
+                    f64::NEG_INFINITY
+                } else {
+                    tet_quality(tet.map(|w| m.pos[w as usize])).min_dihedral_deg
+                }
+            })
+            .fold(f64::INFINITY, f64::min)
     };
+    // A change is kept if no element inverts and none drops below 8 degrees or below the worst
+    // element it replaces (the elements at the rim may be poor before the later optimisation).
+    let good =
+        |m: &WorkMesh, v: u32, before: f64| star_min(m, &[v]) >= SNAP_MIN_DIHEDRAL_DEG.min(before);
+    let isthmus_z = 0.5 * (geo.histological_os_z_m + geo.internal_os_z_m);
+    let mut targets = Vec::new();
     for sign in [1.0, -1.0] {
-        let target = [sign * (top[0] + geo.rounding_m), 0.0, top[1]];
+        targets.push([sign * (top[0] + geo.rounding_m), 0.0, top[1]]);
+        targets.push([sign * geo.os_half_width_m, 0.0, isthmus_z]);
+        for q in &geo.upper_wall_points {
+            targets.push([sign * q[0], 0.0, q[1]]);
+        }
+    }
+    for target in targets {
         let is_rim = |v: u32| {
             let v = v as usize;
             on_mid[v] && psi[v] == 0.0 && m.pos[v][1] == 0.0
@@ -413,36 +439,43 @@ fn snap_cornua(m: &mut WorkMesh, on_mid: &mut Vec<bool>, psi: &mut Vec<f64>, geo
             }
         }
         let Some((_, a, b, t)) = best else { continue };
-        // Try the exact extreme first, then points part of the way from the chord towards it.
+        // Try the exact target first (moving the nearer end of the rim edge, the other end, or
+        // splitting the edge there; the nearer alternative first), then points part of the way
+        // from the chord towards it.
         let (pa, pb) = (m.pos[a as usize], m.pos[b as usize]);
-        let snap_vertex = !(1.0 / 3.0..=2.0 / 3.0).contains(&t);
-        let from = if snap_vertex {
-            if t < 0.5 {
-                pa
-            } else {
-                pb
-            }
+        let split_first = (1.0 / 3.0..=2.0 / 3.0).contains(&t);
+        let (near, far) = if t < 0.5 { (a, b) } else { (b, a) };
+        // None: split the edge; Some(v): move v.
+        let methods: [Option<u32>; 3] = if split_first {
+            [None, Some(near), Some(far)]
         } else {
-            mesher::lerp(pa, pb, t)
+            [Some(near), None, Some(far)]
         };
-        for f in [1.0, 0.75, 0.5, 0.25] {
-            let point = mesher::lerp(from, target, f);
-            if snap_vertex {
-                let v = if t < 0.5 { a } else { b };
-                m.pos[v as usize] = point;
-                if good(m, v) {
-                    break;
+        'search: for f in [1.0, 0.75, 0.5, 0.25] {
+            for method in methods {
+                match method {
+                    Some(v) => {
+                        let from = m.pos[v as usize];
+                        let before = star_min(m, &[v]);
+                        m.pos[v as usize] = mesher::lerp(from, target, f);
+                        if good(m, v, before) {
+                            break 'search;
+                        }
+                        m.pos[v as usize] = from;
+                    }
+                    None => {
+                        let point = mesher::lerp(mesher::lerp(pa, pb, t), target, f);
+                        let before = star_min(m, &[a, b]);
+                        let saved = m.clone();
+                        let v = mesher::split_edge(m, a, b, point);
+                        if good(m, v, before) {
+                            on_mid.push(true);
+                            psi.push(0.0);
+                            break 'search;
+                        }
+                        *m = saved;
+                    }
                 }
-                m.pos[v as usize] = from;
-            } else {
-                let saved = m.clone();
-                let v = mesher::split_edge(m, a, b, point);
-                if good(m, v) {
-                    on_mid.push(true);
-                    psi.push(0.0);
-                    break;
-                }
-                *m = saved;
             }
         }
     }

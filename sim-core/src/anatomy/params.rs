@@ -15,7 +15,8 @@ pub enum Parity {
     Parous,
 }
 
-/// Which wall a lesion grows from. The cavity is a slit between the anterior and posterior walls.
+/// Which wall a lesion grows from. The cavity is a slit between the anterior and posterior walls;
+/// its lateral edges and its fundal line are the lateral and fundal walls.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum WallSide {
@@ -23,28 +24,45 @@ pub enum WallSide {
     Anterior,
     /// Posterior wall (-y).
     Posterior,
+    /// The patient's left lateral wall (+x); myomas of FIGO type 3-4 only.
+    Left,
+    /// The patient's right lateral wall (-x); myomas of FIGO type 3-4 only.
+    Right,
+    /// The fundus, above the cavity's fundal line; myomas of FIGO type 3-4 only.
+    Fundal,
+    /// Any direction around the cavity axis given by `angle_deg` (0 anterior, 90 left, 180
+    /// posterior, 270 right); myomas of FIGO type 3-4 only.
+    Oblique,
 }
 
 impl WallSide {
-    /// +1 for anterior, -1 for posterior: the sign of y inside that wall.
-    pub fn sign(self) -> f64 {
+    /// +1 for anterior, -1 for posterior (the sign of y inside that wall); `None` for the other
+    /// walls, whose lesions do not protrude into the slit.
+    pub fn sign(self) -> Option<f64> {
         match self {
-            WallSide::Anterior => 1.0,
-            WallSide::Posterior => -1.0,
+            WallSide::Anterior => Some(1.0),
+            WallSide::Posterior => Some(-1.0),
+            _ => None,
         }
     }
 }
 
-/// A myoma (fibroid): an axis-aligned ellipsoid in or on the anterior or posterior wall.
+/// A myoma (fibroid): an axis-aligned ellipsoid in or on a wall.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MyomaParams {
     /// Wall it grows in.
     pub wall: WallSide,
-    /// Offset of its centre from the midline, mm (+ towards the patient's left).
+    /// Offset of its centre from the midline, mm (+ towards the patient's left); anterior,
+    /// posterior and fundal walls (ignored for left, right and oblique: the wall fixes x).
     pub x_mm: f64,
-    /// Distance of its centre below the fundal end of the cavity, mm.
+    /// Distance of its centre below the fundal end of the cavity, mm (ignored for the fundal
+    /// wall, whose myomas lie above the fundal line).
     pub from_fundus_mm: f64,
+    /// Direction around the cavity axis for `wall = "oblique"`, degrees (0 anterior, 90 left,
+    /// 180 posterior, 270 right).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub angle_deg: Option<f64>,
     /// Diameters: coronal width (x), antero-posterior thickness (y), longitudinal length (z), mm.
     pub diameters_mm: [f64; 3],
     /// FIGO type 0-4. If given without `depth_mm`, the placement is derived from it.

@@ -22,7 +22,8 @@ pub(crate) struct Lesion {
     /// Index in `params.myomas` or `params.polyps`.
     pub index: usize,
     pub kind: LesionKind,
-    /// +1 anterior wall, -1 posterior wall.
+    /// +1 anterior wall, -1 posterior wall, 0 other walls (not protruding; its region takes
+    /// elements on both sides of the slit).
     pub wall_sign: f64,
     pub centre_m: [f64; 3],
     pub semi_axes_m: [f64; 3],
@@ -79,7 +80,7 @@ impl Lesion {
     /// Whether a tetrahedron with reference centroid `c` on slit side `side` (+1/-1) belongs to
     /// this lesion's material region.
     pub fn region_contains(&self, c: [f64; 3], side: f64) -> bool {
-        if side != self.wall_sign {
+        if self.wall_sign != 0.0 && side != self.wall_sign {
             return false;
         }
         match self.kind {
@@ -172,6 +173,17 @@ pub(crate) fn place_lesions(
                 ),
             ));
         }
+        let Some(sign) = m.wall.sign() else {
+            let lesion = place_intramural(m, i, &key, r, g, spacing)?;
+            out.push(lesion);
+            continue;
+        };
+        if m.angle_deg.is_some() {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.angle_deg"), &format!("{key}.wall")],
+                "angle_deg is only used with wall = \"oblique\"".to_string(),
+            ));
+        }
         let stalk_len = (0.4 * r[1]).max(1.5 * spacing);
         let depth = match (m.figo, m.depth_mm) {
             (Some(f), None) => depth_for_figo(f, r[1], stalk_len, spacing),
@@ -196,7 +208,6 @@ pub(crate) fn place_lesions(
             }
         };
         let figo = figo_from_depth(depth, r[1]);
-        let sign = m.wall.sign();
         let x0 = m.x_mm * MM;
         let z0 = g.cavity_top_z_m - m.from_fundus_mm * MM;
         let centre = [x0, sign * depth, z0];
@@ -241,7 +252,15 @@ pub(crate) fn place_lesions(
                 ),
             ));
         }
-        let sign = pp.wall.sign();
+        let Some(sign) = pp.wall.sign() else {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.wall")],
+                format!(
+                    "polyps grow from the anterior or posterior wall (the slit's faces), not {:?}",
+                    pp.wall
+                ),
+            ));
+        };
         let x0 = pp.x_mm * MM;
         let z0 = g.cavity_top_z_m - pp.from_fundus_mm * MM;
         let (depth, stalk) = match pp.kind {
@@ -270,6 +289,156 @@ pub(crate) fn place_lesions(
         out.push(lesion);
     }
     Ok(out)
+}
+
+/// Points on an ellipsoid's surface (a latitude-longitude grid).
+fn ellipsoid_samples(c: [f64; 3], r: [f64; 3]) -> Vec<[f64; 3]> {
+    let (nu, nv) = (48, 24);
+    let mut out = Vec::with_capacity(nu * (nv + 1));
+    for j in 0..=nv {
+        let v = std::f64::consts::PI * j as f64 / nv as f64;
+        for i in 0..nu {
+            let u = 2.0 * std::f64::consts::PI * i as f64 / nu as f64;
+            out.push([
+                c[0] + r[0] * v.sin() * u.cos(),
+                c[1] + r[1] * v.sin() * u.sin(),
+                c[2] + r[2] * v.cos(),
+            ]);
+        }
+    }
+    out
+}
+
+/// A myoma on a lateral, fundal or oblique wall, FIGO type 3 (touching the endometrium) or 4
+/// (intramural, at least max(3 mm, 2 spacings) from it). Its centre moves from the cavity along
+/// the wall's direction until the ellipsoid leaves the slit (bisection on the distance between
+/// the ellipsoid and the slit's footprint in the mid-plane, the endometrium before opening);
+/// type 3 then sinks back half a spacing so that elements of the myoma line the cavity.
+fn place_intramural(
+    m: &super::params::MyomaParams,
+    index: usize,
+    key: &str,
+    r: [f64; 3],
+    g: &Geometry,
+    spacing: f64,
+) -> Result<Lesion, AnatomyError> {
+    use super::params::WallSide;
+    let figo = match (m.figo, m.depth_mm) {
+        (Some(f @ (3 | 4)), None) => f,
+        _ => {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.figo"), &format!("{key}.wall")],
+                format!(
+                    "a myoma on the {:?} wall must be given as figo = 3 or 4 without depth_mm \
+                     (types 0-2 protrude into the slit cavity, modelled for the anterior and posterior walls only)",
+                    m.wall
+                ),
+            ))
+        }
+    };
+    let z0 = g.cavity_top_z_m - m.from_fundus_mm * MM;
+    let (start, dir) = match (m.wall, m.angle_deg) {
+        (WallSide::Left, None) => ([0.0, 0.0, z0], [1.0, 0.0, 0.0]),
+        (WallSide::Right, None) => ([0.0, 0.0, z0], [-1.0, 0.0, 0.0]),
+        (WallSide::Fundal, None) => ([m.x_mm * MM, 0.0, g.cavity_top_z_m], [0.0, 0.0, 1.0]),
+        (WallSide::Oblique, Some(a)) => {
+            let a = a.to_radians();
+            ([0.0, 0.0, z0], [a.sin(), a.cos(), 0.0])
+        }
+        (WallSide::Oblique, None) => {
+            return Err(AnatomyError::Parse(format!(
+                "{key}: wall = \"oblique\" needs angle_deg"
+            )))
+        }
+        _ => {
+            return Err(AnatomyError::conflict(
+                &[&format!("{key}.angle_deg"), &format!("{key}.wall")],
+                "angle_deg is only used with wall = \"oblique\"".to_string(),
+            ))
+        }
+    };
+    if g.footprint(start[0], start[2]) > 0.0 {
+        return Err(AnatomyError::conflict(
+            &[&format!("{key}.from_fundus_mm"), &format!("{key}.x_mm")],
+            format!(
+                "the myoma's level ({:.1} mm below the fundal line, x {:.1} mm) is outside the cavity",
+                m.from_fundus_mm, m.x_mm
+            ),
+        ));
+    }
+    let centre_at = |t: f64| [0, 1, 2].map(|k| start[k] + t * dir[k]);
+    // Distance from the ellipsoid to the slit's footprint (0 where they overlap).
+    let gap_to_slit = |t: f64| {
+        ellipsoid_samples(centre_at(t), r)
+            .iter()
+            .map(|p| {
+                let f = g.footprint(p[0], p[2]).max(0.0);
+                (p[1] * p[1] + f * f).sqrt()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    // A point of the ellipsoid's mid-plane section inside the footprint means overlap.
+    let overlaps = |t: f64| {
+        let c = centre_at(t);
+        if c[1].abs() >= r[1] {
+            return false;
+        }
+        let k = (1.0 - (c[1] / r[1]).powi(2)).sqrt();
+        (0..64).any(|i| {
+            let u = 2.0 * std::f64::consts::PI * i as f64 / 64.0;
+            g.footprint(c[0] + k * r[0] * u.cos(), c[2] + k * r[2] * u.sin()) < 0.0
+        }) || g.footprint(c[0], c[2]) < 0.0
+    };
+    let bisect = |pred: &dyn Fn(f64) -> bool| {
+        // pred(lo) true, pred(hi) false.
+        let (mut lo, mut hi) = (0.0, 0.15);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if pred(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        hi
+    };
+    let t_touch = bisect(&|t| overlaps(t));
+    let t = if figo == 3 {
+        (t_touch - 0.5 * spacing).max(0.0)
+    } else {
+        let clear = (3.0 * MM).max(2.0 * spacing);
+        bisect(&|t| t <= t_touch || gap_to_slit(t) < clear)
+    };
+    let centre = centre_at(t);
+    for q in ellipsoid_samples(centre, r) {
+        if g.organ(q) > -1.5 * spacing {
+            return Err(AnatomyError::conflict(
+                &[
+                    &format!("{key}.from_fundus_mm"),
+                    &format!("{key}.diameters_mm"),
+                    &format!("{key}.figo"),
+                ],
+                format!(
+                    "the myoma reaches within 1.5 lattice spacings of the serosa at ({:.1}, {:.1}, {:.1}) mm \
+                     (subserosal FIGO types 5-7 are not modelled)",
+                    q[0] / MM,
+                    q[1] / MM,
+                    q[2] / MM
+                ),
+            ));
+        }
+    }
+    Ok(Lesion {
+        index,
+        kind: LesionKind::Myoma { figo },
+        wall_sign: 0.0,
+        centre_m: centre,
+        semi_axes_m: r,
+        stalk: None,
+        fillet_m: 0.0,
+        protrudes: false,
+        inflate_m: 0.0,
+    })
 }
 
 fn check_fit(
