@@ -167,6 +167,70 @@ pub(crate) fn apply_fixed(
     }
 }
 
+/// The block pattern of the displacement part of a tangent, borrowed from either element system.
+pub(crate) struct Pattern<'a> {
+    /// Per vertex j, the range of `nbr_idx` holding its neighbours (sorted, itself included).
+    pub nbr_ptr: &'a [usize],
+    /// Neighbour vertices.
+    pub nbr_idx: &'a [u32],
+    /// Column pointers of the tangent.
+    pub col_ptr: &'a [usize],
+    /// Row indices of the tangent.
+    pub row_idx: &'a [usize],
+    /// Position of each diagonal entry in the values.
+    pub diag_pos: &'a [usize],
+    /// Fixed displacement unknowns.
+    pub fixed: &'a [bool],
+}
+
+impl Pattern<'_> {
+    /// Adds the 3x3 block coupling vertex `i` (rows) with vertex `j` (columns).
+    #[inline]
+    pub fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
+        let nb = &self.nbr_idx[self.nbr_ptr[j as usize]..self.nbr_ptr[j as usize + 1]];
+        if let Ok(k) = nb.binary_search(&i) {
+            for dj in 0..3 {
+                let col = self.col_ptr[3 * j as usize + dj] + 3 * k;
+                for di in 0..3 {
+                    values[col + di] += blk[di][dj];
+                }
+            }
+        }
+    }
+
+    /// The common end of an evaluation: the follower pressure as the potential `-p V(x)` of the
+    /// closed cavity (energy, residual, load stiffness), then the fixed unknowns.
+    pub fn finish(
+        &self,
+        model: &FemModel,
+        x: &[[f64; 3]],
+        pressure_pa: f64,
+        energy: &mut f64,
+        residual: &mut [f64],
+        mut tangent: Option<&mut [f64]>,
+    ) {
+        if pressure_pa != 0.0 {
+            *energy -= pressure_pa * model.cavity.volume(x);
+            model.cavity.add_gradient(x, -pressure_pa, residual);
+            if let Some(k) = tangent.as_deref_mut() {
+                model
+                    .cavity
+                    .for_each_hessian_block(x, -pressure_pa, |i, j, blk| {
+                        self.add_block(k, i, j, &blk)
+                    });
+            }
+        }
+        for (r, &f) in residual.iter_mut().zip(self.fixed) {
+            if f {
+                *r = 0.0;
+            }
+        }
+        if let Some(k) = tangent {
+            apply_fixed(k, self.col_ptr, self.row_idx, self.diag_pos, self.fixed);
+        }
+    }
+}
+
 /// Sparsity pattern, reference data and nodal averaging data of a linear-tetrahedron model.
 pub struct NodalSystem {
     n_nodes: usize,
@@ -374,17 +438,20 @@ impl NodalSystem {
         self.refs.iter().map(|r| r.volume0)
     }
 
+    fn pattern(&self) -> Pattern<'_> {
+        Pattern {
+            nbr_ptr: &self.nbr_ptr,
+            nbr_idx: &self.nbr_idx,
+            col_ptr: &self.col_ptr,
+            row_idx: &self.row_idx,
+            diag_pos: &self.diag_pos,
+            fixed: &self.fixed,
+        }
+    }
+
     #[inline]
     fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
-        let nb = &self.nbr_idx[self.nbr_ptr[j as usize]..self.nbr_ptr[j as usize + 1]];
-        if let Ok(k) = nb.binary_search(&i) {
-            for dj in 0..3 {
-                let col = self.col_ptr[3 * j as usize + dj] + 3 * k;
-                for di in 0..3 {
-                    values[col + di] += blk[di][dj];
-                }
-            }
-        }
+        self.pattern().add_block(values, i, j, blk);
     }
 
     /// Adds `b` to the coupling of displacement `(i, d)` with pressure `m`, in both triangles.
@@ -537,26 +604,8 @@ impl NodalSystem {
                 }
             }
         }
-        // Follower pressure: potential -p V(x).
-        if pressure_pa != 0.0 {
-            energy -= pressure_pa * model.cavity.volume(x);
-            model.cavity.add_gradient(x, -pressure_pa, &mut residual);
-            if let Some(k) = tangent.as_deref_mut() {
-                model
-                    .cavity
-                    .for_each_hessian_block(x, -pressure_pa, |i, j, blk| {
-                        self.add_block(k, i, j, &blk)
-                    });
-            }
-        }
-        for (r, &f) in residual.iter_mut().zip(&self.fixed) {
-            if f {
-                *r = 0.0;
-            }
-        }
-        if let Some(k) = tangent {
-            apply_fixed(k, &self.col_ptr, &self.row_idx, &self.diag_pos, &self.fixed);
-        }
+        self.pattern()
+            .finish(model, x, pressure_pa, &mut energy, &mut residual, tangent);
         Ok(Evaluation {
             energy_j: energy,
             residual,

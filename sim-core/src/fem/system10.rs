@@ -10,7 +10,7 @@
 //! plain displacement Hessian (positive definite at stable equilibria), factorized by LDL^T.
 
 use super::model::FemModel;
-use super::system::{apply_fixed, Evaluation};
+use super::system::{Evaluation, Pattern};
 use super::tet10::Tet10Reference;
 use super::FemError;
 use rayon::prelude::*;
@@ -134,17 +134,20 @@ impl Tet10System {
         self.refs.iter().map(|r| r.volume0).sum()
     }
 
+    fn pattern(&self) -> Pattern<'_> {
+        Pattern {
+            nbr_ptr: &self.nbr_ptr,
+            nbr_idx: &self.nbr_idx,
+            col_ptr: &self.col_ptr,
+            row_idx: &self.row_idx,
+            diag_pos: &self.diag_pos,
+            fixed: &self.fixed,
+        }
+    }
+
     #[inline]
     fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
-        let nb = &self.nbr_idx[self.nbr_ptr[j as usize]..self.nbr_ptr[j as usize + 1]];
-        if let Ok(k) = nb.binary_search(&i) {
-            for dj in 0..3 {
-                let col = self.col_ptr[3 * j as usize + dj] + 3 * k;
-                for di in 0..3 {
-                    values[col + di] += blk[di][dj];
-                }
-            }
-        }
+        self.pattern().add_block(values, i, j, blk);
     }
 
     fn element(
@@ -239,25 +242,8 @@ impl Tet10System {
                 }
             }
         }
-        if pressure_pa != 0.0 {
-            energy -= pressure_pa * model.cavity.volume(x);
-            model.cavity.add_gradient(x, -pressure_pa, &mut residual);
-            if let Some(k) = tangent.as_deref_mut() {
-                model
-                    .cavity
-                    .for_each_hessian_block(x, -pressure_pa, |i, j, blk| {
-                        self.add_block(k, i, j, &blk)
-                    });
-            }
-        }
-        for (r, &f) in residual.iter_mut().zip(&self.fixed) {
-            if f {
-                *r = 0.0;
-            }
-        }
-        if let Some(k) = tangent {
-            apply_fixed(k, &self.col_ptr, &self.row_idx, &self.diag_pos, &self.fixed);
-        }
+        self.pattern()
+            .finish(model, x, pressure_pa, &mut energy, &mut residual, tangent);
         Ok(Evaluation {
             energy_j: energy,
             residual,
