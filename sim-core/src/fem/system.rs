@@ -64,7 +64,7 @@ impl System {
     /// Column pointers of the full symmetric matrix.
     pub fn col_ptr(&self) -> &[usize] {
         match self {
-            Self::Nodal(s) => &s.col_ptr,
+            Self::Nodal(s) => s.col_ptr(),
             Self::Tet10(s) => s.col_ptr(),
         }
     }
@@ -72,7 +72,7 @@ impl System {
     /// Row indices, sorted within each column.
     pub fn row_idx(&self) -> &[usize] {
         match self {
-            Self::Nodal(s) => &s.row_idx,
+            Self::Nodal(s) => s.row_idx(),
             Self::Tet10(s) => s.row_idx(),
         }
     }
@@ -167,23 +167,25 @@ pub(crate) fn apply_fixed(
     }
 }
 
-/// The block pattern of the displacement part of a tangent, borrowed from either element system.
-pub(crate) struct Pattern<'a> {
+/// The tangent's sparsity, shared by both element systems: vertex adjacency, the column-compressed
+/// pattern of the full symmetric matrix, the diagonal positions and the fixed unknowns.
+#[derive(Debug, Clone)]
+pub(crate) struct BlockPattern {
     /// Per vertex j, the range of `nbr_idx` holding its neighbours (sorted, itself included).
-    pub nbr_ptr: &'a [usize],
+    pub nbr_ptr: Vec<usize>,
     /// Neighbour vertices.
-    pub nbr_idx: &'a [u32],
+    pub nbr_idx: Vec<u32>,
     /// Column pointers of the tangent.
-    pub col_ptr: &'a [usize],
-    /// Row indices of the tangent.
-    pub row_idx: &'a [usize],
+    pub col_ptr: Vec<usize>,
+    /// Row indices of the tangent, sorted within each column.
+    pub row_idx: Vec<usize>,
     /// Position of each diagonal entry in the values.
-    pub diag_pos: &'a [usize],
+    pub diag_pos: Vec<usize>,
     /// Fixed displacement unknowns.
-    pub fixed: &'a [bool],
+    pub fixed: Vec<bool>,
 }
 
-impl Pattern<'_> {
+impl BlockPattern {
     /// Adds the 3x3 block coupling vertex `i` (rows) with vertex `j` (columns).
     #[inline]
     pub fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
@@ -220,14 +222,25 @@ impl Pattern<'_> {
                     });
             }
         }
-        for (r, &f) in residual.iter_mut().zip(self.fixed) {
+        for (r, &f) in residual.iter_mut().zip(&self.fixed) {
             if f {
                 *r = 0.0;
             }
         }
         if let Some(k) = tangent {
-            apply_fixed(k, self.col_ptr, self.row_idx, self.diag_pos, self.fixed);
+            apply_fixed(k, &self.col_ptr, &self.row_idx, &self.diag_pos, &self.fixed);
         }
+    }
+
+    /// `y = A x` for the matrix with this pattern and the stored `values`.
+    pub fn multiply(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
+        let mut y = vec![0.0; x.len()];
+        for (j, &xj) in x.iter().enumerate().take(self.col_ptr.len() - 1) {
+            for p in self.col_ptr[j]..self.col_ptr[j + 1] {
+                y[self.row_idx[p]] += values[p] * xj;
+            }
+        }
+        y
     }
 }
 
@@ -241,15 +254,9 @@ pub struct NodalSystem {
     star_idx: Vec<u32>,
     v0_node: Vec<f64>,
     kappa_node: Vec<f64>,
-    nbr_ptr: Vec<usize>,
-    nbr_idx: Vec<u32>,
-    /// Column pointers of the full symmetric expanded matrix: 3 displacement columns per vertex,
-    /// then one pressure column per vertex.
-    pub col_ptr: Vec<usize>,
-    /// Row indices of the tangent, sorted within each column.
-    pub row_idx: Vec<usize>,
-    diag_pos: Vec<usize>,
-    fixed: Vec<bool>,
+    /// Pattern of the full symmetric expanded matrix: 3 displacement columns per vertex, then one
+    /// pressure column per vertex.
+    pattern: BlockPattern,
 }
 
 /// Energy and residual at one state.
@@ -387,12 +394,14 @@ impl NodalSystem {
             star_idx,
             v0_node,
             kappa_node,
-            nbr_ptr,
-            nbr_idx,
-            col_ptr,
-            row_idx,
-            diag_pos,
-            fixed: model.fixed_dofs.clone(),
+            pattern: BlockPattern {
+                nbr_ptr,
+                nbr_idx,
+                col_ptr,
+                row_idx,
+                diag_pos,
+                fixed: model.fixed_dofs.clone(),
+            },
         })
     }
 
@@ -408,7 +417,7 @@ impl NodalSystem {
 
     /// Number of stored entries of the expanded matrix.
     pub fn nnz(&self) -> usize {
-        self.row_idx.len()
+        self.pattern.row_idx.len()
     }
 
     /// Fill-reducing elimination order of the expanded system: geometric nested dissection of
@@ -416,8 +425,8 @@ impl NodalSystem {
     pub fn elimination_order(&self, model: &FemModel) -> Vec<usize> {
         let nodes = super::ordering::nested_dissection(
             &model.rest_positions_m,
-            &self.nbr_ptr,
-            &self.nbr_idx,
+            &self.pattern.nbr_ptr,
+            &self.pattern.nbr_idx,
         );
         let n = self.n_nodes;
         let mut order = Vec::with_capacity(4 * n);
@@ -430,7 +439,7 @@ impl NodalSystem {
 
     /// Fixed degree-of-freedom flags.
     pub fn fixed(&self) -> &[bool] {
-        &self.fixed
+        &self.pattern.fixed
     }
 
     /// Reference volume of every tetrahedron.
@@ -438,20 +447,19 @@ impl NodalSystem {
         self.refs.iter().map(|r| r.volume0)
     }
 
-    fn pattern(&self) -> Pattern<'_> {
-        Pattern {
-            nbr_ptr: &self.nbr_ptr,
-            nbr_idx: &self.nbr_idx,
-            col_ptr: &self.col_ptr,
-            row_idx: &self.row_idx,
-            diag_pos: &self.diag_pos,
-            fixed: &self.fixed,
-        }
-    }
-
     #[inline]
     fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
-        self.pattern().add_block(values, i, j, blk);
+        self.pattern.add_block(values, i, j, blk);
+    }
+
+    /// Column pointers of the expanded matrix.
+    pub fn col_ptr(&self) -> &[usize] {
+        &self.pattern.col_ptr
+    }
+
+    /// Row indices of the expanded matrix, sorted within each column.
+    pub fn row_idx(&self) -> &[usize] {
+        &self.pattern.row_idx
     }
 
     /// Adds `b` to the coupling of displacement `(i, d)` with pressure `m`, in both triangles.
@@ -461,9 +469,9 @@ impl NodalSystem {
         let star_i = &self.star_idx[self.star_ptr[i as usize]..self.star_ptr[i as usize + 1]];
         if let (Ok(a), Ok(c)) = (star_m.binary_search(&i), star_i.binary_search(&(m as u32))) {
             let n = self.n_nodes;
-            values[self.col_ptr[3 * n + m] + 3 * a + d] += b;
-            let deg = self.nbr_ptr[i as usize + 1] - self.nbr_ptr[i as usize];
-            values[self.col_ptr[3 * i as usize + d] + 3 * deg + c] += b;
+            values[self.pattern.col_ptr[3 * n + m] + 3 * a + d] += b;
+            let deg = self.pattern.nbr_ptr[i as usize + 1] - self.pattern.nbr_ptr[i as usize];
+            values[self.pattern.col_ptr[3 * i as usize + d] + 3 * deg + c] += b;
         }
     }
 
@@ -578,7 +586,7 @@ impl NodalSystem {
         if let Some(k) = tangent.as_deref_mut() {
             let mut g: Vec<[f64; 3]> = Vec::new();
             for v in 0..n {
-                k[self.diag_pos[3 * n + v]] = -1.0;
+                k[self.pattern.diag_pos[3 * n + v]] = -1.0;
                 if self.v0_node[v] <= 0.0 {
                     continue;
                 }
@@ -604,7 +612,7 @@ impl NodalSystem {
                 }
             }
         }
-        self.pattern()
+        self.pattern
             .finish(model, x, pressure_pa, &mut energy, &mut residual, tangent);
         Ok(Evaluation {
             energy_j: energy,
@@ -615,13 +623,7 @@ impl NodalSystem {
     }
 
     fn multiply_expanded(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
-        let mut y = vec![0.0; x.len()];
-        for j in 0..self.n_linear() {
-            for p in self.col_ptr[j]..self.col_ptr[j + 1] {
-                y[self.row_idx[p]] += values[p] * x[j];
-            }
-        }
-        y
+        self.pattern.multiply(values, x)
     }
 
     /// `y = (K_xx + B B^T) x`: the condensed tangent (the Hessian of the potential) applied to a

@@ -10,7 +10,7 @@
 //! plain displacement Hessian (positive definite at stable equilibria), factorized by LDL^T.
 
 use super::model::FemModel;
-use super::system::{Evaluation, Pattern};
+use super::system::{BlockPattern, Evaluation};
 use super::tet10::Tet10Reference;
 use super::FemError;
 use rayon::prelude::*;
@@ -19,12 +19,7 @@ use rayon::prelude::*;
 pub struct Tet10System {
     n_nodes: usize,
     refs: Vec<Tet10Reference>,
-    nbr_ptr: Vec<usize>,
-    nbr_idx: Vec<u32>,
-    col_ptr: Vec<usize>,
-    row_idx: Vec<usize>,
-    diag_pos: Vec<usize>,
-    fixed: Vec<bool>,
+    pattern: BlockPattern,
 }
 
 const CHUNK: usize = 1024;
@@ -87,12 +82,14 @@ impl Tet10System {
         Ok(Self {
             n_nodes: n,
             refs,
-            nbr_ptr,
-            nbr_idx,
-            col_ptr,
-            row_idx,
-            diag_pos,
-            fixed: model.fixed_dofs.clone(),
+            pattern: BlockPattern {
+                nbr_ptr,
+                nbr_idx,
+                col_ptr,
+                row_idx,
+                diag_pos,
+                fixed: model.fixed_dofs.clone(),
+            },
         })
     }
 
@@ -103,30 +100,34 @@ impl Tet10System {
 
     /// Stored entries of the (full symmetric) tangent.
     pub fn nnz(&self) -> usize {
-        self.row_idx.len()
+        self.pattern.row_idx.len()
     }
 
     /// Column pointers of the tangent.
     pub fn col_ptr(&self) -> &[usize] {
-        &self.col_ptr
+        &self.pattern.col_ptr
     }
 
     /// Row indices of the tangent, sorted within each column.
     pub fn row_idx(&self) -> &[usize] {
-        &self.row_idx
+        &self.pattern.row_idx
     }
 
     /// Nested-dissection elimination order, each node's three displacements kept together.
     pub fn elimination_order(&self, model: &FemModel) -> Vec<usize> {
-        super::ordering::nested_dissection(&model.rest_positions_m, &self.nbr_ptr, &self.nbr_idx)
-            .into_iter()
-            .flat_map(|v| [3 * v as usize, 3 * v as usize + 1, 3 * v as usize + 2])
-            .collect()
+        super::ordering::nested_dissection(
+            &model.rest_positions_m,
+            &self.pattern.nbr_ptr,
+            &self.pattern.nbr_idx,
+        )
+        .into_iter()
+        .flat_map(|v| [3 * v as usize, 3 * v as usize + 1, 3 * v as usize + 2])
+        .collect()
     }
 
     /// Fixed degree-of-freedom flags.
     pub fn fixed(&self) -> &[bool] {
-        &self.fixed
+        &self.pattern.fixed
     }
 
     /// Total reference volume.
@@ -134,20 +135,9 @@ impl Tet10System {
         self.refs.iter().map(|r| r.volume0).sum()
     }
 
-    fn pattern(&self) -> Pattern<'_> {
-        Pattern {
-            nbr_ptr: &self.nbr_ptr,
-            nbr_idx: &self.nbr_idx,
-            col_ptr: &self.col_ptr,
-            row_idx: &self.row_idx,
-            diag_pos: &self.diag_pos,
-            fixed: &self.fixed,
-        }
-    }
-
     #[inline]
     fn add_block(&self, values: &mut [f64], i: u32, j: u32, blk: &[[f64; 3]; 3]) {
-        self.pattern().add_block(values, i, j, blk);
+        self.pattern.add_block(values, i, j, blk);
     }
 
     fn element(
@@ -242,7 +232,7 @@ impl Tet10System {
                 }
             }
         }
-        self.pattern()
+        self.pattern
             .finish(model, x, pressure_pa, &mut energy, &mut residual, tangent);
         Ok(Evaluation {
             energy_j: energy,
@@ -254,12 +244,6 @@ impl Tet10System {
 
     /// `y = K x` with the assembled tangent `values`.
     pub fn multiply(&self, values: &[f64], x: &[f64]) -> Vec<f64> {
-        let mut y = vec![0.0; x.len()];
-        for j in 0..self.n_dofs() {
-            for p in self.col_ptr[j]..self.col_ptr[j + 1] {
-                y[self.row_idx[p]] += values[p] * x[j];
-            }
-        }
-        y
+        self.pattern.multiply(values, x)
     }
 }
