@@ -1,14 +1,35 @@
 //! End-to-end checks of `hydrometra fem sphere` and `hydrometra precompute` through the binary.
 
 use hydrometra_sim::atlas::Atlas;
-use std::path::PathBuf;
-use std::process::Command;
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
 
 fn out_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hydrometra-fem-cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).unwrap();
     d
+}
+
+/// Runs `hydrometra ARGS... [--material FILE]`.
+fn hydrometra(args: &[&str], material: Option<&Path>) -> Output {
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_hydrometra"));
+    cmd.args(args);
+    if let Some(m) = material {
+        cmd.args([OsStr::new("--material"), m.as_os_str()]);
+    }
+    cmd.output().unwrap()
+}
+
+/// Its JSON on stdout, after checking that it succeeded.
+fn success_json(out: &Output) -> serde_json::Value {
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
 }
 
 #[test]
@@ -20,8 +41,8 @@ fn fem_sphere_json_reports_stretch_near_the_integral_oracle() {
         "[myometrium]\nmu_pa = [0.5, 0.4]\nkappa_pa = 1000.0\n",
     )
     .unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
-        .args([
+    let out = hydrometra(
+        &[
             "fem",
             "sphere",
             "--inner",
@@ -33,17 +54,10 @@ fn fem_sphere_json_reports_stretch_near_the_integral_oracle() {
             "--json",
             "--pressures",
             "0.04,0.08",
-        ])
-        .arg("--material")
-        .arg(&mat)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        Some(&mat),
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = success_json(&out);
     let rows = v["results"].as_array().unwrap();
     assert_eq!(rows.len(), 2);
     for r in rows {
@@ -53,8 +67,8 @@ fn fem_sphere_json_reports_stretch_near_the_integral_oracle() {
         assert!(r["inner_stretch"].as_f64().unwrap() > 1.0);
     }
     // Bad input names the argument.
-    let bad = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
-        .args([
+    let bad = hydrometra(
+        &[
             "fem",
             "sphere",
             "--inner",
@@ -63,11 +77,9 @@ fn fem_sphere_json_reports_stretch_near_the_integral_oracle() {
             "2",
             "--pressures",
             "0.3,0.1",
-        ])
-        .arg("--material")
-        .arg(&mat)
-        .output()
-        .unwrap();
+        ],
+        Some(&mat),
+    );
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--pressures"));
 }
@@ -79,8 +91,8 @@ fn fem_sphere_volume_control_passes_the_neo_hookean_pressure_maximum() {
     let dir = out_dir("volume");
     let mat = dir.join("nh.toml");
     std::fs::write(&mat, "[myometrium]\nmu_pa = [0.5]\nkappa_pa = 1000.0\n").unwrap();
-    let out = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
-        .args([
+    let out = hydrometra(
+        &[
             "fem",
             "sphere",
             "--inner",
@@ -98,17 +110,10 @@ fn fem_sphere_volume_control_passes_the_neo_hookean_pressure_maximum() {
             "--stretches",
             "1.3,1.6,1.85,2.0",
             "--json",
-        ])
-        .arg("--material")
-        .arg(&mat)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+        ],
+        Some(&mat),
     );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let v = success_json(&out);
     assert_eq!(v["element"], "tet10");
     let rows = v["results"].as_array().unwrap();
     let p: Vec<f64> = rows
@@ -135,8 +140,8 @@ fn fem_sphere_volume_control_passes_the_neo_hookean_pressure_maximum() {
         );
     }
     // Stretches with pressure control is a mistake that names the flag.
-    let bad = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
-        .args([
+    let bad = hydrometra(
+        &[
             "fem",
             "sphere",
             "--inner",
@@ -145,11 +150,9 @@ fn fem_sphere_volume_control_passes_the_neo_hookean_pressure_maximum() {
             "2",
             "--stretches",
             "1.2",
-        ])
-        .arg("--material")
-        .arg(&mat)
-        .output()
-        .unwrap();
+        ],
+        Some(&mat),
+    );
     assert!(!bad.status.success());
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--stretches"));
     let _ = std::fs::remove_dir_all(&dir);
