@@ -43,15 +43,7 @@ impl TetReference {
 
     /// Deformation gradient `F = sum_a x_a (x) grad N_a`.
     pub fn deformation_gradient(&self, x: &[[f64; 3]; 4]) -> [[f64; 3]; 3] {
-        let mut f = [[0.0; 3]; 3];
-        for a in 0..4 {
-            for i in 0..3 {
-                for j in 0..3 {
-                    f[i][j] += x[a][i] * self.grad[a][j];
-                }
-            }
-        }
-        f
+        deformation_gradient(&self.grad, x)
     }
 
     /// Deviatoric energy, element force (12) and, if `stiffness` is given, element stiffness
@@ -181,6 +173,62 @@ pub fn skew(a: [f64; 3]) -> [[f64; 3]; 3] {
 
 pub(crate) use crate::mesh::{cross, dot, sub};
 
+/// Deformation gradient `F = sum_a x_a (x) grad N_a` of an element with `N` nodes.
+pub(crate) fn deformation_gradient<const N: usize>(
+    grad: &[[f64; 3]; N],
+    x: &[[f64; 3]; N],
+) -> [[f64; 3]; 3] {
+    let mut f = [[0.0; 3]; 3];
+    for (xa, ga) in x.iter().zip(grad) {
+        for i in 0..3 {
+            for j in 0..3 {
+                f[i][j] += xa[i] * ga[j];
+            }
+        }
+    }
+    f
+}
+
+/// Central-difference check of an element's force (the gradient of its energy) and stiffness
+/// (the Jacobian of its force), both relative to their largest entry.
+#[cfg(test)]
+pub(crate) fn check_force_and_stiffness<const N: usize, const D: usize>(
+    x: &[[f64; 3]; N],
+    force: &[f64; D],
+    stiffness: &[[f64; D]; D],
+    energy_and_force: impl Fn(&[[f64; 3]; N], &mut [f64; D]) -> f64,
+) {
+    let eps = 1e-6;
+    let fscale = force.iter().map(|v| v.abs()).fold(0.0, f64::max);
+    let kscale = stiffness
+        .iter()
+        .flatten()
+        .map(|v| v.abs())
+        .fold(0.0, f64::max);
+    for d in 0..D {
+        let perturbed = |s: f64| {
+            let mut y = *x;
+            y[d / 3][d % 3] += s;
+            y
+        };
+        let (mut fp, mut fm) = ([0.0; D], [0.0; D]);
+        let wp = energy_and_force(&perturbed(eps), &mut fp);
+        let wm = energy_and_force(&perturbed(-eps), &mut fm);
+        assert!(
+            ((wp - wm) / (2.0 * eps) - force[d]).abs() < 1e-7 * fscale,
+            "force dof {d}"
+        );
+        for c in 0..D {
+            let fd = (fp[c] - fm[c]) / (2.0 * eps);
+            assert!(
+                (fd - stiffness[c][d]).abs() < 1e-7 * kscale,
+                "stiffness ({c},{d}): {fd} vs {}",
+                stiffness[c][d]
+            );
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -218,31 +266,7 @@ mod tests {
         let mut f = [0.0; 12];
         let mut k = [[0.0; 12]; 12];
         r.deviatoric(&mat, &x, &mut f, Some(&mut k)).unwrap();
-        let eps = 1e-6;
-        let fscale = f.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let kscale = k.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
-        for d in 0..12 {
-            let mut fp = [0.0; 12];
-            let mut fm = [0.0; 12];
-            let wp = r
-                .deviatoric(&mat, &perturbed(&x, d, eps), &mut fp, None)
-                .unwrap();
-            let wm = r
-                .deviatoric(&mat, &perturbed(&x, d, -eps), &mut fm, None)
-                .unwrap();
-            assert!(
-                ((wp - wm) / (2.0 * eps) - f[d]).abs() < 1e-7 * fscale,
-                "force dof {d}"
-            );
-            for c in 0..12 {
-                let fd = (fp[c] - fm[c]) / (2.0 * eps);
-                assert!(
-                    (fd - k[c][d]).abs() < 1e-7 * kscale,
-                    "stiffness ({c},{d}): {fd} vs {}",
-                    k[c][d]
-                );
-            }
-        }
+        check_force_and_stiffness(&x, &f, &k, |y, fy| r.deviatoric(&mat, y, fy, None).unwrap());
     }
 
     #[test]

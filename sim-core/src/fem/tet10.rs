@@ -8,6 +8,7 @@
 //! `4 L_i L_j` at mid-edge nodes. The reference configuration may be curved (mid-edge nodes off
 //! the chords), which is how the element represents a curved boundary.
 
+use super::element::deformation_gradient;
 use super::material::{det3, deviatoric_stress, inv3, Material};
 
 /// Corner pairs of the six edges, in mid-node order.
@@ -267,18 +268,6 @@ impl Tet10Reference {
     }
 }
 
-fn deformation_gradient(grad: &[[f64; 3]; 10], x: &[[f64; 3]; 10]) -> [[f64; 3]; 3] {
-    let mut f = [[0.0; 3]; 3];
-    for a in 0..10 {
-        for i in 0..3 {
-            for j in 0..3 {
-                f[i][j] += x[a][i] * grad[a][j];
-            }
-        }
-    }
-    f
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -326,30 +315,9 @@ mod tests {
         let mut f = [0.0; 30];
         let mut k = Box::new([[0.0; 30]; 30]);
         r.deviatoric(&mat, &x, &mut f, Some(&mut k)).unwrap();
-        let eps = 1e-6;
-        let fscale = f.iter().map(|v| v.abs()).fold(0.0, f64::max);
-        let kscale = k.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max);
-        for d in 0..30 {
-            let (mut fp, mut fm) = ([0.0; 30], [0.0; 30]);
-            let wp = r
-                .deviatoric(&mat, &perturbed(&x, d, eps), &mut fp, None)
-                .unwrap();
-            let wm = r
-                .deviatoric(&mat, &perturbed(&x, d, -eps), &mut fm, None)
-                .unwrap();
-            assert!(
-                ((wp - wm) / (2.0 * eps) - f[d]).abs() < 1e-7 * fscale,
-                "force dof {d}"
-            );
-            for c in 0..30 {
-                let fd = (fp[c] - fm[c]) / (2.0 * eps);
-                assert!(
-                    (fd - k[c][d]).abs() < 1e-7 * kscale,
-                    "stiffness ({c},{d}): {fd} vs {}",
-                    k[c][d]
-                );
-            }
-        }
+        crate::fem::element::check_force_and_stiffness(&x, &f, &k, |y, fy| {
+            r.deviatoric(&mat, y, fy, None).unwrap()
+        });
     }
 
     #[test]
