@@ -410,24 +410,17 @@ fn place_intramural(
         bisect(&|t| t <= t_touch || gap_to_slit(t) < clear)
     };
     let centre = centre_at(t);
-    for q in ellipsoid_samples(centre, r) {
-        if g.organ(q) > -1.5 * spacing {
-            return Err(AnatomyError::conflict(
-                &[
-                    &format!("{key}.from_fundus_mm"),
-                    &format!("{key}.diameters_mm"),
-                    &format!("{key}.figo"),
-                ],
-                format!(
-                    "the myoma reaches within 1.5 lattice spacings of the serosa at ({:.1}, {:.1}, {:.1}) mm \
-                     (subserosal FIGO types 5-7 are not modelled)",
-                    q[0] / MM,
-                    q[1] / MM,
-                    q[2] / MM
-                ),
-            ));
-        }
-    }
+    clear_of_serosa(
+        g,
+        ellipsoid_samples(centre, r),
+        spacing,
+        &[
+            &format!("{key}.from_fundus_mm"),
+            &format!("{key}.diameters_mm"),
+            &format!("{key}.figo"),
+        ],
+        "myoma",
+    )?;
     Ok(Lesion {
         index,
         kind: LesionKind::Myoma { figo },
@@ -439,6 +432,29 @@ fn place_intramural(
         protrudes: false,
         inflate_m: 0.0,
     })
+}
+
+/// Every probe point stays 1.5 lattice spacings inside the serosa, or the parameters `keys` conflict.
+fn clear_of_serosa(
+    g: &Geometry,
+    probes: impl IntoIterator<Item = [f64; 3]>,
+    spacing: f64,
+    keys: &[&str],
+    what: &str,
+) -> Result<(), AnatomyError> {
+    match probes.into_iter().find(|&q| g.organ(q) > -1.5 * spacing) {
+        None => Ok(()),
+        Some(q) => Err(AnatomyError::conflict(
+            keys,
+            format!(
+                "the {what} reaches within 1.5 lattice spacings of the serosa at ({:.1}, {:.1}, {:.1}) mm \
+                 (subserosal FIGO types 5-7 are not modelled)",
+                q[0] / MM,
+                q[1] / MM,
+                q[2] / MM
+            ),
+        )),
+    }
 }
 
 fn check_fit(
@@ -462,24 +478,17 @@ fn check_fit(
             [x0, yc, z0 + r[2]],
             [x0, yc, z0 - r[2]],
         ];
-        for q in probes {
-            if g.organ(q) > -1.5 * spacing {
-                return Err(AnatomyError::conflict(
-                    &[
-                        &format!("{key}.x_mm"),
-                        &format!("{key}.from_fundus_mm"),
-                        &format!("{key}.diameters_mm"),
-                    ],
-                    format!(
-                        "the lesion reaches within 1.5 lattice spacings of the serosa at ({:.1}, {:.1}, {:.1}) mm \
-                         (subserosal FIGO types 5-7 are not modelled)",
-                        q[0] / MM,
-                        q[1] / MM,
-                        q[2] / MM
-                    ),
-                ));
-            }
-        }
+        clear_of_serosa(
+            g,
+            probes,
+            spacing,
+            &[
+                &format!("{key}.x_mm"),
+                &format!("{key}.from_fundus_mm"),
+                &format!("{key}.diameters_mm"),
+            ],
+            "lesion",
+        )?;
     }
     if l.protrudes {
         // The wrapped slit must stay inside the cavity's footprint, away from its rim: the part in
