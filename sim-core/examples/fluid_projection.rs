@@ -1,14 +1,14 @@
-//! Our solver alone on the benchmark cavity, for profiling the projection:
+//! Our solver alone on the uterine benchmark cavity, for profiling the projection:
 //! `cargo run -p hydrometra-sim --example fluid_projection -- [voxel_mm] [steps] [warmup]
 //! [parallel_threshold_cells]`.
 //! `parallel_threshold_cells` is `FluidParams::parallel_threshold_cells` (the multigrid splits levels
-//! of at least 4x that many fluid cells over two threads: 8000 puts the 0.6 mm level 0 on rayon).
+//! of at least 1/12 of that many fluid cells over two threads: 2,000 by default).
 //! Prints the fluid cells, the step and projection means (ms), the CG iterations per step and the
 //! worst `max |div u| h / U`.
 
 use std::time::Instant;
 
-use hydrometra_sim::fluid::cavity::ellipsoid_cavity;
+use hydrometra_sim::fluid::cavity::uterine_cavity;
 use hydrometra_sim::fluid::{FluidParams, FluidSolver, ProjectionMethod};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -31,7 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         tolerance: 1e-5,
         ..Default::default()
     };
-    let mut s = FluidSolver::new(ellipsoid_cavity(voxel_mm * 1e-3, 1.0)?, params)?;
+    let mut s = FluidSolver::new(uterine_cavity(voxel_mm * 1e-3, 1.0)?, params)?;
     for _ in 0..warmup {
         s.step(1.0 / 60.0)?;
     }

@@ -6,6 +6,7 @@
 
 pub mod anatomy;
 pub mod atlas;
+mod duo;
 pub mod fem;
 pub mod fluid;
 pub mod hydraulics;

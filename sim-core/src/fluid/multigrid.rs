@@ -338,7 +338,7 @@ pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
     let mid = level.spans[k][0] as usize;
     let (sa, sb) = level.spans.split_at(k);
     let (oa, ob) = op.split(mid);
-    let (ra, rb) = rayon::join(
+    let (ra, rb) = crate::duo::join(
         || dispatch(level, sa, 0, oa),
         || dispatch(level, sb, mid, ob),
     );

@@ -6,6 +6,10 @@
 //! negative Laplacian in cell units (diagonal = number of fluid or open neighbours) and `b = -h div u*`,
 //! so the residual of a row *is* `-h div u` of the projected velocity there: stopping on
 //! `max |r| <= tol * U` stops on `max |div u| h / U <= tol`.
+//!
+//! The solver's interface is dense: `b` and `q` live on level 0's padded box (zero off the fluid
+//! cells), where the velocity update and the divergence are contiguous row loops. The reference
+//! solvers work on compressed rows and are wrapped by a gather and a scatter.
 
 use rayon::prelude::*;
 
@@ -41,35 +45,34 @@ pub(crate) struct SolveOutcome {
 pub(crate) struct PressureSolver {
     pub mg: Multigrid,
     pub regions: Regions,
-    /// Unknowns (warm start between steps).
-    pub q: Vec<f64>,
-    pub b: Vec<f64>,
+    /// Dense (padded) right-hand side `-h div u` and unknowns `q` (the warm start on entry to
+    /// [`PressureSolver::solve`], the solution on return; zero off the fluid cells).
+    pub bd: Vec<f64>,
+    pub dq: Vec<f64>,
+    /// Compressed rows of the reference solvers.
+    q: Vec<f64>,
+    b: Vec<f64>,
     r: Vec<f64>,
     z: Vec<f64>,
     p: Vec<f64>,
     ap: Vec<f64>,
-    /// Dense (padded) vectors of the multigrid-PCG: the warm start in f64, and the increment, search
-    /// direction and its product in f32 (the residual and the preconditioned residual live in level
-    /// 0's `b` and `x`).
-    dq: Vec<f64>,
+    /// Dense vectors of the multigrid-PCG in f32: the increment of `dq`, the search direction and
+    /// its product (the residual and the preconditioned residual live in level 0's `b` and `x`).
     dd: Vec<f32>,
     dp: Vec<f32>,
     dap: Vec<f32>,
     /// Rows above which the matrix-vector product runs on rayon.
     pub parallel_rows: usize,
-    /// Full face indices of each row's faces (lower x, upper x, lower y, ...), for the divergence;
-    /// rebuilt by the solver when `faces_stale`.
-    pub faces_of_row: Vec<[u32; 6]>,
-    pub faces_stale: bool,
 }
 
 const CHUNK: usize = 2048;
 
-/// Multigrid levels run their kernels on rayon from this many times `parallel_rows` fluid cells.
-/// Measured on the shared 2-core machine at 34.6k rows (0.6 mm cavity): two halves per kernel (one
-/// fork-join each, ~20 per CG iteration, plus the extra pass of the out-of-place smoother) were
-/// 1.4-1.8x slower than one thread, so only much larger grids split.
-const MG_PARALLEL_FACTOR: usize = 4;
+/// Multigrid levels split their kernels in two halves (on [`crate::duo`]) from `parallel_rows /
+/// MG_SPLIT_DIVISOR` fluid cells: 2,000 by default. A split costs well under a microsecond there, so
+/// it pays from a few thousand cells (measured on the 2-core machine: the 1.2 mm cavity's level 0,
+/// 3.8k cells, gains ~25 % of the projection, the 0.6 mm cavity's levels 0 and 1 ~25 %; rayon's
+/// fork-join lost at every size).
+const MG_SPLIT_DIVISOR: usize = 12;
 
 fn matvec(l: &Level, x: &[f64], y: &mut [f64], parallel: bool) {
     let n_rows = x.len();
@@ -120,10 +123,11 @@ impl PressureSolver {
             v.resize(n, 0.0);
         }
         self.regions.build(&self.mg.levels[0]);
-        self.faces_stale = true;
         let len = self.mg.levels[0].x.len();
-        self.dq.clear();
-        self.dq.resize(len, 0.0);
+        for v in [&mut self.dq, &mut self.bd] {
+            v.clear();
+            v.resize(len, 0.0);
+        }
         for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
             v.clear();
             v.resize(len, 0.0);
@@ -139,26 +143,40 @@ impl PressureSolver {
         self.regions.remove_closed_means(&mut self.z);
     }
 
-    /// Solves `A q = b` from the current `q` until `max |r| <= tol_abs` or `max_iterations` (the
-    /// recurrence residual: the caller measures the true one).
+    /// Solves `A q = b` (dense `dq`, `bd`) from the current `dq` until `max |r| <= tol_abs` or
+    /// `max_iterations` (the recurrence residual: the caller measures the true one).
     pub fn solve(
         &mut self,
         method: ProjectionMethod,
         tol_abs: f64,
         max_iterations: usize,
     ) -> SolveOutcome {
-        let n = self.q.len();
-        if n == 0 {
+        if self.q.is_empty() {
             return SolveOutcome {
                 iterations: 0,
                 converged: true,
             };
         }
-        match method {
-            ProjectionMethod::GaussSeidel { sweeps } => return self.gauss_seidel(sweeps, tol_abs),
-            ProjectionMethod::MultigridPcg => return self.solve_multigrid(tol_abs, max_iterations),
-            ProjectionMethod::JacobiPcg => {}
+        if method == ProjectionMethod::MultigridPcg {
+            return self.solve_multigrid(tol_abs, max_iterations);
         }
+        let pad_of_row = &self.mg.levels[0].pad_of_row;
+        for ((q, b), &p) in self.q.iter_mut().zip(&mut self.b).zip(pad_of_row) {
+            (*q, *b) = (self.dq[p as usize], self.bd[p as usize]);
+        }
+        let out = match method {
+            ProjectionMethod::GaussSeidel { sweeps } => self.gauss_seidel(sweeps, tol_abs),
+            _ => self.jacobi_pcg(tol_abs, max_iterations),
+        };
+        for (&q, &p) in self.q.iter().zip(&self.mg.levels[0].pad_of_row) {
+            self.dq[p as usize] = q;
+        }
+        out
+    }
+
+    /// The reference: Jacobi-preconditioned CG on the compressed rows.
+    fn jacobi_pcg(&mut self, tol_abs: f64, max_iterations: usize) -> SolveOutcome {
+        let n = self.q.len();
         let parallel = n >= self.parallel_rows;
         self.regions.remove_closed_means(&mut self.q);
         matvec(&self.mg.levels[0], &self.q, &mut self.r, parallel);
@@ -220,12 +238,13 @@ impl PressureSolver {
     /// the (small) correction.
     fn solve_multigrid(&mut self, tol_abs: f64, max_iterations: usize) -> SolveOutcome {
         // Closed regions: pressure is defined up to a constant; keeping it mean-free keeps it small.
-        self.regions.remove_closed_means(&mut self.q);
+        let pad_of_row = &self.mg.levels[0].pad_of_row;
+        self.regions
+            .remove_closed_means_dense(&mut self.dq, pad_of_row);
         let PressureSolver {
             mg,
             regions,
-            q,
-            b,
+            bd,
             dq,
             dd,
             dp,
@@ -235,22 +254,27 @@ impl PressureSolver {
         } = self;
         let periodic = mg.levels[0].periodic.iter().any(|&p| p);
         for l in &mut mg.levels[..mg.used] {
-            l.parallel = l.fluid >= parallel_rows.saturating_mul(MG_PARALLEL_FACTOR);
+            l.parallel = l.fluid >= (*parallel_rows / MG_SPLIT_DIVISOR).max(1);
         }
         {
             let l0 = &mut mg.levels[0];
-            for (&qv, &p) in q.iter().zip(&l0.pad_of_row) {
-                dq[p as usize] = qv;
-            }
             if periodic {
                 l0.halo(dq);
             }
+            // The warm start's residual in f64, rounded once to f32.
             let (sy, sz) = (l0.sy, l0.sz);
-            for (&bv, &p) in b.iter().zip(&l0.pad_of_row) {
-                let p = p as usize;
-                let nsum =
-                    (dq[p - 1] + dq[p + 1]) + (dq[p - sy] + dq[p + sy]) + (dq[p - sz] + dq[p + sz]);
-                l0.b[p] = (bv - (l0.ddiag[p] as f64 * dq[p] - nsum)) as f32;
+            for &[s, e] in &l0.spans {
+                let (s, e) = (s as usize, e as usize);
+                let n = e - s;
+                let (xm, xp) = (&dq[s - 1..e - 1], &dq[s + 1..e + 1]);
+                let (ym, yp) = (&dq[s - sy..e - sy], &dq[s + sy..e + sy]);
+                let (zm, zp) = (&dq[s - sz..e - sz], &dq[s + sz..e + sz]);
+                let (q0, b, d, m) = (&dq[s..e], &bd[s..e], &l0.ddiag[s..e], &l0.mask[s..e]);
+                let out = &mut l0.b[s..e];
+                for i in 0..n {
+                    let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
+                    out[i] = m[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
+                }
             }
             regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
         }
@@ -332,13 +356,16 @@ impl PressureSolver {
                 },
             );
         }
-        for (qv, &p) in q.iter_mut().zip(&mg.levels[0].pad_of_row) {
-            *qv += dd[p as usize] as f64;
+        for &[s, e] in &mg.levels[0].spans {
+            let (s, e) = (s as usize, e as usize);
+            for (q, &d) in dq[s..e].iter_mut().zip(&dd[s..e]) {
+                *q += d as f64;
+            }
         }
         outcome
     }
 
-    /// The baseline: `sweeps` lexicographic Gauss-Seidel sweeps from q = 0.
+    /// The baseline: `sweeps` lexicographic Gauss-Seidel sweeps from q = 0 (on the compressed rows).
     fn gauss_seidel(&mut self, sweeps: usize, tol_abs: f64) -> SolveOutcome {
         self.regions.remove_closed_means(&mut self.b);
         self.q.fill(0.0);

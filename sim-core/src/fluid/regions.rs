@@ -96,15 +96,15 @@ impl Regions {
         worst
     }
 
-    /// As [`Regions::remove_closed_means`] for a dense (padded) f32 vector whose rows sit at
+    /// As [`Regions::remove_closed_means`] for a dense (padded) vector whose rows sit at
     /// `pad_of_row`; the means are accumulated in f64.
-    pub fn remove_closed_means_dense(&mut self, v: &mut [f32], pad_of_row: &[u32]) -> f64 {
+    pub fn remove_closed_means_dense<T: Real>(&mut self, v: &mut [T], pad_of_row: &[u32]) -> f64 {
         if !self.any_closed() {
             return 0.0;
         }
         self.sum.fill(0.0);
         for (r, &p) in pad_of_row.iter().enumerate() {
-            self.sum[self.of_row[r] as usize] += v[p as usize] as f64;
+            self.sum[self.of_row[r] as usize] += v[p as usize].to_f64();
         }
         let mut worst = 0.0f64;
         for (id, s) in self.sum.iter_mut().enumerate() {
@@ -117,8 +117,32 @@ impl Regions {
         }
         for (r, &p) in pad_of_row.iter().enumerate() {
             let x = &mut v[p as usize];
-            *x = (*x as f64 - self.sum[self.of_row[r] as usize]) as f32;
+            *x = T::from_f64(x.to_f64() - self.sum[self.of_row[r] as usize]);
         }
         worst
+    }
+}
+
+/// The vector element types of the pressure solve.
+pub(crate) trait Real: Copy {
+    fn to_f64(self) -> f64;
+    fn from_f64(v: f64) -> Self;
+}
+
+impl Real for f32 {
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+}
+
+impl Real for f64 {
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_f64(v: f64) -> Self {
+        v
     }
 }

@@ -177,8 +177,13 @@ pub struct FluidSolver {
     ghost: [Vec<f32>; 3],
     visc: ViscosityScratch,
     pressure: PressureSolver,
-    /// Pressure (Pa) per pressure row, kept for warm starts and probes.
+    /// Pressure (Pa) on level 0's padded box (zero off the fluid cells), kept for warm starts and
+    /// probes; the box does not change with the labels, so the pressure of a cell that stays fluid
+    /// survives a relabelling.
     pressure_pa: Vec<f64>,
+    /// Runs of consecutive active faces per component, for the pressure-gradient update: (full
+    /// index of the first face, padded index of its upper cell, length).
+    grad_runs: [Vec<[u32; 3]>; 3],
     time_s: f64,
 }
 
@@ -208,6 +213,7 @@ impl FluidSolver {
             visc: ViscosityScratch::default(),
             pressure: PressureSolver::default(),
             pressure_pa: Vec::new(),
+            grad_runs: Default::default(),
             time_s: 0.0,
         };
         // Measured on the benchmark cavity: 2 sweeps and a coarse scale of 0.6 (over twice
@@ -248,7 +254,7 @@ impl FluidSolver {
     }
     /// Number of fluid cells.
     pub fn fluid_cells(&self) -> usize {
-        self.pressure.q.len()
+        self.pressure.mg.levels.first().map_or(0, |l| l.rows())
     }
     /// Number of connected fluid regions, and how many are closed (no outflow cell).
     pub fn regions(&self) -> (usize, usize) {
@@ -297,17 +303,14 @@ impl FluidSolver {
             CellLabel::Outflow => L_OPEN,
             _ => L_SOLID,
         }));
-        // Keep the old pressure by cell for the warm start across relabelling.
-        let old_rows = std::mem::take(&mut l0.cell_of_row);
         l0.build_rows();
-        let mut new_p = vec![0.0; l0.rows()];
-        for (old_row, &cell) in old_rows.iter().enumerate() {
-            let r = l0.row_of_cell[cell as usize];
-            if r != NONE && old_row < self.pressure_pa.len() {
-                new_p[r as usize] = self.pressure_pa[old_row];
+        // Keep the pressure of cells that stay fluid for the warm start across relabelling.
+        self.pressure_pa.resize(l0.mask.len(), 0.0);
+        for (p, &m) in self.pressure_pa.iter_mut().zip(&l0.mask) {
+            if m == 0.0 {
+                *p = 0.0;
             }
         }
-        self.pressure_pa = new_p;
         mg.build_hierarchy();
         self.pressure.resize();
         for c in 0..3 {
@@ -317,6 +320,21 @@ impl FluidSolver {
             for v in [&mut self.compact[c], &mut self.ghost[c]] {
                 v.clear();
                 v.resize(n, 0.0);
+            }
+            self.grad_runs[c].clear();
+            let (l0, fd) = (&self.pressure.mg.levels[0], self.layout.fdims[c]);
+            for &idx in &self.faces[c].active {
+                match self.grad_runs[c].last_mut() {
+                    Some([first, _, len])
+                        if *first + *len == idx && !(idx as usize).is_multiple_of(fd[0]) =>
+                    {
+                        *len += 1
+                    }
+                    _ => {
+                        let f = self.layout.face_coords(c, idx as usize);
+                        self.grad_runs[c].push([idx, l0.pad(f[0], f[1], f[2]) as u32, 1]);
+                    }
+                }
             }
             // Faces no longer tracked are zeroed so stale values never leak into samples.
             for (idx, v) in self.u[c].iter_mut().enumerate() {
@@ -601,39 +619,84 @@ impl FluidSolver {
         advection::scatter(&self.plan, &self.adv, &mut self.u);
     }
 
-    /// `-h div u` per pressure row, from the face velocities.
-    fn divergence_rhs(&mut self) {
+    /// `-h div u` on the fluid cells of level 0's padded box (zero elsewhere), into the pressure
+    /// solver's right-hand side, with the incompatible mean of closed regions removed; returns the
+    /// largest mean removed (m/s). Row by row: each row's faces are contiguous in every component.
+    fn divergence_rhs(&mut self) -> f64 {
         let ps = &mut self.pressure;
-        if ps.faces_stale {
-            // Each row's six faces, found once per topology (the per-step loop is then gathers).
-            let l0 = &ps.mg.levels[0];
-            let dims = self.grid.dims();
-            let periodic = self.grid.periodic();
-            let [nx, ny, _] = dims;
-            ps.faces_of_row.clear();
-            for &ci in &l0.cell_of_row {
-                let ci = ci as usize;
-                let cell = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
-                let mut f = [0u32; 6];
-                for c in 0..3 {
-                    f[2 * c] = self.layout.face_index(c, cell) as u32;
-                    let mut up = cell;
-                    up[c] += 1;
-                    if periodic[c] && up[c] == dims[c] {
-                        up[c] = 0;
-                    }
-                    f[2 * c + 1] = self.layout.face_index(c, up) as u32;
-                }
-                ps.faces_of_row.push(f);
-            }
-            ps.faces_stale = false;
-        }
+        let l0 = &ps.mg.levels[0];
+        let [nx, ny, nz] = self.grid.dims();
+        let periodic = self.grid.periodic();
+        let fd = self.layout.fdims;
         let [u0, u1, u2] = &self.u;
-        for (b, f) in ps.b.iter_mut().zip(&ps.faces_of_row) {
-            let dx = u0[f[1] as usize] as f64 - u0[f[0] as usize] as f64;
-            let dy = u1[f[3] as usize] as f64 - u1[f[2] as usize] as f64;
-            let dz = u2[f[5] as usize] as f64 - u2[f[4] as usize] as f64;
-            *b = -(dx + dy + dz);
+        let bd = &mut ps.bd;
+        for &[j, k, i0, i1] in &l0.row_spans {
+            let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+            let n = i1 - i0;
+            let up = |a: usize, v: usize, len: usize| {
+                if v + 1 == len && periodic[a] {
+                    0
+                } else {
+                    v + 1
+                }
+            };
+            let x0 = i0 + fd[0][0] * (j + fd[0][1] * k);
+            let (y0, y1) = (nx * (j + fd[1][1] * k), nx * (up(1, j, ny) + fd[1][1] * k));
+            let (z0, z1) = (nx * (j + ny * k), nx * (j + ny * up(2, k, nz)));
+            let (xl, yl, yu) = (
+                &u0[x0..x0 + n],
+                &u1[y0 + i0..y0 + i1],
+                &u1[y1 + i0..y1 + i1],
+            );
+            let (zl, zu) = (&u2[z0 + i0..z0 + i1], &u2[z1 + i0..z1 + i1]);
+            // The upper x face of the row's last cell wraps on a periodic axis.
+            let wrap = periodic[0] && i1 == nx;
+            let xu = &u0[x0 + 1..x0 + n + usize::from(!wrap)];
+            let p0 = l0.pad(i0, j, k);
+            let (out, mask) = (&mut bd[p0..p0 + n], &l0.mask[p0..p0 + n]);
+            for i in 0..xu.len() {
+                let dx = xu[i] as f64 - xl[i] as f64;
+                let dy = yu[i] as f64 - yl[i] as f64;
+                let dz = zu[i] as f64 - zl[i] as f64;
+                out[i] = -(dx + dy + dz) * mask[i] as f64;
+            }
+            if wrap {
+                let i = n - 1;
+                let dx = u0[x0 - i0] as f64 - xl[i] as f64;
+                let dy = yu[i] as f64 - yl[i] as f64;
+                let dz = zu[i] as f64 - zl[i] as f64;
+                out[i] = -(dx + dy + dz) * mask[i] as f64;
+            }
+        }
+        ps.regions.remove_closed_means_dense(bd, &l0.pad_of_row)
+    }
+
+    /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
+    fn max_divergence_m_s(&self) -> f64 {
+        let ps = &self.pressure;
+        let mut m = 0.0f64;
+        for &[s, e] in &ps.mg.levels[0].spans {
+            m = ps.bd[s as usize..e as usize]
+                .iter()
+                .fold(m, |m, &x| m.max(x.abs()));
+        }
+        m
+    }
+
+    /// `u -= grad q` on the active faces, `q` being the dense solution of the pressure solver.
+    fn subtract_gradient(&mut self) {
+        let l0 = &self.pressure.mg.levels[0];
+        let q = &self.pressure.dq;
+        let strides = [1, l0.sy, l0.sz];
+        for c in 0..3 {
+            let u = &mut self.u[c];
+            for &[first, pu, len] in &self.grad_runs[c] {
+                let (f, pu, n) = (first as usize, pu as usize, len as usize);
+                let (up, lo) = (&q[pu..pu + n], &q[pu - strides[c]..pu - strides[c] + n]);
+                for ((u, &qu), &ql) in u[f..f + n].iter_mut().zip(up).zip(lo) {
+                    *u -= (qu - ql) as f32;
+                }
+            }
         }
     }
 
@@ -649,15 +712,19 @@ impl FluidSolver {
             .max_speed_m_s()
             .max(self.params.velocity_scale_m_s)
             .max(1e-12);
-        self.divergence_rhs();
-        let mismatch = self
-            .pressure
-            .regions
-            .remove_closed_means(&mut self.pressure.b);
+        let mismatch = self.divergence_rhs();
         stats.closed_region_mismatch_m_s = stats.closed_region_mismatch_m_s.max(mismatch);
         let to_q = dt / (rho * h);
-        for (q, &p) in self.pressure.q.iter_mut().zip(&self.pressure_pa) {
-            *q = p * to_q;
+        let periodic = self.grid.periodic().iter().any(|&p| p);
+        let spans = &self.pressure.mg.levels[0].spans;
+        for &[s, e] in spans {
+            let (s, e) = (s as usize, e as usize);
+            for (q, &p) in self.pressure.dq[s..e]
+                .iter_mut()
+                .zip(&self.pressure_pa[s..e])
+            {
+                *q = p * to_q;
+            }
         }
         self.pressure.parallel_rows = self.params.parallel_threshold_cells;
         let method = self.params.projection;
@@ -677,7 +744,7 @@ impl FluidSolver {
                 {
                     break;
                 }
-                self.pressure.q.fill(0.0);
+                self.pressure.dq.fill(0.0);
             }
             let out = self
                 .pressure
@@ -687,27 +754,24 @@ impl FluidSolver {
             if matches!(method, ProjectionMethod::GaussSeidel { .. }) {
                 stats.projection_converged &= out.converged;
             }
-            let q = &self.pressure.q;
-            for (p, &qv) in self.pressure_pa.iter_mut().zip(q) {
-                *p = if round == 0 {
-                    qv / to_q
-                } else {
-                    *p + qv / to_q
-                };
+            let l0 = &self.pressure.mg.levels[0];
+            if periodic {
+                l0.halo(&mut self.pressure.dq);
             }
-            for c in 0..3 {
-                let set = &self.faces[c];
-                for (&idx, &[lo, up]) in set.active.iter().zip(&set.rows) {
-                    let ql = if lo == NONE { 0.0 } else { q[lo as usize] };
-                    let qu = if up == NONE { 0.0 } else { q[up as usize] };
-                    self.u[c][idx as usize] -= (qu - ql) as f32;
+            for &[s, e] in &l0.spans {
+                let (s, e) = (s as usize, e as usize);
+                let q = &self.pressure.dq[s..e];
+                for (p, &qv) in self.pressure_pa[s..e].iter_mut().zip(q) {
+                    *p = if round == 0 {
+                        qv / to_q
+                    } else {
+                        *p + qv / to_q
+                    };
                 }
             }
+            self.subtract_gradient();
             self.divergence_rhs();
-            self.pressure
-                .regions
-                .remove_closed_means(&mut self.pressure.b);
-            max_div = self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs()));
+            max_div = self.max_divergence_m_s();
         }
         if max_div > tol_abs && !matches!(method, ProjectionMethod::GaussSeidel { .. }) {
             stats.projection_converged = false;
@@ -771,11 +835,8 @@ impl FluidSolver {
                     let idx = self.grid.index([i, j, k]);
                     match self.grid.label_at(idx) {
                         CellLabel::Fluid => {
-                            let r = l0.row_of_cell[idx];
-                            if r != NONE {
-                                sum += w * self.pressure_pa[r as usize];
-                                wsum += w;
-                            }
+                            sum += w * self.pressure_pa[l0.pad(i, j, k)];
+                            wsum += w;
                         }
                         CellLabel::Outflow => wsum += w,
                         _ => {}
@@ -788,10 +849,10 @@ impl FluidSolver {
 
     /// Pressure (Pa) of a fluid cell; `None` for other cells.
     pub fn cell_pressure_pa(&self, cell: [usize; 3]) -> Option<f64> {
-        self.grid.label(cell)?; // out of range: None
-        let idx = self.grid.index(cell);
-        let r = *self.pressure.mg.levels[0].row_of_cell.get(idx)?;
-        (r != NONE).then(|| self.pressure_pa[r as usize])
+        (self.grid.label(cell)? == CellLabel::Fluid).then(|| {
+            let l0 = &self.pressure.mg.levels[0];
+            self.pressure_pa[l0.pad(cell[0], cell[1], cell[2])]
+        })
     }
 
     /// Max |div u| h / U over fluid cells now (closed regions' incompatible mean removed).
@@ -804,10 +865,7 @@ impl FluidSolver {
             .max(self.params.velocity_scale_m_s)
             .max(1e-12);
         self.divergence_rhs();
-        self.pressure
-            .regions
-            .remove_closed_means(&mut self.pressure.b);
-        self.pressure.b.iter().fold(0.0f64, |m, &x| m.max(x.abs())) / u_ref
+        self.max_divergence_m_s() / u_ref
     }
 
     /// Projects the current velocity field (e.g. after setting an initial condition) without
