@@ -30,7 +30,7 @@ pub(crate) const L_OPEN: u8 = 2;
 const CHUNK: usize = 128;
 /// Spans closer than this many cells merge (the cells between are masked out, so this only trades
 /// a little work on non-fluid cells for longer vector loops).
-const SPAN_GAP: usize = 12;
+const SPAN_GAP: usize = 48;
 
 /// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies).
 const LANES: usize = 8;
@@ -773,6 +773,10 @@ fn stencil_span(
 struct Transfer<'a> {
     fine: &'a Level,
     coarse: &'a Level,
+    /// The coarse rows to transfer.
+    rows: &'a [[u32; 4]],
+    /// Padded index of element 0 of the output.
+    off: usize,
     /// Restriction: the coarse right-hand side to write (`Some(scale, b)`); prolongation: the fine
     /// unknowns to correct.
     restrict: Option<(f32, &'a mut [f32])>,
@@ -784,17 +788,17 @@ impl pulp::WithSimd for Transfer<'_> {
 
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) {
-        let (fine, coarse) = (self.fine, self.coarse);
+        let (fine, coarse, off) = (self.fine, self.coarse, self.off);
         let (fsy, fsz) = (fine.sy, fine.sz);
         let (mut restrict, mut fine_x) = (self.restrict, self.fine_x);
-        for &[j, k, i0, i1] in &coarse.row_spans {
+        for &[j, k, i0, i1] in self.rows {
             let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
             let c = coarse.pad(i0, j, k)..coarse.pad(i1, j, k);
             let f0 = fine.pad(2 * i0, 2 * j, 2 * k);
             let n2 = 2 * (i1 - i0);
             let rows = [f0, f0 + fsy, f0 + fsz, f0 + fsz + fsy];
             if let Some((scale, b)) = restrict.as_mut() {
-                let b = &mut b[c.clone()];
+                let b = &mut b[c.start - off..c.end - off];
                 b.fill(0.0);
                 for f in rows {
                     for (bv, r2) in b.iter_mut().zip(fine.r[f..f + n2].chunks_exact(2)) {
@@ -808,7 +812,7 @@ impl pulp::WithSimd for Transfer<'_> {
             if let Some(x) = fine_x.as_mut() {
                 let xc = &coarse.x[c.clone()];
                 for f in rows {
-                    let xs = x[f..f + n2].chunks_exact_mut(2);
+                    let xs = x[f - off..f - off + n2].chunks_exact_mut(2);
                     let ms = fine.mask[f..f + n2].chunks_exact(2);
                     for ((x2, m2), &v) in xs.zip(ms).zip(xc) {
                         x2[0] += m2[0] * v;
@@ -820,27 +824,51 @@ impl pulp::WithSimd for Transfer<'_> {
     }
 }
 
+/// Runs a transfer over all coarse rows; on a `parallel` coarse level in two halves split at a
+/// coarse plane (the fine rows of the two halves then lie in separate fine planes).
+fn transfer(fine: &Level, coarse: &Level, restrict: Option<f32>, out: &mut [f32]) {
+    let rows = &coarse.row_spans[..];
+    let whole = |rows, off, out: &mut [f32]| {
+        let (restrict, fine_x) = match restrict {
+            Some(scale) => (Some((scale, out)), None),
+            None => (None, Some(out)),
+        };
+        pulp::Arch::new().dispatch(Transfer {
+            fine,
+            coarse,
+            rows,
+            off,
+            restrict,
+            fine_x,
+        })
+    };
+    let k_mid = rows.get(rows.len() / 2).map_or(0, |r| r[1]);
+    let m = rows.partition_point(|r| r[1] < k_mid);
+    if !coarse.parallel || m == 0 {
+        return whole(rows, 0, out);
+    }
+    let k = k_mid as usize;
+    let mid = if restrict.is_some() {
+        coarse.sz * (k + 1)
+    } else {
+        fine.sz * (2 * k + 1)
+    };
+    let (a, b) = out.split_at_mut(mid);
+    let (ra, rb) = rows.split_at(m);
+    crate::duo::join(|| whole(ra, 0, a), || whole(rb, mid, b));
+}
+
 /// `coarse.b = scale * (sum of the children's residuals)` on the coarse fluid cells.
 fn restrict(fine: &Level, coarse: &mut Level, scale: f32) {
     let mut b = std::mem::take(&mut coarse.b);
-    pulp::Arch::new().dispatch(Transfer {
-        fine,
-        coarse,
-        restrict: Some((scale, &mut b)),
-        fine_x: None,
-    });
+    transfer(fine, coarse, Some(scale), &mut b);
     coarse.b = b;
 }
 
 /// `fine.x += coarse.x` of the parent on every fine fluid cell.
 fn prolongate(coarse: &Level, fine: &mut Level) {
     let mut x = std::mem::take(&mut fine.x);
-    pulp::Arch::new().dispatch(Transfer {
-        fine,
-        coarse,
-        restrict: None,
-        fine_x: Some(&mut x),
-    });
+    transfer(fine, coarse, None, &mut x);
     fine.x = x;
 }
 
