@@ -87,6 +87,13 @@ pub(crate) enum SpanOp<'a> {
     },
     /// `sum a b` accumulated in f64.
     Dot { a: &'a [f32], b: &'a [f32] },
+    /// `y = mask A v` and `sum v y` (as `Stencil` then `Dot`, in one pass).
+    ApplyDot {
+        y: &'a mut [f32],
+        v: &'a [f32],
+        diag: &'a [f32],
+        mask: &'a [f32],
+    },
     /// `d += alpha p`, `r -= alpha ap`; returns `max |r|`.
     Update {
         alpha: f32,
@@ -162,6 +169,23 @@ impl<'a> SpanOp<'a> {
                 )
             }
             Dot { a, b } => (Dot { a, b }, Dot { a, b }),
+            ApplyDot { y, v, diag, mask } => {
+                let (ya, yb) = y.split_at_mut(mid);
+                (
+                    ApplyDot {
+                        y: ya,
+                        v,
+                        diag,
+                        mask,
+                    },
+                    ApplyDot {
+                        y: yb,
+                        v,
+                        diag,
+                        mask,
+                    },
+                )
+            }
             Update { alpha, p, ap, d, r } => {
                 let (da, db) = d.split_at_mut(mid);
                 let (ra, rb) = r.split_at_mut(mid);
@@ -263,15 +287,16 @@ impl pulp::WithSimd for SpanRun<'_> {
             SpanOp::Dot { a, b } => {
                 let mut acc = [0.0f64; LANES];
                 for (s, e) in spans {
-                    let (ac, bc) = (a[s..e].chunks_exact(LANES), b[s..e].chunks_exact(LANES));
-                    for (&x, &y) in ac.remainder().iter().zip(bc.remainder()) {
-                        acc[0] += x as f64 * y as f64;
-                    }
-                    for (x, y) in ac.zip(bc) {
-                        for k in 0..LANES {
-                            acc[k] += x[k] as f64 * y[k] as f64;
-                        }
-                    }
+                    dot_span(&mut acc, &a[s..e], &b[s..e]);
+                }
+                acc.iter().sum()
+            }
+            SpanOp::ApplyDot { y, v, diag, mask } => {
+                let mut acc = [0.0f64; LANES];
+                for (s, e) in spans {
+                    let y = &mut y[s - off..e - off];
+                    stencil_span(y, v, None, diag, mask, s, e, sy, sz);
+                    dot_span(&mut acc, &v[s..e], y);
                 }
                 acc.iter().sum()
             }
@@ -685,6 +710,7 @@ impl Level {
 
     /// `y = A v` on the spans (zero on non-fluid cells of the spans); `v`'s periodic ghost layers
     /// must be filled.
+    #[cfg(test)]
     pub fn apply(&self, v: &[f32], y: &mut [f32]) {
         run(
             self,
@@ -696,6 +722,21 @@ impl Level {
                 mask: &self.mask,
             },
         );
+    }
+}
+
+/// Adds `a b` to the lane accumulators: lane k takes the elements at k mod 8 of the span's whole
+/// 8-blocks, lane 0 the tail.
+#[inline(always)]
+fn dot_span(acc: &mut [f64; LANES], a: &[f32], b: &[f32]) {
+    let (ac, bc) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    for (&x, &y) in ac.remainder().iter().zip(bc.remainder()) {
+        acc[0] += x as f64 * y as f64;
+    }
+    for (x, y) in ac.zip(bc) {
+        for k in 0..LANES {
+            acc[k] += x[k] as f64 * y[k] as f64;
+        }
     }
 }
 

@@ -311,8 +311,15 @@ impl PressureSolver {
             if periodic {
                 l0.halo(dp);
             }
-            l0.apply(dp, dap);
-            let pap = run(l0, SpanOp::Dot { a: dp, b: dap });
+            let pap = run(
+                l0,
+                SpanOp::ApplyDot {
+                    y: dap,
+                    v: dp,
+                    diag: &l0.ddiag,
+                    mask: &l0.mask,
+                },
+            );
             if pap.is_nan() || pap <= 0.0 || !rz.is_finite() {
                 break;
             }

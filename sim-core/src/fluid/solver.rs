@@ -629,46 +629,63 @@ impl FluidSolver {
         let periodic = self.grid.periodic();
         let fd = self.layout.fdims;
         let [u0, u1, u2] = &self.u;
-        let bd = &mut ps.bd;
-        for &[j, k, i0, i1] in &l0.row_spans {
-            let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
-            let n = i1 - i0;
-            let up = |a: usize, v: usize, len: usize| {
-                if v + 1 == len && periodic[a] {
-                    0
-                } else {
-                    v + 1
+        // `out` holds the padded box from index `off`.
+        let rows_kernel = |rows: &[[u32; 4]], out: &mut [f64], off: usize| {
+            for &[j, k, i0, i1] in rows {
+                let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+                let n = i1 - i0;
+                let up = |a: usize, v: usize, len: usize| {
+                    if v + 1 == len && periodic[a] {
+                        0
+                    } else {
+                        v + 1
+                    }
+                };
+                let x0 = i0 + fd[0][0] * (j + fd[0][1] * k);
+                let (y0, y1) = (nx * (j + fd[1][1] * k), nx * (up(1, j, ny) + fd[1][1] * k));
+                let (z0, z1) = (nx * (j + ny * k), nx * (j + ny * up(2, k, nz)));
+                let (xl, yl, yu) = (
+                    &u0[x0..x0 + n],
+                    &u1[y0 + i0..y0 + i1],
+                    &u1[y1 + i0..y1 + i1],
+                );
+                let (zl, zu) = (&u2[z0 + i0..z0 + i1], &u2[z1 + i0..z1 + i1]);
+                // The upper x face of the row's last cell wraps on a periodic axis.
+                let wrap = periodic[0] && i1 == nx;
+                let xu = &u0[x0 + 1..x0 + n + usize::from(!wrap)];
+                let p0 = l0.pad(i0, j, k);
+                let (out, mask) = (&mut out[p0 - off..p0 - off + n], &l0.mask[p0..p0 + n]);
+                for i in 0..xu.len() {
+                    let dx = xu[i] as f64 - xl[i] as f64;
+                    let dy = yu[i] as f64 - yl[i] as f64;
+                    let dz = zu[i] as f64 - zl[i] as f64;
+                    out[i] = -(dx + dy + dz) * mask[i] as f64;
                 }
-            };
-            let x0 = i0 + fd[0][0] * (j + fd[0][1] * k);
-            let (y0, y1) = (nx * (j + fd[1][1] * k), nx * (up(1, j, ny) + fd[1][1] * k));
-            let (z0, z1) = (nx * (j + ny * k), nx * (j + ny * up(2, k, nz)));
-            let (xl, yl, yu) = (
-                &u0[x0..x0 + n],
-                &u1[y0 + i0..y0 + i1],
-                &u1[y1 + i0..y1 + i1],
+                if wrap {
+                    let i = n - 1;
+                    let dx = u0[x0 - i0] as f64 - xl[i] as f64;
+                    let dy = yu[i] as f64 - yl[i] as f64;
+                    let dz = zu[i] as f64 - zl[i] as f64;
+                    out[i] = -(dx + dy + dz) * mask[i] as f64;
+                }
+            }
+        };
+        let rows = &l0.row_spans[..];
+        if l0.parallel && rows.len() >= 2 {
+            let m = rows.len() / 2;
+            let mid = l0.pad(
+                rows[m][2] as usize,
+                rows[m][0] as usize,
+                rows[m][1] as usize,
             );
-            let (zl, zu) = (&u2[z0 + i0..z0 + i1], &u2[z1 + i0..z1 + i1]);
-            // The upper x face of the row's last cell wraps on a periodic axis.
-            let wrap = periodic[0] && i1 == nx;
-            let xu = &u0[x0 + 1..x0 + n + usize::from(!wrap)];
-            let p0 = l0.pad(i0, j, k);
-            let (out, mask) = (&mut bd[p0..p0 + n], &l0.mask[p0..p0 + n]);
-            for i in 0..xu.len() {
-                let dx = xu[i] as f64 - xl[i] as f64;
-                let dy = yu[i] as f64 - yl[i] as f64;
-                let dz = zu[i] as f64 - zl[i] as f64;
-                out[i] = -(dx + dy + dz) * mask[i] as f64;
-            }
-            if wrap {
-                let i = n - 1;
-                let dx = u0[x0 - i0] as f64 - xl[i] as f64;
-                let dy = yu[i] as f64 - yl[i] as f64;
-                let dz = zu[i] as f64 - zl[i] as f64;
-                out[i] = -(dx + dy + dz) * mask[i] as f64;
-            }
+            let (a, b) = ps.bd.split_at_mut(mid);
+            let (ra, rb) = rows.split_at(m);
+            crate::duo::join(|| rows_kernel(ra, a, 0), || rows_kernel(rb, b, mid));
+        } else {
+            rows_kernel(rows, &mut ps.bd, 0);
         }
-        ps.regions.remove_closed_means_dense(bd, &l0.pad_of_row)
+        ps.regions
+            .remove_closed_means_dense(&mut ps.bd, &l0.pad_of_row)
     }
 
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
@@ -689,13 +706,26 @@ impl FluidSolver {
         let q = &self.pressure.dq;
         let strides = [1, l0.sy, l0.sz];
         for c in 0..3 {
-            let u = &mut self.u[c];
-            for &[first, pu, len] in &self.grad_runs[c] {
-                let (f, pu, n) = (first as usize, pu as usize, len as usize);
-                let (up, lo) = (&q[pu..pu + n], &q[pu - strides[c]..pu - strides[c] + n]);
-                for ((u, &qu), &ql) in u[f..f + n].iter_mut().zip(up).zip(lo) {
-                    *u -= (qu - ql) as f32;
+            let st = strides[c];
+            // `u` holds the full face array from index `off`.
+            let kernel = |runs: &[[u32; 3]], u: &mut [f32], off: usize| {
+                for &[first, pu, len] in runs {
+                    let (f, pu, n) = (first as usize - off, pu as usize, len as usize);
+                    let (up, lo) = (&q[pu..pu + n], &q[pu - st..pu - st + n]);
+                    for ((u, &qu), &ql) in u[f..f + n].iter_mut().zip(up).zip(lo) {
+                        *u -= (qu - ql) as f32;
+                    }
                 }
+            };
+            let runs = &self.grad_runs[c][..];
+            if l0.parallel && runs.len() >= 2 {
+                let m = runs.len() / 2;
+                let mid = runs[m][0] as usize;
+                let (a, b) = self.u[c].split_at_mut(mid);
+                let (ra, rb) = runs.split_at(m);
+                crate::duo::join(|| kernel(ra, a, 0), || kernel(rb, b, mid));
+            } else {
+                kernel(runs, &mut self.u[c], 0);
             }
         }
     }
