@@ -7,7 +7,8 @@
 //! other half back if the helper has not started it, so a parked, busy or missing helper costs at
 //! most the caller doing both halves itself. The helper spins for [`SPIN`] after its last task and
 //! then parks, so it costs nothing between steps. Nested or concurrent calls (another solver on
-//! another thread) find the slot taken and run both halves in the caller.
+//! another thread) find the slot taken and run both halves in the caller. Rayon's thread count is
+//! the one switch: with a pool of one thread (`--threads 1`) both halves run in the caller.
 
 use std::cell::UnsafeCell;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -142,6 +143,9 @@ pub(crate) fn join<RA, RB: Send>(
     a: impl FnOnce() -> RA,
     b: impl FnOnce() -> RB + Send,
 ) -> (RA, RB) {
+    if rayon::current_num_threads() < 2 {
+        return (a(), b());
+    }
     let Some(s) = shared() else {
         return (a(), b());
     };
