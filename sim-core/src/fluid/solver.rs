@@ -522,9 +522,7 @@ impl FluidSolver {
                         &mut self.compact[c],
                         wide,
                     );
-                    for (n, &idx) in set.active.iter().enumerate() {
-                        self.u[c][idx as usize] = self.compact[c][n];
-                    }
+                    viscosity::write_back(set, &self.compact[c], &mut self.u[c]);
                 }
             }
             if !implicit {

@@ -21,6 +21,8 @@ pub(crate) const EXT2: u8 = 4;
 /// Everything the solver needs to know about the faces of one velocity component.
 #[derive(Default, Debug)]
 pub(crate) struct FaceSet {
+    /// Face-array dimensions of the component (`Layout::fdims`).
+    pub fdims: [usize; 3],
     /// Class of every face (full array).
     pub class: Vec<u8>,
     /// Full index of each active face.
@@ -39,6 +41,14 @@ pub(crate) struct FaceSet {
     /// of such self entries, so `sum(full[nbr]) - self_diag u` is the stencil without branches.
     pub nbr: Vec<[u32; 6]>,
     pub self_diag: Vec<f32>,
+    /// Runs `[full, compact, len]` of consecutive active faces (consecutive in both arrays).
+    pub runs: Vec<[u32; 3]>,
+    /// Runs as in `runs` of faces whose stencil is the plain 7-point one (six in-array neighbours
+    /// at the structured offsets, `self_diag` 6), and the compact indices of all other active
+    /// faces: the explicit step walks the former as contiguous rows (vectorised) and gathers only
+    /// the latter.
+    pub regular: Vec<[u32; 3]>,
+    pub irregular: Vec<u32>,
     /// Wall ghosts: (compact face, cell a, cell b, opposite face): the wall velocity is the mean of the
     /// prescribed velocities of `Velocity` cells among a and b (zero for solids and outside); the
     /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
@@ -139,6 +149,7 @@ impl FaceSet {
     /// pressure rows.
     pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize, row_of_cell: &[u32]) {
         let nf = layout.face_count(c);
+        self.fdims = layout.fdims[c];
         self.class.clear();
         self.class.resize(nf, OTHER);
         self.compact.clear();
@@ -150,6 +161,9 @@ impl FaceSet {
         self.diag.clear();
         self.nbr.clear();
         self.self_diag.clear();
+        self.runs.clear();
+        self.regular.clear();
+        self.irregular.clear();
         self.ghosts.clear();
         self.ext1.clear();
         self.ext2.clear();
@@ -254,6 +268,33 @@ impl FaceSet {
             self.diag.push(diag);
             self.self_diag.push(diag + selfs);
             self.nbr.push(nbr);
+        }
+
+        // Runs of active faces, and of regular ones (see `regular`).
+        let d = self.fdims;
+        let offs = [1, d[0], d[0] * d[1]];
+        for (n, &idx) in self.active.iter().enumerate() {
+            let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
+                Some(r) if r[0] + r[2] == idx && r[1] + r[2] == n as u32 => r[2] += 1,
+                _ => runs.push([idx, n as u32, 1]),
+            };
+            push(&mut self.runs);
+            let i = idx as usize;
+            let plain = self.self_diag[n] == 6.0
+                && (0..6).all(|slot| {
+                    let o = offs[slot / 2];
+                    let want = if slot % 2 == 0 {
+                        i.checked_sub(o)
+                    } else {
+                        Some(i + o)
+                    };
+                    want == Some(self.nbr[n][slot] as usize)
+                });
+            if plain {
+                push(&mut self.regular);
+            } else {
+                self.irregular.push(n as u32);
+            }
         }
 
         // Keep only `Velocity` cells in the wall-velocity pairs, moving fixed faces first, so the
