@@ -620,6 +620,8 @@ pub(crate) mod avx2 {
     #[derive(Clone, Copy)]
     struct AxisV {
         periodic: bool,
+        /// The upper sample is always the next one in memory (clamped axis, n > 1, stride 1).
+        pairs: bool,
         shift: __m256,
         last: __m256,
         top: __m256i,
@@ -635,6 +637,7 @@ pub(crate) mod avx2 {
         fn new(a: &Axis, scale: u32) -> Self {
             Self {
                 periodic: a.periodic,
+                pairs: !a.periodic && a.n > 1 && a.stride * scale == 1,
                 shift: _mm256_set1_ps(a.shift),
                 last: _mm256_set1_ps(a.last),
                 top: _mm256_set1_epi32(a.top as i32),
@@ -734,37 +737,93 @@ pub(crate) mod avx2 {
         unsafe { _mm256_i32gather_ps::<4>(base, idx) }
     }
 
-    /// The geometry of the centred velocity field for the vector trace.
+    /// Stores the eight lanes of `v`.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn lanes_i32(v: __m256i) -> [i32; 8] {
+        let mut a = [0i32; 8];
+        // SAFETY: `a` has room for eight lanes.
+        unsafe { _mm256_storeu_si256(a.as_mut_ptr().cast(), v) };
+        a
+    }
+
+    /// Four registers each holding two `V4`, `r[p] = [lane p | lane p + 4]`, to three registers of
+    /// eight lanes (x, y, z) in lane order.
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    fn transpose(r: [__m256; 4]) -> [__m256; 3] {
+        let t0 = _mm256_unpacklo_ps(r[0], r[1]);
+        let t1 = _mm256_unpackhi_ps(r[0], r[1]);
+        let t2 = _mm256_unpacklo_ps(r[2], r[3]);
+        let t3 = _mm256_unpackhi_ps(r[2], r[3]);
+        [
+            _mm256_shuffle_ps::<0x44>(t0, t2),
+            _mm256_shuffle_ps::<0xEE>(t0, t2),
+            _mm256_shuffle_ps::<0x44>(t1, t3),
+        ]
+    }
+
+    /// The centred velocity field for the vector trace. Zen 3 runs a gather as ~40 micro-ops,
+    /// so the `V4` of a cell is one 16-byte load instead, two faces per register (lanes p and
+    /// p + 4, which `transpose` turns back into lane order): 4-lane lerps on two faces at once.
     #[derive(Clone, Copy)]
     pub(super) struct Centred {
         ax: [AxisV; 3],
-        /// The `V4` array as f32 (four per cell) and its length in f32.
-        ptr: *const f32,
+        ptr: *const V4,
         len: usize,
+        /// Per pair p, the lane indices `[p; 4] ++ [p + 4; 4]` (weights to the pair layout).
+        pair: [__m256i; 4],
     }
 
     impl Centred {
         #[target_feature(enable = "avx2,fma")]
         pub(super) fn new(geo: &super::Geometry, v: &[V4]) -> Self {
             // The centred grid has one sample per cell (`Axis::new` with the cell dims), so the
-            // offsets `locate` returns (times 4 floats per cell) are below `4 v.len()`.
-            debug_assert_eq!(v.len(), geo.dims.iter().product::<usize>());
+            // offsets `locate` returns are cells of `v`.
+            assert_eq!(v.len(), geo.dims.iter().product::<usize>());
             Self {
-                ax: std::array::from_fn(|a| AxisV::new(&geo.centred.ax[a], 4)),
-                ptr: v.as_ptr().cast(),
-                len: 4 * v.len(),
+                ax: std::array::from_fn(|a| AxisV::new(&geo.centred.ax[a], 1)),
+                ptr: v.as_ptr(),
+                len: v.len(),
+                pair: std::array::from_fn(|p| {
+                    let (a, b) = (p as i32, p as i32 + 4);
+                    _mm256_setr_epi32(a, a, a, a, b, b, b, b)
+                }),
             }
         }
 
-        /// Component `comp` of the cell-centred velocity at cell offsets `idx` (already times 4).
+        /// The `V4` of cells `lo` (low half) and `hi` (high half).
         ///
         /// # Safety
-        /// `idx` are offsets of cells of the field (`4 cell`, cell < cells).
+        /// Both must be below `len`.
         #[target_feature(enable = "avx2,fma")]
         #[inline]
-        unsafe fn at(&self, comp: usize, idx: __m256i) -> __m256 {
-            // SAFETY: 4 cell + comp < 4 cells = len by the caller's contract.
-            unsafe { gather(self.ptr.add(comp), self.len - comp, idx) }
+        unsafe fn pair_at(&self, lo: i32, hi: i32) -> __m256 {
+            debug_assert!(lo >= 0 && hi >= 0 && (lo.max(hi) as usize) < self.len);
+            // SAFETY: both cells are in `v` (the caller's contract); `V4` is 16 bytes.
+            unsafe {
+                _mm256_loadu2_m128(
+                    self.ptr.add(hi as usize).cast(),
+                    self.ptr.add(lo as usize).cast(),
+                )
+            }
+        }
+
+        /// The mean of the `V4` at cells `a` and `b` per lane (the velocity at a face).
+        ///
+        /// # Safety
+        /// All lanes must be cells (below `len`).
+        #[target_feature(enable = "avx2,fma")]
+        pub(super) unsafe fn mean(&self, a: __m256i, b: __m256i) -> [__m256; 3] {
+            let (a, b) = (lanes_i32(a), lanes_i32(b));
+            let half = _mm256_set1_ps(0.5);
+            let r: [__m256; 4] = std::array::from_fn(|p| {
+                // SAFETY: cells by the caller's contract.
+                let (va, vb) =
+                    unsafe { (self.pair_at(a[p], a[p + 4]), self.pair_at(b[p], b[p + 4])) };
+                lerp(va, vb, half)
+            });
+            transpose(r)
         }
 
         /// [`super::Geometry::centred`] at eight points.
@@ -773,25 +832,30 @@ pub(crate) mod avx2 {
             let (x0, x1, tx) = self.ax[0].locate(p[0]);
             let (y0, y1, ty) = self.ax[1].locate(p[1]);
             let (z0, z1, tz) = self.ax[2].locate(p[2]);
-            let r = [
+            // Corner cells: rows (y, z) 00, 10, 01, 11, each at x0 and x1.
+            let rows = [
                 _mm256_add_epi32(y0, z0),
                 _mm256_add_epi32(y1, z0),
                 _mm256_add_epi32(y0, z1),
                 _mm256_add_epi32(y1, z1),
             ];
-            let mut out = [_mm256_setzero_ps(); 3];
-            // Written out (no closures): LLVM would not inline twelve calls of one, and the
-            // vectors would go through memory.
-            for (comp, o) in out.iter_mut().enumerate() {
-                // SAFETY: `locate` keeps every axis index in range, so the offsets are cells.
-                let g = |i: usize, x: __m256i| unsafe { self.at(comp, _mm256_add_epi32(r[i], x)) };
-                let (a0, b0, a1, b1) = (g(0, x0), g(0, x1), g(1, x0), g(1, x1));
-                let (a2, b2, a3, b3) = (g(2, x0), g(2, x1), g(3, x0), g(3, x1));
-                let c0 = lerp(lerp(a0, b0, tx), lerp(a1, b1, tx), ty);
-                let c1 = lerp(lerp(a2, b2, tx), lerp(a3, b3, tx), ty);
-                *o = lerp(c0, c1, tz);
+            let mut corner = [[0i32; 8]; 8];
+            for (q, r) in rows.iter().enumerate() {
+                corner[2 * q] = lanes_i32(_mm256_add_epi32(*r, x0));
+                corner[2 * q + 1] = lanes_i32(_mm256_add_epi32(*r, x1));
             }
-            out
+            let mut out = [_mm256_setzero_ps(); 4];
+            for (p, o) in out.iter_mut().enumerate() {
+                // SAFETY: `locate` keeps every axis index in range, so the corners are cells.
+                let g = |k: usize| unsafe { self.pair_at(corner[k][p], corner[k][p + 4]) };
+                let wx = _mm256_permutevar8x32_ps(tx, self.pair[p]);
+                let wy = _mm256_permutevar8x32_ps(ty, self.pair[p]);
+                let wz = _mm256_permutevar8x32_ps(tz, self.pair[p]);
+                let c0 = lerp(lerp(g(0), g(1), wx), lerp(g(2), g(3), wx), wy);
+                let c1 = lerp(lerp(g(4), g(5), wx), lerp(g(6), g(7), wx), wy);
+                *o = lerp(c0, c1, wz);
+            }
+            transpose(out)
         }
     }
 
@@ -815,15 +879,38 @@ pub(crate) mod avx2 {
             _mm256_add_epi32(y1, z1),
         ];
         let (ptr, len) = (field.as_ptr(), field.len());
-        // SAFETY: `locate` keeps each axis index below that axis' face count, so the offsets
-        // index faces of the array (the caller's contract gives its length).
-        let s: [__m256; 8] = std::array::from_fn(|k| unsafe {
-            gather(
-                ptr,
-                len,
-                _mm256_add_epi32(r[k / 2], if k % 2 == 0 { x0 } else { x1 }),
-            )
-        });
+        let s: [__m256; 8] = if ax[0].pairs {
+            // x1 = x0 + 1 in every lane: one 8-byte load per row and face instead of gathers
+            // (~40 micro-ops each on Zen 3), then even/odd floats split into x0 and x1 lanes.
+            // Faces are loaded in the order (0, 1, 4, 5) and (2, 3, 6, 7) so that the in-lane
+            // shuffles come out in lane order.
+            let mut s = [_mm256_setzero_ps(); 8];
+            for (q, r) in r.iter().enumerate() {
+                let i = lanes_i32(_mm256_add_epi32(*r, x0));
+                // SAFETY: `locate` keeps x0 <= n - 2 on a clamped axis with n > 1 (`pairs`),
+                // so both floats of each pair are faces of the array (its length is the
+                // caller's contract).
+                let ld = |l: usize| unsafe {
+                    debug_assert!(i[l] >= 0 && (i[l] as usize) + 1 < len);
+                    ptr.add(i[l] as usize).cast::<i64>().read_unaligned()
+                };
+                let a = _mm256_castsi256_ps(_mm256_setr_epi64x(ld(0), ld(1), ld(4), ld(5)));
+                let b = _mm256_castsi256_ps(_mm256_setr_epi64x(ld(2), ld(3), ld(6), ld(7)));
+                s[2 * q] = _mm256_shuffle_ps::<0x88>(a, b);
+                s[2 * q + 1] = _mm256_shuffle_ps::<0xDD>(a, b);
+            }
+            s
+        } else {
+            // SAFETY: `locate` keeps each axis index below that axis' face count, so the
+            // offsets index faces of the array (the caller's contract gives its length).
+            std::array::from_fn(|k| unsafe {
+                gather(
+                    ptr,
+                    len,
+                    _mm256_add_epi32(r[k / 2], if k % 2 == 0 { x0 } else { x1 }),
+                )
+            })
+        };
         let (mut lo, mut hi) = (_mm256_setzero_ps(), _mm256_setzero_ps());
         if BOUNDS {
             lo = s[0];
@@ -858,7 +945,6 @@ pub(crate) mod avx2 {
         let dt = _mm256_set1_ps(pass.dt_cells);
         let half_dt = _mm256_set1_ps(0.5 * pass.dt_cells);
         let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-        let half = _mm256_set1_ps(0.5);
         let (mut vo, mut lo, mut hi) = ([0f32; 8], [0f32; 8], [0f32; 8]);
         // The gathers' bounds rest on this (a cheap check per block, not a debug assertion).
         for c in 0..3 {
@@ -917,17 +1003,16 @@ pub(crate) mod avx2 {
                         _mm256_cmpgt_epi32(fc, _mm256_sub_epi32(n_c, _mm256_set1_epi32(1)));
                     let c_lo = _mm256_blendv_epi8(below, _mm256_add_epi32(cell, wrap_c), at_zero);
                     let c_hi = _mm256_blendv_epi8(cell, below, at_top);
-                    let (c_lo, c_hi) = (_mm256_slli_epi32::<2>(c_lo), _mm256_slli_epi32::<2>(c_hi));
                     pos[j] = [
                         _mm256_add_ps(_mm256_cvtepi32_ps(fx), _mm256_set1_ps(sh_x)),
                         pos_y,
                         pos_z,
                     ];
+                    // SAFETY: `c_lo`, `c_hi` are cells of the grid (the face coordinates are in
+                    // range and the boundary cases are clamped or wrapped as above).
+                    let v = unsafe { centred.mean(c_lo, c_hi) };
                     for a in 0..3 {
-                        // SAFETY: `c_lo`, `c_hi` are cells of the grid (the face coordinates are
-                        // in range and the boundary cases are clamped or wrapped as above).
-                        let (vl, vh) = unsafe { (centred.at(a, c_lo), centred.at(a, c_hi)) };
-                        pts[j][a] = sub_scaled(pos[j][a], half_dt, lerp(vl, vh, half));
+                        pts[j][a] = sub_scaled(pos[j][a], half_dt, v[a]);
                     }
                 }
                 for j in 0..nv {
