@@ -465,7 +465,24 @@ impl Pass<'_> {
 
     /// Semi-Lagrangian values at every active face into `out` (concatenated compact order).
     pub fn semi_lagrangian(&self, out: &mut [f32], parallel: bool) {
-        let task = |(b, os): (usize, &mut [f32])| self.block::<false>(b, |n, r| os[n] = r.0);
+        let task = |(b, os): (usize, &mut [f32])| {
+            #[cfg(target_arch = "x86_64")]
+            if avx2::available() {
+                // SAFETY: the CPU has AVX2 and FMA (checked by `available`).
+                unsafe {
+                    avx2::block::<false>(self, b, |o, m, v, _, _| {
+                        // A fixed-size copy for whole vectors (one store, no memcpy call).
+                        if m == 8 {
+                            os[o..o + 8].copy_from_slice(v);
+                        } else {
+                            os[o..o + m].copy_from_slice(&v[..m]);
+                        }
+                    })
+                };
+                return;
+            }
+            self.block_scalar::<false>(b, |n, r| os[n] = r.0)
+        };
         if parallel {
             out.par_chunks_mut(BLOCK).enumerate().for_each(task);
         } else {
@@ -615,7 +632,7 @@ pub(crate) mod avx2 {
     use super::{Axis, Pass, BLOCK, V4};
 
     /// Vectors (of eight faces) per chunk of the trace's split loops.
-    const CHUNK_VECTORS: usize = 8;
+    const CHUNK_VECTORS: usize = 4;
 
     /// Whether the CPU has AVX2 and FMA (`is_x86_feature_detected` caches its answer).
     #[inline]
