@@ -382,16 +382,32 @@ impl FluidSolver {
 
     /// Fills the extrapolation layers from their inner neighbours (mean of the layer inside).
     fn extrapolate(&mut self) {
+        /// The faces with `K` sources each (a fixed-length sum, unrolled).
+        fn group<const K: usize>(u: &mut [f32], faces: &[u32], srcs: &[u32]) {
+            for (&idx, src) in faces.iter().zip(srcs.chunks_exact(K)) {
+                let mut s = 0.0;
+                for &g in src {
+                    s += u[g as usize];
+                }
+                u[idx as usize] = s / K as f32;
+            }
+        }
         for c in 0..3 {
             let set = &self.faces[c];
             let u = &mut self.u[c];
-            for (n, &idx) in set.ext1.iter().chain(&set.ext2).enumerate() {
-                let (s0, s1) = (set.ext_start[n] as usize, set.ext_start[n + 1] as usize);
-                let mut s = 0.0;
-                for &g in &set.ext_src[s0..s1] {
-                    s += u[g as usize];
+            // Layer 1 first: layer 2 reads it.
+            for layer in &set.ext_groups {
+                for (k, (faces, srcs)) in layer.iter().enumerate() {
+                    match k {
+                        1 => group::<1>(u, faces, srcs),
+                        2 => group::<2>(u, faces, srcs),
+                        3 => group::<3>(u, faces, srcs),
+                        4 => group::<4>(u, faces, srcs),
+                        5 => group::<5>(u, faces, srcs),
+                        6 => group::<6>(u, faces, srcs),
+                        _ => faces.iter().for_each(|&idx| u[idx as usize] = 0.0),
+                    }
                 }
-                u[idx as usize] = if s1 > s0 { s / (s1 - s0) as f32 } else { 0.0 };
             }
         }
     }

@@ -66,6 +66,10 @@ pub(crate) struct FaceSet {
     /// Sources of the extrapolated faces (ext1 then ext2): `ext_src[ext_start[n]..ext_start[n+1]]`.
     pub ext_start: Vec<u32>,
     pub ext_src: Vec<u32>,
+    /// The same per layer (ext1, ext2) grouped by number of sources k (0 to 6): the faces, and
+    /// their sources k at a time (same order). A fixed count per loop has no mispredicted exits,
+    /// and within a layer no face reads another, so the order among groups is free.
+    pub ext_groups: [[(Vec<u32>, Vec<u32>); 7]; 2],
 }
 
 fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
@@ -356,6 +360,18 @@ impl FaceSet {
                     }
                 }
             }
+        }
+        for g in self.ext_groups.iter_mut().flatten() {
+            g.0.clear();
+            g.1.clear();
+        }
+        for (n, &idx) in self.ext1.iter().chain(&self.ext2).enumerate() {
+            let layer = usize::from(n >= self.ext1.len());
+            let (s0, s1) = (self.ext_start[n] as usize, self.ext_start[n + 1] as usize);
+            // At most six sources (one per neighbour slot).
+            let g = &mut self.ext_groups[layer][s1 - s0];
+            g.0.push(idx);
+            g.1.extend_from_slice(&self.ext_src[s0..s1]);
         }
     }
 }
