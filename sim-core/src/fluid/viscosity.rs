@@ -69,47 +69,69 @@ pub(crate) fn explicit(
     let (sy, sz) = (d[0], d[0] * d[1]);
     // Regular runs: the 7-point stencil on contiguous slices (same sum order as the general
     // form below, so the same rounding), which the compiler vectorises.
-    let run = |&[f, n, len]: &[u32; 3], os: &mut [f32]| {
-        let (f, n, len) = (f as usize, n as usize, len as usize);
-        let u = &full[f..f + len];
-        let (xm, xp) = (&full[f - 1..f - 1 + len], &full[f + 1..f + 1 + len]);
-        let (ym, yp) = (&full[f - sy..f - sy + len], &full[f + sy..f + sy + len]);
-        let (zm, zp) = (&full[f - sz..f - sz + len], &full[f + sz..f + sz + len]);
-        let g = &ghost[n..n + len];
-        let o = &mut os[..len];
-        for i in 0..len {
-            let mut s = g[i] - 6.0 * u[i];
-            s += xm[i];
-            s += xp[i];
-            s += ym[i];
-            s += yp[i];
-            s += zm[i];
-            s += zp[i];
-            o[i] = u[i] + a * s;
+    #[inline(always)]
+    fn runs(
+        runs: &[[u32; 3]],
+        base: usize,
+        full: &[f32],
+        ghost: &[f32],
+        a: f32,
+        s: [usize; 2],
+        out: &mut [f32],
+    ) {
+        let [sy, sz] = s;
+        for &[f, n, len] in runs {
+            let (f, n, len) = (f as usize, n as usize, len as usize);
+            let u = &full[f..f + len];
+            let (xm, xp) = (&full[f - 1..f - 1 + len], &full[f + 1..f + 1 + len]);
+            let (ym, yp) = (&full[f - sy..f - sy + len], &full[f + sy..f + sy + len]);
+            let (zm, zp) = (&full[f - sz..f - sz + len], &full[f + sz..f + sz + len]);
+            let g = &ghost[n..n + len];
+            let o = &mut out[n - base..n - base + len];
+            for i in 0..len {
+                let mut s = g[i] - 6.0 * u[i];
+                s += xm[i];
+                s += xp[i];
+                s += ym[i];
+                s += yp[i];
+                s += zm[i];
+                s += zp[i];
+                o[i] = u[i] + a * s;
+            }
         }
+    }
+    // Compiled for AVX2 when the CPU has it (eight lanes; no FMA contraction, same values).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn runs_avx2(
+        r: &[[u32; 3]],
+        base: usize,
+        full: &[f32],
+        ghost: &[f32],
+        a: f32,
+        s: [usize; 2],
+        out: &mut [f32],
+    ) {
+        runs(r, base, full, ghost, a, s, out)
+    }
+    let run = |r: &[[u32; 3]], base: usize, out: &mut [f32]| {
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU has AVX2 and FMA (checked just above).
+            unsafe { runs_avx2(r, base, full, ghost, a, [sy, sz], out) };
+            return;
+        }
+        runs(r, base, full, ghost, a, [sy, sz], out)
     };
     if parallel {
         // Two halves of the regular runs (the machine this is tuned on has two cores).
         let (r0, r1) = set.regular.split_at(set.regular.len() / 2);
         let split = r1.first().map_or(out.len(), |r| r[1] as usize);
         let (o0, o1) = out.split_at_mut(split);
-        let base1 = split;
-        rayon::join(
-            || {
-                for r in r0 {
-                    run(r, &mut o0[r[1] as usize..]);
-                }
-            },
-            || {
-                for r in r1 {
-                    run(r, &mut o1[r[1] as usize - base1..]);
-                }
-            },
-        );
+        rayon::join(|| run(r0, 0, o0), || run(r1, split, o1));
     } else {
-        for r in &set.regular {
-            run(r, &mut out[r[1] as usize..]);
-        }
+        run(&set.regular, 0, out);
     }
     // The others through the general stencil (see `FaceSet::nbr`).
     for &n in &set.irregular {
