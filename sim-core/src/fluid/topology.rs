@@ -18,6 +18,17 @@ pub(crate) const FIXED: u8 = 2;
 pub(crate) const EXT1: u8 = 3;
 pub(crate) const EXT2: u8 = 4;
 
+/// An active face off the plain 7-point stencil, packed (its `nbr` and `self_diag`) so the
+/// explicit step reads one record per face rather than four sparse arrays.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Irregular {
+    /// Compact and full index.
+    pub n: u32,
+    pub idx: u32,
+    pub nbr: [u32; 6],
+    pub self_diag: f32,
+}
+
 /// Everything the solver needs to know about the faces of one velocity component.
 #[derive(Default, Debug)]
 pub(crate) struct FaceSet {
@@ -48,7 +59,7 @@ pub(crate) struct FaceSet {
     /// faces: the explicit step walks the former as contiguous rows (vectorised) and gathers only
     /// the latter.
     pub regular: Vec<[u32; 3]>,
-    pub irregular: Vec<u32>,
+    pub irregular: Vec<Irregular>,
     /// Wall ghosts: (compact face, cell a, cell b, opposite face): the wall velocity is the mean of the
     /// prescribed velocities of `Velocity` cells among a and b (zero for solids and outside); the
     /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
@@ -297,7 +308,12 @@ impl FaceSet {
             if plain {
                 push(&mut self.regular);
             } else {
-                self.irregular.push(n as u32);
+                self.irregular.push(Irregular {
+                    n: n as u32,
+                    idx,
+                    nbr: self.nbr[n],
+                    self_diag: self.self_diag[n],
+                });
             }
         }
 

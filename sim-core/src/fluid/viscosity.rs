@@ -134,11 +134,11 @@ pub(crate) fn explicit(
         run(&set.regular, 0, out);
     }
     // The others through the general stencil (see `FaceSet::nbr`).
-    for &n in &set.irregular {
-        let n = n as usize;
-        let u = full[set.active[n] as usize];
-        let mut s = ghost[n] - set.self_diag[n] * u;
-        for &e in &set.nbr[n] {
+    for f in &set.irregular {
+        let n = f.n as usize;
+        let u = full[f.idx as usize];
+        let mut s = ghost[n] - f.self_diag * u;
+        for &e in &f.nbr {
             s += full[e as usize];
         }
         out[n] = u + a * s;
