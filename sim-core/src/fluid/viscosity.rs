@@ -5,7 +5,7 @@
 // Index loops over several parallel arrays read clearer than zipped iterators here.
 #![allow(clippy::needless_range_loop)]
 
-use super::topology::{FaceSet, CONST_BIT, NONE};
+use super::topology::{FaceSet, Irregular, CONST_BIT, NONE};
 
 /// Which viscosity step ran.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -124,24 +124,41 @@ pub(crate) fn explicit(
         }
         runs(r, base, full, ghost, a, [sy, sz], out)
     };
+    // The others through the general stencil (see `FaceSet::nbr`); `base` is the compact index
+    // of `out[0]`.
+    let others = |list: &[Irregular], base: usize, out: &mut [f32]| {
+        for f in list {
+            let n = f.n as usize;
+            let u = full[f.idx as usize];
+            let mut s = ghost[n] - f.self_diag * u;
+            for &e in &f.nbr {
+                s += full[e as usize];
+            }
+            out[n - base] = u + a * s;
+        }
+    };
     if parallel {
-        // Two halves of the regular runs (the machine this is tuned on has two cores).
+        // Two halves by compact index (the machine this is tuned on has two cores): the regular
+        // runs split in two, and the irregular faces (ascending) on the same side of the cut.
         let (r0, r1) = set.regular.split_at(set.regular.len() / 2);
         let split = r1.first().map_or(out.len(), |r| r[1] as usize);
+        let (i0, i1) = set
+            .irregular
+            .split_at(set.irregular.partition_point(|f| (f.n as usize) < split));
         let (o0, o1) = out.split_at_mut(split);
-        rayon::join(|| run(r0, 0, o0), || run(r1, split, o1));
+        rayon::join(
+            || {
+                run(r0, 0, o0);
+                others(i0, 0, o0);
+            },
+            || {
+                run(r1, split, o1);
+                others(i1, split, o1);
+            },
+        );
     } else {
         run(&set.regular, 0, out);
-    }
-    // The others through the general stencil (see `FaceSet::nbr`).
-    for f in &set.irregular {
-        let n = f.n as usize;
-        let u = full[f.idx as usize];
-        let mut s = ghost[n] - f.self_diag * u;
-        for &e in &f.nbr {
-            s += full[e as usize];
-        }
-        out[n] = u + a * s;
+        others(&set.irregular, 0, out);
     }
 }
 
