@@ -400,33 +400,94 @@ impl FluidSolver {
 
     /// Fills the extrapolation layers from their inner neighbours (mean of the layer inside).
     fn extrapolate(&mut self) {
+        /// The faces with `K` sources each (a fixed-length sum, unrolled).
+        fn group<const K: usize>(u: &mut [f32], faces: &[u32], srcs: &[u32]) {
+            for (&idx, src) in faces.iter().zip(srcs.chunks_exact(K)) {
+                let mut s = 0.0;
+                for &g in src {
+                    s += u[g as usize];
+                }
+                u[idx as usize] = s / K as f32;
+            }
+        }
         for c in 0..3 {
             let set = &self.faces[c];
             let u = &mut self.u[c];
-            for (n, &idx) in set.ext1.iter().chain(&set.ext2).enumerate() {
-                let (s0, s1) = (set.ext_start[n] as usize, set.ext_start[n + 1] as usize);
-                let mut s = 0.0;
-                for &g in &set.ext_src[s0..s1] {
-                    s += u[g as usize];
+            // Layer 1 first: layer 2 reads it.
+            for layer in &set.ext_groups {
+                for (k, (faces, srcs)) in layer.iter().enumerate() {
+                    match k {
+                        1 => group::<1>(u, faces, srcs),
+                        2 => group::<2>(u, faces, srcs),
+                        3 => group::<3>(u, faces, srcs),
+                        4 => group::<4>(u, faces, srcs),
+                        5 => group::<5>(u, faces, srcs),
+                        6 => group::<6>(u, faces, srcs),
+                        _ => faces.iter().for_each(|&idx| u[idx as usize] = 0.0),
+                    }
                 }
-                u[idx as usize] = if s1 > s0 { s / (s1 - s0) as f32 } else { 0.0 };
             }
         }
     }
 
     /// Largest face speed (m/s) over active and fixed faces.
     pub fn max_speed_m_s(&self) -> f64 {
-        let mut m = 0.0f32;
+        // On the bits: |v| of a float orders as a (non-negative) i32, and an i32 max reduction
+        // vectorises even on baseline SSE2 (f32::max's NaN rule does not, nor does u32 max).
+        // NaN, which f32::max would skip, counts as 0.
+        let bits = |v: f32| {
+            let b = (v.to_bits() & 0x7fff_ffff) as i32;
+            if b > 0x7f80_0000 {
+                0
+            } else {
+                b
+            }
+        };
+        #[inline(always)]
+        fn runs_max(u: &[f32], runs: &[[u32; 3]], mut m: i32, bits: impl Fn(f32) -> i32) -> i32 {
+            // Eight running maxima (lanes), so the reduction is plain lane-wise code.
+            let mut acc = [m; 8];
+            for &[f, _, len] in runs {
+                let (f, len) = (f as usize, len as usize);
+                let run = &u[f..f + len];
+                let mut chunks = run.chunks_exact(8);
+                for ch in &mut chunks {
+                    for (a, &v) in acc.iter_mut().zip(ch) {
+                        *a = (*a).max(bits(v));
+                    }
+                }
+                for &v in chunks.remainder() {
+                    m = m.max(bits(v));
+                }
+            }
+            acc.into_iter().fold(m, i32::max)
+        }
+        // Compiled for AVX2 when the CPU has it: SSE2 has no i32 max, and LLVM keeps it scalar.
+        #[cfg(target_arch = "x86_64")]
+        #[target_feature(enable = "avx2")]
+        fn runs_max_avx2(u: &[f32], runs: &[[u32; 3]], m: i32, bits: impl Fn(f32) -> i32) -> i32 {
+            runs_max(u, runs, m, bits)
+        }
+        let mut m = 0i32;
         for c in 0..3 {
             let set = &self.faces[c];
-            for &idx in &set.active {
-                m = m.max(self.u[c][idx as usize].abs());
+            let u = &self.u[c];
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU has AVX2 (checked just above).
+                m = unsafe { runs_max_avx2(u, &set.runs, m, bits) };
+            } else {
+                m = runs_max(u, &set.runs, m, bits);
+            }
+            #[cfg(not(target_arch = "x86_64"))]
+            {
+                m = runs_max(u, &set.runs, m, bits);
             }
             for f in &set.fixed {
-                m = m.max(self.u[c][f[0] as usize].abs());
+                m = m.max(bits(u[f[0] as usize]));
             }
         }
-        m as f64
+        f32::from_bits(m as u32) as f64
     }
 
     /// Kinetic energy (J) of the fluid: `rho/2 sum u_f^2 h^3` over active faces.
@@ -540,9 +601,7 @@ impl FluidSolver {
                         &mut self.compact[c],
                         wide,
                     );
-                    for (n, &idx) in set.active.iter().enumerate() {
-                        self.u[c][idx as usize] = self.compact[c][n];
-                    }
+                    viscosity::write_back(set, &self.compact[c], &mut self.u[c]);
                 }
             }
             if !implicit {

@@ -18,9 +18,22 @@ pub(crate) const FIXED: u8 = 2;
 pub(crate) const EXT1: u8 = 3;
 pub(crate) const EXT2: u8 = 4;
 
+/// An active face off the plain 7-point stencil, packed (its `nbr` and `self_diag`) so the
+/// explicit step reads one record per face rather than four sparse arrays.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Irregular {
+    /// Compact and full index.
+    pub n: u32,
+    pub idx: u32,
+    pub nbr: [u32; 6],
+    pub self_diag: f32,
+}
+
 /// Everything the solver needs to know about the faces of one velocity component.
 #[derive(Default, Debug)]
 pub(crate) struct FaceSet {
+    /// Face-array dimensions of the component (`Layout::fdims`).
+    pub fdims: [usize; 3],
     /// Class of every face (full array).
     pub class: Vec<u8>,
     /// Full index of each active face.
@@ -39,6 +52,14 @@ pub(crate) struct FaceSet {
     /// of such self entries, so `sum(full[nbr]) - self_diag u` is the stencil without branches.
     pub nbr: Vec<[u32; 6]>,
     pub self_diag: Vec<f32>,
+    /// Runs `[full, compact, len]` of consecutive active faces (consecutive in both arrays).
+    pub runs: Vec<[u32; 3]>,
+    /// Runs as in `runs` of faces whose stencil is the plain 7-point one (six in-array neighbours
+    /// at the structured offsets, `self_diag` 6), and the compact indices of all other active
+    /// faces: the explicit step walks the former as contiguous rows (vectorised) and gathers only
+    /// the latter.
+    pub regular: Vec<[u32; 3]>,
+    pub irregular: Vec<Irregular>,
     /// Wall ghosts: (compact face, cell a, cell b, opposite face): the wall velocity is the mean of the
     /// prescribed velocities of `Velocity` cells among a and b (zero for solids and outside); the
     /// opposite face (full index, NONE if it is not active or fixed) is the second point of the
@@ -56,6 +77,10 @@ pub(crate) struct FaceSet {
     /// Sources of the extrapolated faces (ext1 then ext2): `ext_src[ext_start[n]..ext_start[n+1]]`.
     pub ext_start: Vec<u32>,
     pub ext_src: Vec<u32>,
+    /// The same per layer (ext1, ext2) grouped by number of sources k (0 to 6): the faces, and
+    /// their sources k at a time (same order). A fixed count per loop has no mispredicted exits,
+    /// and within a layer no face reads another, so the order among groups is free.
+    pub ext_groups: [[(Vec<u32>, Vec<u32>); 7]; 2],
 }
 
 fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
@@ -139,6 +164,7 @@ impl FaceSet {
     /// pressure rows.
     pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize, row_of_cell: &[u32]) {
         let nf = layout.face_count(c);
+        self.fdims = layout.fdims[c];
         self.class.clear();
         self.class.resize(nf, OTHER);
         self.compact.clear();
@@ -150,6 +176,9 @@ impl FaceSet {
         self.diag.clear();
         self.nbr.clear();
         self.self_diag.clear();
+        self.runs.clear();
+        self.regular.clear();
+        self.irregular.clear();
         self.ghosts.clear();
         self.ext1.clear();
         self.ext2.clear();
@@ -256,6 +285,38 @@ impl FaceSet {
             self.nbr.push(nbr);
         }
 
+        // Runs of active faces, and of regular ones (see `regular`).
+        let d = self.fdims;
+        let offs = [1, d[0], d[0] * d[1]];
+        for (n, &idx) in self.active.iter().enumerate() {
+            let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
+                Some(r) if r[0] + r[2] == idx && r[1] + r[2] == n as u32 => r[2] += 1,
+                _ => runs.push([idx, n as u32, 1]),
+            };
+            push(&mut self.runs);
+            let i = idx as usize;
+            let plain = self.self_diag[n] == 6.0
+                && (0..6).all(|slot| {
+                    let o = offs[slot / 2];
+                    let want = if slot % 2 == 0 {
+                        i.checked_sub(o)
+                    } else {
+                        Some(i + o)
+                    };
+                    want == Some(self.nbr[n][slot] as usize)
+                });
+            if plain {
+                push(&mut self.regular);
+            } else {
+                self.irregular.push(Irregular {
+                    n: n as u32,
+                    idx,
+                    nbr: self.nbr[n],
+                    self_diag: self.self_diag[n],
+                });
+            }
+        }
+
         // Keep only `Velocity` cells in the wall-velocity pairs, moving fixed faces first, so the
         // per-step wall updates skip label lookups and still walls.
         let moving = |i: u32| i != NONE && grid.label_at(i as usize) == CellLabel::Velocity;
@@ -315,6 +376,18 @@ impl FaceSet {
                     }
                 }
             }
+        }
+        for g in self.ext_groups.iter_mut().flatten() {
+            g.0.clear();
+            g.1.clear();
+        }
+        for (n, &idx) in self.ext1.iter().chain(&self.ext2).enumerate() {
+            let layer = usize::from(n >= self.ext1.len());
+            let (s0, s1) = (self.ext_start[n] as usize, self.ext_start[n + 1] as usize);
+            // At most six sources (one per neighbour slot).
+            let g = &mut self.ext_groups[layer][s1 - s0];
+            g.0.push(idx);
+            g.1.extend_from_slice(&self.ext_src[s0..s1]);
         }
     }
 }
