@@ -7,7 +7,6 @@
 //! one array concatenating the three components (so one rayon region covers the whole stage), and
 //! the trace reads a padded cell-centred velocity (`[f32; 4]`: one 4-lane trilinear per sample).
 
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use super::sample::Layout;
@@ -26,7 +25,14 @@ pub enum AdvectionScheme {
 /// Faces per chunk of the trace's split loops.
 const CHAIN: usize = 64;
 
-/// Faces per parallel task (a block of the concatenated active faces).
+/// The block at which `len` compact faces split into two halves on two threads, if `parallel` and
+/// there are at least two blocks.
+fn split_block(len: usize, parallel: bool) -> Option<usize> {
+    let blocks = len.div_ceil(BLOCK);
+    (parallel && blocks >= 2).then_some(blocks / 2)
+}
+
+/// Faces per task (a block of the concatenated active faces).
 pub(crate) const BLOCK: usize = 2048;
 
 /// Consecutive active faces of one component along x.
@@ -483,10 +489,17 @@ impl Pass<'_> {
             }
             self.block_scalar::<false>(b, |n, r| os[n] = r.0)
         };
-        if parallel {
-            out.par_chunks_mut(BLOCK).enumerate().for_each(task);
-        } else {
-            out.chunks_mut(BLOCK).enumerate().for_each(task);
+        let blocks = |first: usize, out: &mut [f32]| {
+            for (b, os) in out.chunks_mut(BLOCK).enumerate() {
+                task((first + b, os));
+            }
+        };
+        match split_block(out.len(), parallel) {
+            Some(mid) => {
+                let (a, b) = out.split_at_mut(mid * BLOCK);
+                crate::duo::join(|| blocks(0, a), || blocks(mid, b));
+            }
+            None => blocks(0, out),
         }
     }
 
@@ -502,18 +515,23 @@ impl Pass<'_> {
         let task = |(b, ((os, ls), hs)): (usize, Slices)| {
             self.block::<true>(b, |n, r| (os[n], ls[n], hs[n]) = r)
         };
-        if parallel {
-            out.par_chunks_mut(BLOCK)
-                .zip(lo.par_chunks_mut(BLOCK))
-                .zip(hi.par_chunks_mut(BLOCK))
-                .enumerate()
-                .for_each(task);
-        } else {
-            out.chunks_mut(BLOCK)
-                .zip(lo.chunks_mut(BLOCK))
-                .zip(hi.chunks_mut(BLOCK))
-                .enumerate()
-                .for_each(task);
+        let blocks = |first: usize, out: &mut [f32], lo: &mut [f32], hi: &mut [f32]| {
+            let chunks = out.chunks_mut(BLOCK).zip(lo.chunks_mut(BLOCK));
+            for (b, s) in chunks.zip(hi.chunks_mut(BLOCK)).enumerate() {
+                task((first + b, s));
+            }
+        };
+        match split_block(out.len(), parallel) {
+            Some(mid) => {
+                let at = mid * BLOCK;
+                let ((o0, o1), (l0, l1), (h0, h1)) = (
+                    out.split_at_mut(at),
+                    lo.split_at_mut(at),
+                    hi.split_at_mut(at),
+                );
+                crate::duo::join(|| blocks(0, o0, l0, h0), || blocks(mid, o1, l1, h1));
+            }
+            None => blocks(0, out, lo, hi),
         }
     }
 
@@ -540,20 +558,22 @@ impl Pass<'_> {
                 };
             })
         };
-        if parallel {
-            out.par_chunks_mut(BLOCK)
-                .zip(lo.par_chunks(BLOCK))
-                .zip(hi.par_chunks(BLOCK))
-                .zip(orig.par_chunks(BLOCK))
-                .enumerate()
-                .for_each(task);
-        } else {
-            out.chunks_mut(BLOCK)
-                .zip(lo.chunks(BLOCK))
-                .zip(hi.chunks(BLOCK))
-                .zip(orig.chunks(BLOCK))
-                .enumerate()
-                .for_each(task);
+        let blocks = |first: usize, out: &mut [f32], lo: &[f32], hi: &[f32], orig: &[f32]| {
+            let chunks = out.chunks_mut(BLOCK).zip(lo.chunks(BLOCK));
+            let chunks = chunks.zip(hi.chunks(BLOCK)).zip(orig.chunks(BLOCK));
+            for (b, s) in chunks.enumerate() {
+                task((first + b, s));
+            }
+        };
+        match split_block(out.len(), parallel) {
+            Some(mid) => {
+                let at = mid * BLOCK;
+                let (o0, o1) = out.split_at_mut(at);
+                let ((l0, l1), (h0, h1), (u0, u1)) =
+                    (lo.split_at(at), hi.split_at(at), orig.split_at(at));
+                crate::duo::join(|| blocks(0, o0, l0, h0, u0), || blocks(mid, o1, l1, h1, u1));
+            }
+            None => blocks(0, out, lo, hi, orig),
         }
     }
 }
@@ -599,10 +619,16 @@ pub(crate) fn update_centred(
             }
         }
     };
-    if parallel {
-        out.par_chunks_mut(nx * ny).enumerate().for_each(slab);
+    let slabs = |first: usize, out: &mut [V4]| {
+        for (k, sl) in out.chunks_mut(nx * ny).enumerate() {
+            slab((first + k, sl));
+        }
+    };
+    if parallel && nz >= 2 {
+        let (a, b) = out.split_at_mut(nz / 2 * nx * ny);
+        crate::duo::join(|| slabs(0, a), || slabs(nz / 2, b));
     } else {
-        out.chunks_mut(nx * ny).enumerate().for_each(slab);
+        slabs(0, out);
     }
 }
 

@@ -68,11 +68,11 @@ pub(crate) struct PressureSolver {
 const CHUNK: usize = 2048;
 
 /// Multigrid levels split their kernels in two halves (on [`crate::duo`]) from `parallel_rows /
-/// MG_SPLIT_DIVISOR` fluid cells: 2,000 by default. A split costs well under a microsecond there, so
+/// SPLIT_DIVISOR` fluid cells: 2,000 by default. A split costs well under a microsecond there, so
 /// it pays from a few thousand cells (measured on the 2-core machine: the 1.2 mm cavity's level 0,
 /// 3.8k cells, gains ~25 % of the projection, the 0.6 mm cavity's levels 0 and 1 ~25 %; rayon's
 /// fork-join lost at every size).
-const MG_SPLIT_DIVISOR: usize = 12;
+pub(crate) const SPLIT_DIVISOR: usize = 12;
 
 fn matvec(l: &Level, x: &[f64], y: &mut [f64], parallel: bool) {
     let n_rows = x.len();
@@ -254,7 +254,7 @@ impl PressureSolver {
         } = self;
         let periodic = mg.levels[0].periodic.iter().any(|&p| p);
         for l in &mut mg.levels[..mg.used] {
-            l.parallel = l.fluid >= (*parallel_rows / MG_SPLIT_DIVISOR).max(1);
+            l.parallel = l.fluid >= (*parallel_rows / SPLIT_DIVISOR).max(1);
         }
         {
             let l0 = &mut mg.levels[0];

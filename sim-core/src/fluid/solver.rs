@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 use super::advection::{self, AdvectionScheme};
 use super::grid::FluidGrid;
 use super::multigrid::{L_FLUID, L_OPEN, L_SOLID};
-use super::pressure::{PressureSolver, ProjectionMethod};
+use super::pressure::{PressureSolver, ProjectionMethod, SPLIT_DIVISOR};
 use super::sample::Layout;
 use super::topology::{self, FaceSet, NONE};
 use super::viscosity::{self, ViscosityMode, ViscosityScratch};
@@ -40,7 +40,9 @@ pub struct FluidParams {
     pub max_cfl: Option<f64>,
     /// Upper bound on substeps per step.
     pub max_substeps: usize,
-    /// Fluid cells from which the CG products run on rayon (advection from 1/4 of this).
+    /// Fluid cells from which the reference solver's CG products run on rayon; every stage of a
+    /// step (advection, viscosity, the multigrid levels, divergence and gradient) runs in two halves
+    /// on two threads from 1/12 of this.
     pub parallel_threshold_cells: usize,
 }
 
@@ -256,6 +258,12 @@ impl FluidSolver {
     pub fn fluid_cells(&self) -> usize {
         self.pressure.mg.levels.first().map_or(0, |l| l.rows())
     }
+    /// Whether the stages run in two halves on two threads (from `parallel_threshold_cells /
+    /// SPLIT_DIVISOR` fluid cells).
+    fn split(&self) -> bool {
+        self.fluid_cells() >= (self.params.parallel_threshold_cells / SPLIT_DIVISOR).max(1)
+    }
+
     /// Number of connected fluid regions, and how many are closed (no outflow cell).
     pub fn regions(&self) -> (usize, usize) {
         let r = &self.pressure.regions;
@@ -542,11 +550,9 @@ impl FluidSolver {
 
     fn substep(&mut self, dt: f64, stats: &mut StepStats) {
         let h = self.grid.spacing_m();
-        // Advection costs ~10x a CG product per cell, so it pays for rayon's overhead on grids
-        // smaller than the threshold of the CG products: from 1/4 of it (6,000 cells by default).
-        // Measured on the 2-core benchmark machine: two threads lose at 3.8k cells (advect 0.54 vs
-        // 0.42 ms) and win at 9.6k (0.82 vs 0.96 ms).
-        let parallel = self.fluid_cells() >= (self.params.parallel_threshold_cells / 4).max(1024);
+        // Every stage splits in two halves from the multigrid's threshold (on the duo helper, whose
+        // hand-over costs well under a microsecond).
+        let parallel = self.split();
 
         // Advection.
         let t = Instant::now();
@@ -560,8 +566,7 @@ impl FluidSolver {
         let t = Instant::now();
         let nu = self.params.viscosity_m2_s;
         let a = nu * dt / (h * h);
-        // The cheap per-face stages pay for a rayon region only on large grids.
-        let wide = self.fluid_cells() >= self.params.parallel_threshold_cells;
+        let wide = parallel;
         let implicit = nu > 0.0 && a > viscosity::EXPLICIT_LIMIT;
         stats.viscosity = match (nu > 0.0, implicit) {
             (false, _) => ViscosityMode::Skipped,
@@ -631,7 +636,7 @@ impl FluidSolver {
     fn advect(&mut self, dt_cells: f64, parallel: bool) {
         let dt_cells = dt_cells as f32;
         let mac = self.params.advection == AdvectionScheme::MacCormack;
-        let wide = self.fluid_cells() >= self.params.parallel_threshold_cells;
+        let wide = self.split();
         let [u0, u1, u2] = &self.u;
         advection::update_centred(
             &self.layout,

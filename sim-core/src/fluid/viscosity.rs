@@ -146,7 +146,7 @@ pub(crate) fn explicit(
             .irregular
             .split_at(set.irregular.partition_point(|f| (f.n as usize) < split));
         let (o0, o1) = out.split_at_mut(split);
-        rayon::join(
+        crate::duo::join(
             || {
                 run(r0, 0, o0);
                 others(i0, 0, o0);
