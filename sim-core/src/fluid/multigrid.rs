@@ -67,7 +67,7 @@ pub(crate) enum SpanOp<'a> {
         diag: &'a [f32],
         inv: &'a [f32],
     },
-    /// `t = inv (b - A x)`: the increment of `Relax`, into a separate vector (parallel).
+    /// `t = x + inv (b - A x)`: the result of `Relax` into a separate vector (parallel).
     RelaxInto {
         t: &'a mut [f32],
         x: &'a [f32],
@@ -75,8 +75,6 @@ pub(crate) enum SpanOp<'a> {
         diag: &'a [f32],
         inv: &'a [f32],
     },
-    /// `x += t`.
-    Add { x: &'a mut [f32], t: &'a [f32] },
     /// `y = mask (b - A v)` with `b`, `y = mask A v` without.
     Stencil {
         y: &'a mut [f32],
@@ -138,10 +136,6 @@ impl<'a> SpanOp<'a> {
                         inv,
                     },
                 )
-            }
-            Add { x, t } => {
-                let (xa, xb) = x.split_at_mut(mid);
-                (Add { x: xa, t }, Add { x: xb, t })
             }
             Stencil {
                 y,
@@ -210,7 +204,7 @@ impl<'a> SpanOp<'a> {
                 let (pa, pb) = p.split_at_mut(mid);
                 (Xpby { p: pa, z, beta }, Xpby { p: pb, z, beta })
             }
-            // In place: cannot be split (run_level uses RelaxInto + Add instead).
+            // In place: cannot be split (parallel levels use RelaxInto and a swap instead).
             op @ Relax { .. } => (op, Dot { a: &[], b: &[] }),
         }
     }
@@ -259,15 +253,7 @@ impl pulp::WithSimd for SpanRun<'_> {
                     let t = &mut t[s - off..e - off];
                     for q in 0..n {
                         let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
-                        t[q] = ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
-                    }
-                }
-                0.0
-            }
-            SpanOp::Add { x, t } => {
-                for (s, e) in spans {
-                    for (x, &t) in x[s - off..e - off].iter_mut().zip(&t[s..e]) {
-                        *x += t;
+                        t[q] = x0[q] + ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
                     }
                 }
                 0.0
@@ -657,8 +643,9 @@ impl Level {
                 self.halo(&mut x);
             }
             if self.parallel {
-                // Two threads cannot update `x` in place: the increments go to the residual
-                // vector (free during smoothing) and are added after.
+                // Two threads cannot update `x` in place: the new values go to the residual vector
+                // (free during smoothing), which then becomes `x`. Off the spans both hold zero
+                // (ghost layers are refilled by `halo` before every use), so the swap is exact.
                 let mut t = std::mem::take(&mut self.r);
                 run(
                     self,
@@ -670,8 +657,7 @@ impl Level {
                         inv: &self.inv[colour],
                     },
                 );
-                run(self, SpanOp::Add { x: &mut x, t: &t });
-                self.r = t;
+                self.r = std::mem::replace(&mut x, t);
             } else {
                 run(
                     self,
