@@ -92,13 +92,15 @@ pub(crate) enum SpanOp<'a> {
         diag: &'a [f32],
         mask: &'a [f32],
     },
-    /// `d += alpha p`, `r -= alpha ap`; returns `max |r|`.
+    /// `d += alpha p`, `r -= alpha ap`; returns `max |r|`. With `init = (x, inv)` also the first
+    /// half-sweep of a V-cycle whose right-hand side is the new `r`: `x = inv r` (as `Init`).
     Update {
         alpha: f32,
         p: &'a [f32],
         ap: &'a [f32],
         d: &'a mut [f32],
         r: &'a mut [f32],
+        init: Option<(&'a mut [f32], &'a [f32])>,
     },
     /// `p = z + beta p`.
     Xpby {
@@ -180,9 +182,23 @@ impl<'a> SpanOp<'a> {
                     },
                 )
             }
-            Update { alpha, p, ap, d, r } => {
+            Update {
+                alpha,
+                p,
+                ap,
+                d,
+                r,
+                init,
+            } => {
                 let (da, db) = d.split_at_mut(mid);
                 let (ra, rb) = r.split_at_mut(mid);
+                let (ia, ib) = match init {
+                    Some((x, inv)) => {
+                        let (xa, xb) = x.split_at_mut(mid);
+                        (Some((xa, inv)), Some((xb, inv)))
+                    }
+                    None => (None, None),
+                };
                 (
                     Update {
                         alpha,
@@ -190,6 +206,7 @@ impl<'a> SpanOp<'a> {
                         ap,
                         d: da,
                         r: ra,
+                        init: ia,
                     },
                     Update {
                         alpha,
@@ -197,6 +214,7 @@ impl<'a> SpanOp<'a> {
                         ap,
                         d: db,
                         r: rb,
+                        init: ib,
                     },
                 )
             }
@@ -286,9 +304,17 @@ impl pulp::WithSimd for SpanRun<'_> {
                 }
                 acc.iter().sum()
             }
-            SpanOp::Update { alpha, p, ap, d, r } => {
+            SpanOp::Update {
+                alpha,
+                p,
+                ap,
+                d,
+                r,
+                mut init,
+            } => {
                 let mut m = [0.0f32; LANES];
                 for (s, e) in spans {
+                    let rs = s - off..e - off;
                     let (p, ap) = (&p[s..e], &ap[s..e]);
                     let (d, r) = (&mut d[s - off..e - off], &mut r[s - off..e - off]);
                     let mut pc = p.chunks_exact(LANES);
@@ -311,6 +337,11 @@ impl pulp::WithSimd for SpanRun<'_> {
                         *d += alpha * p;
                         *r -= alpha * ap;
                         m[0] = m[0].max(r.abs());
+                    }
+                    if let Some((x, inv)) = init.as_mut() {
+                        for ((x, &r), &i) in x[rs].iter_mut().zip(r.iter()).zip(&inv[s..e]) {
+                            *x = r * i;
+                        }
                     }
                 }
                 m.iter().fold(0.0f32, |a, &b| a.max(b)) as f64
@@ -933,14 +964,17 @@ impl Multigrid {
     }
 
     /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b` (dense, zero off the fluid cells).
-    pub fn vcycle(&mut self) {
+    /// With `initialised`, level 0's first half-sweep (`x = inv b` on red cells) is already done.
+    pub fn vcycle(&mut self, initialised: bool) {
         let n = self.used;
         let sweeps = self.sweeps.max(1);
         for l in 0..n - 1 {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
             let fine = &mut fine[l];
             for s in 0..sweeps {
-                fine.half_sweep(0, s == 0);
+                if !(s == 0 && l == 0 && initialised) {
+                    fine.half_sweep(0, s == 0);
+                }
                 fine.half_sweep(1, false);
             }
             fine.residual();
@@ -1022,7 +1056,7 @@ mod tests {
             let p = l0.pad_of_row[row] as usize;
             l0.b[p] = v;
         }
-        m.vcycle();
+        m.vcycle(false);
         let l0 = &m.levels[0];
         l0.pad_of_row.iter().map(|&p| l0.x[p as usize]).collect()
     }

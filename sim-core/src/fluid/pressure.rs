@@ -296,12 +296,12 @@ impl PressureSolver {
         for &[s, e] in &mg.levels[0].spans {
             dd[s as usize..e as usize].fill(0.0);
         }
-        let precondition = |mg: &mut Multigrid, regions: &mut Regions| {
-            mg.vcycle();
+        let precondition = |mg: &mut Multigrid, regions: &mut Regions, initialised: bool| {
+            mg.vcycle(initialised);
             let l0 = &mut mg.levels[0];
             regions.remove_closed_means_dense(&mut l0.x, &l0.pad_of_row);
         };
-        precondition(mg, regions);
+        precondition(mg, regions, false);
         let l0 = &mg.levels[0];
         dp.copy_from_slice(&l0.x);
         let mut rz = run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x });
@@ -324,7 +324,11 @@ impl PressureSolver {
                 break;
             }
             let alpha = (rz / pap) as f32;
+            // Without closed regions the residual is final here, so the V-cycle's first
+            // half-sweep on it runs in the same pass.
+            let fused = !regions.any_closed();
             let mut r = std::mem::take(&mut l0.b);
+            let mut x = std::mem::take(&mut l0.x);
             let mut rmax = run(
                 l0,
                 SpanOp::Update {
@@ -333,9 +337,10 @@ impl PressureSolver {
                     ap: dap,
                     d: dd,
                     r: &mut r,
+                    init: fused.then_some((&mut x[..], &l0.inv[0][..])),
                 },
             ) as f32;
-            l0.b = r;
+            (l0.b, l0.x) = (r, x);
             if regions.any_closed() {
                 // In f32 the rounding of `r -= alpha A p` accumulates a region mean no pressure
                 // can remove, on which CG would stagnate: keep r in the range of A.
@@ -349,7 +354,7 @@ impl PressureSolver {
                 outcome.converged = true;
                 break;
             }
-            precondition(mg, regions);
+            precondition(mg, regions, fused);
             let l0 = &mg.levels[0];
             let rz_new = run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x });
             let beta = (rz_new / rz) as f32;
