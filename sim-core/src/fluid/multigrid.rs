@@ -392,6 +392,25 @@ pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
     }
 }
 
+/// Runs `f(spans, out, off)` over the level's spans (`out` holds the padded vector from index
+/// `off`), in two halves on a `parallel` level (the output split at the first cell of the second
+/// half), and returns the larger of the two results.
+pub(crate) fn for_spans<T: Send>(
+    level: &Level,
+    out: &mut [T],
+    f: impl Fn(&[[u32; 2]], &mut [T], usize) -> f64 + Sync,
+) -> f64 {
+    let k = level.split_span;
+    if !level.parallel || k == 0 || k >= level.spans.len() {
+        return f(&level.spans, out, 0);
+    }
+    let mid = level.spans[k][0] as usize;
+    let (a, b) = out.split_at_mut(mid);
+    let (sa, sb) = level.spans.split_at(k);
+    let (ra, rb) = crate::duo::join(|| f(sa, a, 0), || f(sb, b, mid));
+    ra.max(rb)
+}
+
 /// One multigrid level.
 #[derive(Default, Debug)]
 pub(crate) struct Level {

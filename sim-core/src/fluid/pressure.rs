@@ -11,9 +11,11 @@
 //! cells), where the velocity update and the divergence are contiguous row loops. The reference
 //! solvers work on compressed rows and are wrapped by a gather and a scatter.
 
+use std::mem::take;
+
 use rayon::prelude::*;
 
-use super::multigrid::{run, Level, Multigrid, SpanOp};
+use super::multigrid::{for_spans, run, Level, Multigrid, SpanOp};
 use super::regions::Regions;
 use super::topology::NONE;
 use serde::{Deserialize, Serialize};
@@ -256,46 +258,57 @@ impl PressureSolver {
         for l in &mut mg.levels[..mg.used] {
             l.parallel = l.fluid >= (*parallel_rows / SPLIT_DIVISOR).max(1);
         }
-        {
+        let l0max = {
             let l0 = &mut mg.levels[0];
             if periodic {
                 l0.halo(dq);
             }
-            // The warm start's residual in f64, rounded once to f32.
+            // The warm start's residual in f64, rounded once to f32, and its largest value.
             let (sy, sz) = (l0.sy, l0.sz);
-            for &[s, e] in &l0.spans {
-                let (s, e) = (s as usize, e as usize);
-                let n = e - s;
-                let (xm, xp) = (&dq[s - 1..e - 1], &dq[s + 1..e + 1]);
-                let (ym, yp) = (&dq[s - sy..e - sy], &dq[s + sy..e + sy]);
-                let (zm, zp) = (&dq[s - sz..e - sz], &dq[s + sz..e + sz]);
-                let (q0, b, d, m) = (&dq[s..e], &bd[s..e], &l0.ddiag[s..e], &l0.mask[s..e]);
-                let out = &mut l0.b[s..e];
-                for i in 0..n {
-                    let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
-                    out[i] = m[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
+            let mut r0 = take(&mut l0.b);
+            let l0max = for_spans(l0, &mut r0, |spans, out, off| {
+                let mut m = 0.0f32;
+                for &[s, e] in spans {
+                    let (s, e) = (s as usize, e as usize);
+                    let n = e - s;
+                    let (xm, xp) = (&dq[s - 1..e - 1], &dq[s + 1..e + 1]);
+                    let (ym, yp) = (&dq[s - sy..e - sy], &dq[s + sy..e + sy]);
+                    let (zm, zp) = (&dq[s - sz..e - sz], &dq[s + sz..e + sz]);
+                    let (q0, b, d, mk) = (&dq[s..e], &bd[s..e], &l0.ddiag[s..e], &l0.mask[s..e]);
+                    let out = &mut out[s - off..e - off];
+                    for i in 0..n {
+                        let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
+                        out[i] = mk[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
+                        m = m.max(out[i].abs());
+                    }
                 }
+                m as f64
+            }) as f32;
+            l0.b = r0;
+            if regions.any_closed() {
+                regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
+                l0.pad_of_row
+                    .iter()
+                    .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
+            } else {
+                l0max
             }
-            regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
-        }
+        };
         let tol = tol_abs as f32;
         let mut outcome = SolveOutcome {
             iterations: 0,
             converged: false,
         };
-        let l0max = {
-            let l0 = &mg.levels[0];
-            l0.pad_of_row
-                .iter()
-                .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
-        };
         if l0max <= tol {
             outcome.converged = true;
             return outcome;
         }
-        for &[s, e] in &mg.levels[0].spans {
-            dd[s as usize..e as usize].fill(0.0);
-        }
+        for_spans(&mg.levels[0], dd, |spans, out, off| {
+            for &[s, e] in spans {
+                out[s as usize - off..e as usize - off].fill(0.0);
+            }
+            0.0
+        });
         let precondition = |mg: &mut Multigrid, regions: &mut Regions, initialised: bool| {
             mg.vcycle(initialised);
             let l0 = &mut mg.levels[0];
@@ -368,12 +381,16 @@ impl PressureSolver {
                 },
             );
         }
-        for &[s, e] in &mg.levels[0].spans {
-            let (s, e) = (s as usize, e as usize);
-            for (q, &d) in dq[s..e].iter_mut().zip(&dd[s..e]) {
-                *q += d as f64;
+        let dd = &*dd;
+        for_spans(&mg.levels[0], dq, |spans, out, off| {
+            for &[s, e] in spans {
+                let (s, e) = (s as usize, e as usize);
+                for (q, &d) in out[s - off..e - off].iter_mut().zip(&dd[s..e]) {
+                    *q += d as f64;
+                }
             }
-        }
+            0.0
+        });
         outcome
     }
 

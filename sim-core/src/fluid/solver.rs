@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::advection::{self, AdvectionScheme};
 use super::grid::FluidGrid;
-use super::multigrid::{L_FLUID, L_OPEN, L_SOLID};
+use super::multigrid::{for_spans, L_FLUID, L_OPEN, L_SOLID};
 use super::pressure::{PressureSolver, ProjectionMethod, SPLIT_DIVISOR};
 use super::sample::Layout;
 use super::topology::{self, FaceSet, NONE};
@@ -753,15 +753,19 @@ impl FluidSolver {
     }
 
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
-    fn max_divergence_m_s(&self) -> f64 {
-        let ps = &self.pressure;
-        let mut m = 0.0f64;
-        for &[s, e] in &ps.mg.levels[0].spans {
-            m = ps.bd[s as usize..e as usize]
-                .iter()
-                .fold(m, |m, &x| m.max(x.abs()));
-        }
-        m
+    fn max_divergence_m_s(&mut self) -> f64 {
+        let ps = &mut self.pressure;
+        // A reduction only (nothing is written), through the split's read-write form.
+        let bd = &mut ps.bd;
+        for_spans(&ps.mg.levels[0], bd, |spans, bd, off| {
+            let mut m = 0.0f64;
+            for &[s, e] in spans {
+                m = bd[s as usize - off..e as usize - off]
+                    .iter()
+                    .fold(m, |m, &x| m.max(x.abs()));
+            }
+            m
+        })
     }
 
     /// `u -= grad q` on the active faces, `q` being the dense solution of the pressure solver.
@@ -810,16 +814,17 @@ impl FluidSolver {
         stats.closed_region_mismatch_m_s = stats.closed_region_mismatch_m_s.max(mismatch);
         let to_q = dt / (rho * h);
         let periodic = self.grid.periodic().iter().any(|&p| p);
-        let spans = &self.pressure.mg.levels[0].spans;
-        for &[s, e] in spans {
-            let (s, e) = (s as usize, e as usize);
-            for (q, &p) in self.pressure.dq[s..e]
-                .iter_mut()
-                .zip(&self.pressure_pa[s..e])
-            {
-                *q = p * to_q;
+        let pressure_pa = &self.pressure_pa;
+        let ps = &mut self.pressure;
+        for_spans(&ps.mg.levels[0], &mut ps.dq, |spans, dq, off| {
+            for &[s, e] in spans {
+                let (s, e) = (s as usize, e as usize);
+                for (q, &p) in dq[s - off..e - off].iter_mut().zip(&pressure_pa[s..e]) {
+                    *q = p * to_q;
+                }
             }
-        }
+            0.0
+        });
         self.pressure.parallel_rows = self.params.parallel_threshold_cells;
         let method = self.params.projection;
         let tol_abs = self.params.tolerance * u_ref;
@@ -852,17 +857,20 @@ impl FluidSolver {
             if periodic {
                 l0.halo(&mut self.pressure.dq);
             }
-            for &[s, e] in &l0.spans {
-                let (s, e) = (s as usize, e as usize);
-                let q = &self.pressure.dq[s..e];
-                for (p, &qv) in self.pressure_pa[s..e].iter_mut().zip(q) {
-                    *p = if round == 0 {
-                        qv / to_q
-                    } else {
-                        *p + qv / to_q
-                    };
+            let dq = &self.pressure.dq;
+            for_spans(l0, &mut self.pressure_pa, |spans, pa, off| {
+                for &[s, e] in spans {
+                    let (s, e) = (s as usize, e as usize);
+                    for (p, &qv) in pa[s - off..e - off].iter_mut().zip(&dq[s..e]) {
+                        *p = if round == 0 {
+                            qv / to_q
+                        } else {
+                            *p + qv / to_q
+                        };
+                    }
                 }
-            }
+                0.0
+            });
             self.subtract_gradient();
             self.divergence_rhs();
             max_div = self.max_divergence_m_s();
