@@ -60,20 +60,24 @@ pub(crate) enum SpanOp<'a> {
         b: &'a [f32],
         inv: &'a [f32],
     },
-    /// `x += inv (b - A x)` on the cells where `inv` is non-zero (one colour), in place (serial).
+    /// `x += inv (b - A x)` on the cells where `inv` is non-zero (one colour), in place (serial);
+    /// with `dot`, returns `sum b x` of the result (as `Dot`).
     Relax {
         x: &'a mut [f32],
         b: &'a [f32],
         diag: &'a [f32],
         inv: &'a [f32],
+        dot: bool,
     },
-    /// `t = x + inv (b - A x)`: the result of `Relax` into a separate vector (parallel).
+    /// `t = x + inv (b - A x)`: the result of `Relax` into a separate vector (parallel); with
+    /// `dot`, returns `sum b t`.
     RelaxInto {
         t: &'a mut [f32],
         x: &'a [f32],
         b: &'a [f32],
         diag: &'a [f32],
         inv: &'a [f32],
+        dot: bool,
     },
     /// `y = mask (b - A v)` with `b`, `y = mask A v` without.
     Stencil {
@@ -120,7 +124,14 @@ impl<'a> SpanOp<'a> {
                 let (xa, xb) = x.split_at_mut(mid);
                 (Init { x: xa, b, inv }, Init { x: xb, b, inv })
             }
-            RelaxInto { t, x, b, diag, inv } => {
+            RelaxInto {
+                t,
+                x,
+                b,
+                diag,
+                inv,
+                dot,
+            } => {
                 let (ta, tb) = t.split_at_mut(mid);
                 (
                     RelaxInto {
@@ -129,6 +140,7 @@ impl<'a> SpanOp<'a> {
                         b,
                         diag,
                         inv,
+                        dot,
                     },
                     RelaxInto {
                         t: tb,
@@ -136,6 +148,7 @@ impl<'a> SpanOp<'a> {
                         b,
                         diag,
                         inv,
+                        dot,
                     },
                 )
             }
@@ -256,14 +269,32 @@ impl pulp::WithSimd for SpanRun<'_> {
                 }
                 0.0
             }
-            SpanOp::Relax { x, b, diag, inv } => {
+            SpanOp::Relax {
+                x,
+                b,
+                diag,
+                inv,
+                dot,
+            } => {
                 debug_assert_eq!(off, 0);
+                let mut acc = [0.0f64; LANES];
                 for (s, e) in spans {
                     relax_span(x, b, diag, inv, s, e, sy, sz);
+                    if dot {
+                        dot_span(&mut acc, &b[s..e], &x[s..e]);
+                    }
                 }
-                0.0
+                acc.iter().sum()
             }
-            SpanOp::RelaxInto { t, x, b, diag, inv } => {
+            SpanOp::RelaxInto {
+                t,
+                x,
+                b,
+                diag,
+                inv,
+                dot,
+            } => {
+                let mut acc = [0.0f64; LANES];
                 for (s, e) in spans {
                     let n = e - s;
                     let (xm, xp, ym, yp, zm, zp) = windows!(x, s, n, sy, sz);
@@ -273,8 +304,11 @@ impl pulp::WithSimd for SpanRun<'_> {
                         let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
                         t[q] = x0[q] + ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
                     }
+                    if dot {
+                        dot_span(&mut acc, bb, t);
+                    }
                 }
-                0.0
+                acc.iter().sum()
             }
             SpanOp::Stencil {
                 y,
@@ -677,8 +711,10 @@ impl Level {
 
     /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
     /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
-    fn half_sweep(&mut self, colour: usize, init: bool) {
+    /// With `dot` (not with `init`), returns `sum b x` of the result, else 0.
+    fn half_sweep(&mut self, colour: usize, init: bool, dot: bool) -> f64 {
         let mut x = std::mem::take(&mut self.x);
+        let mut sum = 0.0;
         if init {
             run(
                 self,
@@ -697,7 +733,7 @@ impl Level {
                 // (free during smoothing), which then becomes `x`. Off the spans both hold zero
                 // (ghost layers are refilled by `halo` before every use), so the swap is exact.
                 let mut t = std::mem::take(&mut self.r);
-                run(
+                sum = run(
                     self,
                     SpanOp::RelaxInto {
                         t: &mut t,
@@ -705,22 +741,25 @@ impl Level {
                         b: &self.b,
                         diag: &self.ddiag,
                         inv: &self.inv[colour],
+                        dot,
                     },
                 );
                 self.r = std::mem::replace(&mut x, t);
             } else {
-                run(
+                sum = run(
                     self,
                     SpanOp::Relax {
                         x: &mut x,
                         b: &self.b,
                         diag: &self.ddiag,
                         inv: &self.inv[colour],
+                        dot,
                     },
                 );
             }
         }
         self.x = x;
+        sum
     }
 
     /// `r = b - A x` on the spans.
@@ -984,7 +1023,8 @@ impl Multigrid {
 
     /// Applies the V-cycle: `levels[0].x = M^{-1} levels[0].b` (dense, zero off the fluid cells).
     /// With `initialised`, level 0's first half-sweep (`x = inv b` on red cells) is already done.
-    pub fn vcycle(&mut self, initialised: bool) {
+    /// Returns `sum b x` on level 0 (computed in the last half-sweep where there is one).
+    pub fn vcycle(&mut self, initialised: bool) -> f64 {
         let n = self.used;
         let sweeps = self.sweeps.max(1);
         for l in 0..n - 1 {
@@ -992,29 +1032,38 @@ impl Multigrid {
             let fine = &mut fine[l];
             for s in 0..sweeps {
                 if !(s == 0 && l == 0 && initialised) {
-                    fine.half_sweep(0, s == 0);
+                    fine.half_sweep(0, s == 0, false);
                 }
-                fine.half_sweep(1, false);
+                fine.half_sweep(1, false, false);
             }
             fine.residual();
             restrict(fine, &mut coarse[0], self.coarse_scale);
         }
         let last = &mut self.levels[n - 1];
         for s in 0..self.coarsest_sweeps.max(1) {
-            last.half_sweep(0, s == 0);
-            last.half_sweep(1, false);
-            last.half_sweep(1, false);
-            last.half_sweep(0, false);
+            last.half_sweep(0, s == 0, false);
+            last.half_sweep(1, false, false);
+            last.half_sweep(1, false, false);
+            last.half_sweep(0, false, false);
         }
+        let mut sum = None;
         for l in (0..n - 1).rev() {
             let (fine, coarse) = self.levels.split_at_mut(l + 1);
             let fine = &mut fine[l];
             prolongate(&coarse[0], fine);
-            for _ in 0..sweeps {
-                fine.half_sweep(1, false);
-                fine.half_sweep(0, false);
+            for s in 0..sweeps {
+                fine.half_sweep(1, false, false);
+                let last = l == 0 && s + 1 == sweeps;
+                let v = fine.half_sweep(0, false, last);
+                if last {
+                    sum = Some(v);
+                }
             }
         }
+        sum.unwrap_or_else(|| {
+            let l0 = &self.levels[0];
+            run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x })
+        })
     }
 }
 

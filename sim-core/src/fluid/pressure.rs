@@ -309,15 +309,20 @@ impl PressureSolver {
             }
             0.0
         });
+        // `z = M r`, and `r.z` (from the V-cycle's last pass unless a closed region's mean changes z).
         let precondition = |mg: &mut Multigrid, regions: &mut Regions, initialised: bool| {
-            mg.vcycle(initialised);
+            let rz = mg.vcycle(initialised);
             let l0 = &mut mg.levels[0];
-            regions.remove_closed_means_dense(&mut l0.x, &l0.pad_of_row);
+            if regions.any_closed() {
+                regions.remove_closed_means_dense(&mut l0.x, &l0.pad_of_row);
+                run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x })
+            } else {
+                rz
+            }
         };
-        precondition(mg, regions, false);
+        let mut rz = precondition(mg, regions, false);
         let l0 = &mg.levels[0];
         dp.copy_from_slice(&l0.x);
-        let mut rz = run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x });
         for it in 1..=max_iterations {
             outcome.iterations = it;
             let l0 = &mut mg.levels[0];
@@ -367,9 +372,8 @@ impl PressureSolver {
                 outcome.converged = true;
                 break;
             }
-            precondition(mg, regions, fused);
+            let rz_new = precondition(mg, regions, fused);
             let l0 = &mg.levels[0];
-            let rz_new = run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x });
             let beta = (rz_new / rz) as f32;
             rz = rz_new;
             run(
