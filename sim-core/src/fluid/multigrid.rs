@@ -709,6 +709,33 @@ impl Level {
         }
     }
 
+    /// Zeroes the ghost layers that [`Level::halo`] fills.
+    fn clear_halo(&self, v: &mut [f32]) {
+        let [nx, ny, nz] = self.dims;
+        let (sy, sz) = (self.sy, self.sz);
+        let (py, pz) = (ny + 2, nz + 2);
+        if self.periodic[0] {
+            for k in 0..pz {
+                for j in 0..py {
+                    let row = j * sy + k * sz;
+                    v[row] = 0.0;
+                    v[row + nx + 1] = 0.0;
+                }
+            }
+        }
+        if self.periodic[1] {
+            for k in 0..pz {
+                let plane = k * sz;
+                v[plane..plane + sy].fill(0.0);
+                v[plane + (ny + 1) * sy..plane + (ny + 2) * sy].fill(0.0);
+            }
+        }
+        if self.periodic[2] {
+            v[..sz].fill(0.0);
+            v[(nz + 1) * sz..(nz + 2) * sz].fill(0.0);
+        }
+    }
+
     /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
     /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
     /// With `dot` (not with `init`), returns `sum b x` of the result, else 0.
@@ -730,8 +757,8 @@ impl Level {
             }
             if self.parallel {
                 // Two threads cannot update `x` in place: the new values go to the residual vector
-                // (free during smoothing), which then becomes `x`. Off the spans both hold zero
-                // (ghost layers are refilled by `halo` before every use), so the swap is exact.
+                // (free during smoothing), which then becomes `x`. Off the spans and the ghost
+                // layers both hold zero, so the swap is exact.
                 let mut t = std::mem::take(&mut self.r);
                 sum = run(
                     self,
@@ -745,6 +772,13 @@ impl Level {
                     },
                 );
                 self.r = std::mem::replace(&mut x, t);
+                if self.any_periodic() {
+                    // The old `x` kept its ghost copies; the restriction reads `r` on the ghost
+                    // layer of a one-cell periodic axis, where it must be zero.
+                    let mut r = std::mem::take(&mut self.r);
+                    self.clear_halo(&mut r);
+                    self.r = r;
+                }
             } else {
                 sum = run(
                     self,
@@ -1214,6 +1248,39 @@ mod tests {
         }
         let l0 = &parallel.levels[0];
         assert!(l0.split_span > 0 && l0.split_span < l0.spans.len());
+        let n = serial.levels[0].rows();
+        let b: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
+        assert_eq!(apply(&mut serial, &b), apply(&mut parallel, &b));
+    }
+
+    #[test]
+    fn parallel_vcycle_equals_the_serial_one_on_a_periodic_slab() {
+        // A one-cell periodic axis: the transfers read the ghost layer of the residual, which the
+        // split smoother's swap must leave at zero.
+        let make = |parallel: bool| {
+            let mut l = Level {
+                dims: [16, 12, 1],
+                periodic: [true; 3],
+                ..Default::default()
+            };
+            l.label = vec![L_FLUID; 16 * 12];
+            l.label[5] = L_OPEN;
+            l.build_rows();
+            let mut m = Multigrid {
+                coarse_scale: 0.5,
+                sweeps: 2,
+                coarsest_sweeps: 16,
+                ..Default::default()
+            };
+            m.levels.push(l);
+            m.build_hierarchy();
+            for l in &mut m.levels {
+                l.parallel = parallel;
+            }
+            m
+        };
+        let (mut serial, mut parallel) = (make(false), make(true));
+        assert!(serial.used >= 3, "levels {}", serial.used);
         let n = serial.levels[0].rows();
         let b: Vec<f32> = (0..n).map(|i| ((i * 31) % 17) as f32 - 8.0).collect();
         assert_eq!(apply(&mut serial, &b), apply(&mut parallel, &b));
