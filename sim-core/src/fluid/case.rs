@@ -93,7 +93,7 @@ pub struct SolverSpec {
     pub max_iterations: Option<usize>,
     /// Substep so that the CFL number stays below this.
     pub max_cfl: Option<f64>,
-    /// Fluid cells from which rayon is used.
+    /// Fluid cells from which the stages split over two threads (from 1/12 of this; see `FluidParams`).
     pub parallel_threshold_cells: Option<usize>,
 }
 
