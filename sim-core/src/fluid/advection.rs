@@ -1153,6 +1153,13 @@ mod tests {
         (*state >> 40) as f32 / (1u64 << 24) as f32
     }
 
+    /// Face values of the three components, uniform in [-0.5, 0.5).
+    fn random_faces(layout: &Layout, st: &mut u64) -> Vec<Vec<f32>> {
+        (0..3)
+            .map(|c| (0..layout.face_count(c)).map(|_| lcg(st) - 0.5).collect())
+            .collect()
+    }
+
     #[test]
     fn fast_sampling_matches_the_reference_interpolation_everywhere() {
         for periodic in [[false; 3], [true, false, true], [false, true, false]] {
@@ -1160,13 +1167,7 @@ mod tests {
             let layout = Layout::new(dims, periodic);
             let geo = Geometry::new(dims, &layout);
             let mut st = 7u64;
-            let fields: Vec<Vec<f32>> = (0..3)
-                .map(|c| {
-                    (0..layout.face_count(c))
-                        .map(|_| lcg(&mut st) - 0.5)
-                        .collect()
-                })
-                .collect();
+            let fields = random_faces(&layout, &mut st);
             let cells = dims.iter().product::<usize>();
             let centred3: Vec<[f32; 3]> = (0..cells)
                 .map(|_| [lcg(&mut st), lcg(&mut st), lcg(&mut st)])
@@ -1223,13 +1224,7 @@ mod tests {
             ] {
                 let layout = Layout::new(dims, periodic);
                 let geo = Geometry::new(dims, &layout);
-                let fields: Vec<Vec<f32>> = (0..3)
-                    .map(|c| {
-                        (0..layout.face_count(c))
-                            .map(|_| lcg(&mut st) - 0.5)
-                            .collect()
-                    })
-                    .collect();
+                let fields = random_faces(&layout, &mut st);
                 let cells = dims.iter().product::<usize>();
                 let centred: Vec<V4> = (0..cells)
                     .map(|_| v4::new(lcg(&mut st) - 0.5, lcg(&mut st) - 0.5, lcg(&mut st) - 0.5))
@@ -1285,13 +1280,7 @@ mod tests {
         for dims in [[13, 3, 2], [8, 2, 3], [21, 1, 1]] {
             for periodic in [[false; 3], [true, true, true], [true, false, false]] {
                 let layout = Layout::new(dims, periodic);
-                let fields: Vec<Vec<f32>> = (0..3)
-                    .map(|c| {
-                        (0..layout.face_count(c))
-                            .map(|_| lcg(&mut st) - 0.5)
-                            .collect()
-                    })
-                    .collect();
+                let fields = random_faces(&layout, &mut st);
                 let mut out = vec![v4::zero(); dims.iter().product()];
                 for parallel in [false, true] {
                     let u = [&fields[0][..], &fields[1][..], &fields[2][..]];

@@ -682,8 +682,9 @@ impl Level {
         self.periodic.iter().any(|&p| p)
     }
 
-    /// Fills the ghost layers of periodic axes of `v` from the opposite side.
-    pub fn halo<T: Copy>(&self, v: &mut [T]) {
+    /// The ghost layers of the periodic axes: `f(ghost, source)` for each piece, `ghost` a range of
+    /// the padded vector and `source` the start of the interior cells it copies.
+    fn ghost_layers(&self, mut f: impl FnMut(std::ops::Range<usize>, usize)) {
         let [nx, ny, nz] = self.dims;
         let (sy, sz) = (self.sy, self.sz);
         let (py, pz) = (ny + 2, nz + 2);
@@ -691,49 +692,32 @@ impl Level {
             for k in 0..pz {
                 for j in 0..py {
                     let row = j * sy + k * sz;
-                    v[row] = v[row + nx];
-                    v[row + nx + 1] = v[row + 1];
+                    f(row..row + 1, row + nx);
+                    f(row + nx + 1..row + nx + 2, row + 1);
                 }
             }
         }
         if self.periodic[1] {
             for k in 0..pz {
                 let plane = k * sz;
-                v.copy_within(plane + ny * sy..plane + (ny + 1) * sy, plane);
-                v.copy_within(plane + sy..plane + 2 * sy, plane + (ny + 1) * sy);
+                f(plane..plane + sy, plane + ny * sy);
+                f(plane + (ny + 1) * sy..plane + (ny + 2) * sy, plane + sy);
             }
         }
         if self.periodic[2] {
-            v.copy_within(nz * sz..(nz + 1) * sz, 0);
-            v.copy_within(sz..2 * sz, (nz + 1) * sz);
+            f(0..sz, nz * sz);
+            f((nz + 1) * sz..(nz + 2) * sz, sz);
         }
+    }
+
+    /// Fills the ghost layers of periodic axes of `v` from the opposite side.
+    pub fn halo<T: Copy>(&self, v: &mut [T]) {
+        self.ghost_layers(|ghost, src| v.copy_within(src..src + ghost.len(), ghost.start));
     }
 
     /// Zeroes the ghost layers that [`Level::halo`] fills.
     fn clear_halo(&self, v: &mut [f32]) {
-        let [nx, ny, nz] = self.dims;
-        let (sy, sz) = (self.sy, self.sz);
-        let (py, pz) = (ny + 2, nz + 2);
-        if self.periodic[0] {
-            for k in 0..pz {
-                for j in 0..py {
-                    let row = j * sy + k * sz;
-                    v[row] = 0.0;
-                    v[row + nx + 1] = 0.0;
-                }
-            }
-        }
-        if self.periodic[1] {
-            for k in 0..pz {
-                let plane = k * sz;
-                v[plane..plane + sy].fill(0.0);
-                v[plane + (ny + 1) * sy..plane + (ny + 2) * sy].fill(0.0);
-            }
-        }
-        if self.periodic[2] {
-            v[..sz].fill(0.0);
-            v[(nz + 1) * sz..(nz + 2) * sz].fill(0.0);
-        }
+        self.ghost_layers(|ghost, _| v[ghost].fill(0.0));
     }
 
     /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
