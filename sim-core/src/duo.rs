@@ -21,6 +21,10 @@ use std::time::{Duration, Instant};
 /// How long the helper spins for new work after a task before it parks.
 const SPIN: Duration = Duration::from_micros(300);
 
+/// Polls of a running task's state before the caller yields its core instead (a few tens of
+/// microseconds; a half-kernel takes 1-50 us).
+const YIELD_AFTER_POLLS: u32 = 4096;
+
 /// Slot states.
 const IDLE: u8 = 0;
 const POSTING: u8 = 1;
@@ -127,8 +131,17 @@ impl Drop for Finish<'_> {
                 }
             }
         } else {
+            // The helper is running the task. If it takes long, it was likely preempted (another
+            // process on its core, or on ours): yield so it can finish instead of spinning
+            // against it.
+            let mut polls = 0u32;
             while s.state.load(Ordering::Acquire) != DONE {
-                std::hint::spin_loop();
+                polls = polls.saturating_add(1);
+                if polls < YIELD_AFTER_POLLS {
+                    std::hint::spin_loop();
+                } else {
+                    thread::yield_now();
+                }
             }
         }
         // SAFETY: the slot is still ours (DONE or TAKEN); nobody else reads the task now.
