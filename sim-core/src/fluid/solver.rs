@@ -322,8 +322,7 @@ impl FluidSolver {
         mg.build_hierarchy();
         self.pressure.resize();
         for c in 0..3 {
-            let row_of_cell = &self.pressure.mg.levels[0].row_of_cell;
-            self.faces[c].rebuild(&self.grid, &self.layout, c, row_of_cell);
+            self.faces[c].rebuild(&self.grid, &self.layout, c);
             let n = self.faces[c].active.len();
             for v in [&mut self.compact[c], &mut self.ghost[c]] {
                 v.clear();

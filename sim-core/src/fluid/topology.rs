@@ -40,8 +40,6 @@ pub(crate) struct FaceSet {
     pub active: Vec<u32>,
     /// Compact index of each face (NONE unless active).
     pub compact: Vec<u32>,
-    /// Pressure rows of the lower and upper cell of each active face (NONE for outflow cells).
-    pub rows: Vec<[u32; 2]>,
     /// Viscous stencil: compact index of an active neighbour, `CONST_BIT | full` for a fixed one,
     /// NONE when the neighbour is a ghost or a zero-gradient (outflow) one.
     pub stencil: Vec<[u32; 6]>,
@@ -160,9 +158,8 @@ pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
 }
 
 impl FaceSet {
-    /// Rebuilds this component's face set from the labels. `row_of_cell` maps fluid cells to
-    /// pressure rows.
-    pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize, row_of_cell: &[u32]) {
+    /// Rebuilds this component's face set from the labels.
+    pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize) {
         let nf = layout.face_count(c);
         self.fdims = layout.fdims[c];
         self.class.clear();
@@ -170,7 +167,6 @@ impl FaceSet {
         self.compact.clear();
         self.compact.resize(nf, NONE);
         self.active.clear();
-        self.rows.clear();
         self.fixed.clear();
         self.stencil.clear();
         self.diag.clear();
@@ -208,14 +204,6 @@ impl FaceSet {
                 ACTIVE => {
                     self.compact[idx] = self.active.len() as u32;
                     self.active.push(idx as u32);
-                    let row = |i: u32| {
-                        if i == NONE {
-                            NONE
-                        } else {
-                            row_of_cell[i as usize]
-                        }
-                    };
-                    self.rows.push([row(li), row(ui)]);
                 }
                 _ => {}
             }
