@@ -445,6 +445,24 @@ pub(crate) fn for_spans<T: Send>(
     ra.max(rb)
 }
 
+/// Largest `|v|` over the level's spans (in two halves on a `parallel` level).
+pub(crate) fn max_abs_spans(level: &Level, v: &[f64]) -> f64 {
+    let max = |spans: &[[u32; 2]]| {
+        spans.iter().fold(0.0f64, |m, &[s, e]| {
+            v[s as usize..e as usize]
+                .iter()
+                .fold(m, |m, &x| m.max(x.abs()))
+        })
+    };
+    let k = level.split_span;
+    if !level.parallel || k == 0 || k >= level.spans.len() {
+        return max(&level.spans);
+    }
+    let (sa, sb) = level.spans.split_at(k);
+    let (ra, rb) = crate::duo::join(|| max(sa), || max(sb));
+    ra.max(rb)
+}
+
 /// One multigrid level.
 #[derive(Default, Debug)]
 pub(crate) struct Level {

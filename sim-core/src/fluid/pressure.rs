@@ -63,8 +63,8 @@ pub(crate) struct PressureSolver {
     dd: Vec<f32>,
     dp: Vec<f32>,
     dap: Vec<f32>,
-    /// Rows above which the matrix-vector product runs on rayon.
-    pub parallel_rows: usize,
+    /// Rows above which the reference solver's matrix-vector product runs on rayon.
+    parallel_rows: usize,
 }
 
 const CHUNK: usize = 2048;
@@ -133,6 +133,16 @@ impl PressureSolver {
         for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
             v.clear();
             v.resize(len, 0.0);
+        }
+    }
+
+    /// Sets the threshold of the reference solver's rayon products and marks the levels that split
+    /// their kernels in two halves (from `rows / SPLIT_DIVISOR` fluid cells).
+    pub fn set_parallel_rows(&mut self, rows: usize) {
+        self.parallel_rows = rows;
+        let split = (rows / SPLIT_DIVISOR).max(1);
+        for l in &mut self.mg.levels[..self.mg.used] {
+            l.parallel = l.fluid >= split;
         }
     }
 
@@ -251,13 +261,9 @@ impl PressureSolver {
             dd,
             dp,
             dap,
-            parallel_rows,
             ..
         } = self;
         let periodic = mg.levels[0].periodic.iter().any(|&p| p);
-        for l in &mut mg.levels[..mg.used] {
-            l.parallel = l.fluid >= (*parallel_rows / SPLIT_DIVISOR).max(1);
-        }
         let l0max = {
             let l0 = &mut mg.levels[0];
             if periodic {

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::advection::{self, AdvectionScheme};
 use super::grid::FluidGrid;
-use super::multigrid::{for_spans, L_FLUID, L_OPEN, L_SOLID};
+use super::multigrid::{for_spans, max_abs_spans, L_FLUID, L_OPEN, L_SOLID};
 use super::pressure::{PressureSolver, ProjectionMethod, SPLIT_DIVISOR};
 use super::sample::Layout;
 use super::topology::{self, FaceSet, NONE};
@@ -183,9 +183,9 @@ pub struct FluidSolver {
     /// probes; the box does not change with the labels, so the pressure of a cell that stays fluid
     /// survives a relabelling.
     pressure_pa: Vec<f64>,
-    /// Runs of consecutive active faces per component, for the pressure-gradient update: (full
-    /// index of the first face, padded index of its upper cell, length).
-    grad_runs: [Vec<[u32; 3]>; 3],
+    /// Padded (level 0) index of the upper cell of the first face of each active run
+    /// (`FaceSet::runs`), for the pressure-gradient update.
+    run_cells: [Vec<u32>; 3],
     time_s: f64,
 }
 
@@ -215,7 +215,7 @@ impl FluidSolver {
             visc: ViscosityScratch::default(),
             pressure: PressureSolver::default(),
             pressure_pa: Vec::new(),
-            grad_runs: Default::default(),
+            run_cells: Default::default(),
             time_s: 0.0,
         };
         // Measured on the benchmark cavity: 2 sweeps and a coarse scale of 0.6 (over twice
@@ -328,21 +328,13 @@ impl FluidSolver {
                 v.clear();
                 v.resize(n, 0.0);
             }
-            self.grad_runs[c].clear();
-            let (l0, fd) = (&self.pressure.mg.levels[0], self.layout.fdims[c]);
-            for &idx in &self.faces[c].active {
-                match self.grad_runs[c].last_mut() {
-                    Some([first, _, len])
-                        if *first + *len == idx && !(idx as usize).is_multiple_of(fd[0]) =>
-                    {
-                        *len += 1
-                    }
-                    _ => {
-                        let f = self.layout.face_coords(c, idx as usize);
-                        self.grad_runs[c].push([idx, l0.pad(f[0], f[1], f[2]) as u32, 1]);
-                    }
-                }
-            }
+            let (l0, layout) = (&self.pressure.mg.levels[0], &self.layout);
+            let cells = self.faces[c].runs.iter().map(|r| {
+                let f = layout.face_coords(c, r[0] as usize);
+                l0.pad(f[0], f[1], f[2]) as u32
+            });
+            self.run_cells[c].clear();
+            self.run_cells[c].extend(cells);
             // Faces no longer tracked are zeroed so stale values never leak into samples.
             for (idx, v) in self.u[c].iter_mut().enumerate() {
                 if self.faces[c].class[idx] == topology::OTHER {
@@ -752,19 +744,8 @@ impl FluidSolver {
     }
 
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
-    fn max_divergence_m_s(&mut self) -> f64 {
-        let ps = &mut self.pressure;
-        // A reduction only (nothing is written), through the split's read-write form.
-        let bd = &mut ps.bd;
-        for_spans(&ps.mg.levels[0], bd, |spans, bd, off| {
-            let mut m = 0.0f64;
-            for &[s, e] in spans {
-                m = bd[s as usize - off..e as usize - off]
-                    .iter()
-                    .fold(m, |m, &x| m.max(x.abs()));
-            }
-            m
-        })
+    fn max_divergence_m_s(&self) -> f64 {
+        max_abs_spans(&self.pressure.mg.levels[0], &self.pressure.bd)
     }
 
     /// `u -= grad q` on the active faces, `q` being the dense solution of the pressure solver.
@@ -775,8 +756,8 @@ impl FluidSolver {
         for c in 0..3 {
             let st = strides[c];
             // `u` holds the full face array from index `off`.
-            let kernel = |runs: &[[u32; 3]], u: &mut [f32], off: usize| {
-                for &[first, pu, len] in runs {
+            let kernel = |runs: &[[u32; 3]], cells: &[u32], u: &mut [f32], off: usize| {
+                for (&[first, _, len], &pu) in runs.iter().zip(cells) {
                     let (f, pu, n) = (first as usize - off, pu as usize, len as usize);
                     let (up, lo) = (&q[pu..pu + n], &q[pu - st..pu - st + n]);
                     for ((u, &qu), &ql) in u[f..f + n].iter_mut().zip(up).zip(lo) {
@@ -784,15 +765,15 @@ impl FluidSolver {
                     }
                 }
             };
-            let runs = &self.grad_runs[c][..];
+            let (runs, cells) = (&self.faces[c].runs[..], &self.run_cells[c][..]);
             if l0.parallel && runs.len() >= 2 {
                 let m = runs.len() / 2;
                 let mid = runs[m][0] as usize;
                 let (a, b) = self.u[c].split_at_mut(mid);
-                let (ra, rb) = runs.split_at(m);
-                crate::duo::join(|| kernel(ra, a, 0), || kernel(rb, b, mid));
+                let ((ra, rb), (ca, cb)) = (runs.split_at(m), cells.split_at(m));
+                crate::duo::join(|| kernel(ra, ca, a, 0), || kernel(rb, cb, b, mid));
             } else {
-                kernel(runs, &mut self.u[c], 0);
+                kernel(runs, cells, &mut self.u[c], 0);
             }
         }
     }
@@ -809,6 +790,8 @@ impl FluidSolver {
             .max_speed_m_s()
             .max(self.params.velocity_scale_m_s)
             .max(1e-12);
+        self.pressure
+            .set_parallel_rows(self.params.parallel_threshold_cells);
         let mismatch = self.divergence_rhs();
         stats.closed_region_mismatch_m_s = stats.closed_region_mismatch_m_s.max(mismatch);
         let to_q = dt / (rho * h);
@@ -824,7 +807,6 @@ impl FluidSolver {
             }
             0.0
         });
-        self.pressure.parallel_rows = self.params.parallel_threshold_cells;
         let method = self.params.projection;
         let tol_abs = self.params.tolerance * u_ref;
         let mut iterations_left = self.params.max_iterations;

@@ -50,7 +50,8 @@ pub(crate) struct FaceSet {
     /// of such self entries, so `sum(full[nbr]) - self_diag u` is the stencil without branches.
     pub nbr: Vec<[u32; 6]>,
     pub self_diag: Vec<f32>,
-    /// Runs `[full, compact, len]` of consecutive active faces (consecutive in both arrays).
+    /// Runs `[full, compact, len]` of consecutive active faces (consecutive in both arrays), each
+    /// within one x row of faces (so its cells are consecutive too).
     pub runs: Vec<[u32; 3]>,
     /// Runs as in `runs` of faces whose stencil is the plain 7-point one (six in-array neighbours
     /// at the structured offsets, `self_diag` 6), and the compact indices of all other active
@@ -278,7 +279,13 @@ impl FaceSet {
         let offs = [1, d[0], d[0] * d[1]];
         for (n, &idx) in self.active.iter().enumerate() {
             let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
-                Some(r) if r[0] + r[2] == idx && r[1] + r[2] == n as u32 => r[2] += 1,
+                Some(r)
+                    if r[0] + r[2] == idx
+                        && r[1] + r[2] == n as u32
+                        && !(idx as usize).is_multiple_of(d[0]) =>
+                {
+                    r[2] += 1
+                }
                 _ => runs.push([idx, n as u32, 1]),
             };
             push(&mut self.runs);
