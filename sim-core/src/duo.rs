@@ -1,7 +1,8 @@
 //! A two-way fork-join for the solver's short kernels: one helper thread that spins while work is
-//! coming, so handing it half a kernel costs a cache-line round trip (well under a microsecond)
-//! instead of a thread-pool wake-up (5-50 us on the 2-core target). A fluid step runs hundreds of
-//! kernels of 5-30 us each; that overhead decides whether the second core helps at all.
+//! coming, so handing it half a kernel costs a cache-line round trip instead of a thread-pool
+//! wake-up (with rayon's fork-join the split multigrid was slower than one thread on the 2-core
+//! target). A fluid step runs hundreds of kernels of 1-30 us each (a half-sweep of the 1.2 and
+//! 0.6 mm benchmark cavities); that overhead decides whether the second core helps at all.
 //!
 //! [`join`] never waits for a helper that is not running: after its own half, the caller takes the
 //! other half back if the helper has not started it, so a parked, busy or missing helper costs at

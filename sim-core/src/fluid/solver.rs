@@ -542,7 +542,7 @@ impl FluidSolver {
     fn substep(&mut self, dt: f64, stats: &mut StepStats) {
         let h = self.grid.spacing_m();
         // Every stage splits in two halves from the multigrid's threshold (on the duo helper, whose
-        // hand-over costs well under a microsecond).
+        // hand-over is a cache-line round trip, not a thread wake-up).
         let parallel = self.split();
 
         // Advection.
