@@ -67,19 +67,25 @@ pub(crate) fn explicit(
 ) {
     let d = set.fdims;
     let (sy, sz) = (d[0], d[0] * d[1]);
-    // Regular runs: the 7-point stencil on contiguous slices (same sum order as the general
-    // form below, so the same rounding), which the compiler vectorises.
-    #[inline(always)]
-    fn runs(
-        runs: &[[u32; 3]],
-        base: usize,
-        full: &[f32],
-        ghost: &[f32],
+    /// The inputs of the regular runs: the field, its wall ghosts, `a`, and the y and z strides.
+    #[derive(Clone, Copy)]
+    struct Stencil<'s> {
+        full: &'s [f32],
+        ghost: &'s [f32],
         a: f32,
-        s: [usize; 2],
-        out: &mut [f32],
-    ) {
-        let [sy, sz] = s;
+        strides: [usize; 2],
+    }
+    // Regular runs: the 7-point stencil on contiguous slices (same sum order as the general
+    // form below, so the same rounding), which the compiler vectorises. `base` is the compact
+    // index of `out[0]`.
+    #[inline(always)]
+    fn runs(st: Stencil, runs: &[[u32; 3]], base: usize, out: &mut [f32]) {
+        let Stencil {
+            full,
+            ghost,
+            a,
+            strides: [sy, sz],
+        } = st;
         for &[f, n, len] in runs {
             let (f, n, len) = (f as usize, n as usize, len as usize);
             let u = &full[f..f + len];
@@ -103,26 +109,24 @@ pub(crate) fn explicit(
     // Compiled for AVX2 when the CPU has it (eight lanes; no FMA contraction, same values).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn runs_avx2(
-        r: &[[u32; 3]],
-        base: usize,
-        full: &[f32],
-        ghost: &[f32],
-        a: f32,
-        s: [usize; 2],
-        out: &mut [f32],
-    ) {
-        runs(r, base, full, ghost, a, s, out)
+    fn runs_avx2(st: Stencil, r: &[[u32; 3]], base: usize, out: &mut [f32]) {
+        runs(st, r, base, out)
     }
+    let st = Stencil {
+        full,
+        ghost,
+        a,
+        strides: [sy, sz],
+    };
     let run = |r: &[[u32; 3]], base: usize, out: &mut [f32]| {
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
         {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
-            unsafe { runs_avx2(r, base, full, ghost, a, [sy, sz], out) };
+            unsafe { runs_avx2(st, r, base, out) };
             return;
         }
-        runs(r, base, full, ghost, a, [sy, sz], out)
+        runs(st, r, base, out)
     };
     // The others through the general stencil (see `FaceSet::nbr`); `base` is the compact index
     // of `out[0]`.
