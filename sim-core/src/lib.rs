@@ -11,4 +11,5 @@ pub mod fem;
 pub mod fluid;
 pub mod hydraulics;
 pub mod mesh;
+pub mod scene;
 pub mod units;

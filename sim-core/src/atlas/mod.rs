@@ -314,6 +314,55 @@ impl Atlas {
         Ok(())
     }
 
+    /// Positions and `dx/dp` of the vertices `ids` at `pressure_pa`: the cubic Hermite of
+    /// [`Self::positions_at`] and its derivative in pressure (clamped to the atlas's range; the
+    /// derivative is the end level's `dx/dp` beyond it). `positions_out[n]` and `dxdp_out[n]`
+    /// belong to vertex `ids[n]`.
+    pub fn replay_subset(
+        &self,
+        pressure_pa: f64,
+        ids: &[u32],
+        positions_out: &mut [[f32; 3]],
+        dxdp_out: &mut [[f32; 3]],
+    ) -> Result<(), AtlasError> {
+        let n = self.vertex_count();
+        if positions_out.len() != ids.len() || dxdp_out.len() != ids.len() {
+            return Err(AtlasError::Argument(format!(
+                "replay_subset: {} ids but {} positions and {} dx/dp outputs",
+                ids.len(),
+                positions_out.len(),
+                dxdp_out.len()
+            )));
+        }
+        if let Some(&bad) = ids.iter().find(|&&i| i as usize >= n) {
+            return Err(AtlasError::Argument(format!(
+                "replay_subset: vertex {bad} is not in the atlas ({n} vertices)"
+            )));
+        }
+        let (k, t) = self.segment(pressure_pa);
+        let h = self.pressure_pa[k + 1] - self.pressure_pa[k];
+        let (t2, t3) = (t * t, t * t * t);
+        let c0 = (2.0 * t3 - 3.0 * t2 + 1.0) as f32;
+        let d0 = ((t3 - 2.0 * t2 + t) * h) as f32;
+        let c1 = (-2.0 * t3 + 3.0 * t2) as f32;
+        let d1 = ((t3 - t2) * h) as f32;
+        // d/dp = (1/h) d/dt.
+        let e0 = ((6.0 * t2 - 6.0 * t) / h) as f32;
+        let f0 = (3.0 * t2 - 4.0 * t + 1.0) as f32;
+        let f1 = (3.0 * t2 - 2.0 * t) as f32;
+        let (x0, x1) = (self.level_positions(k), self.level_positions(k + 1));
+        let (g0, g1) = (self.level_dxdp(k), self.level_dxdp(k + 1));
+        for (m, &i) in ids.iter().enumerate() {
+            let i = i as usize;
+            for c in 0..3 {
+                positions_out[m][c] =
+                    c0 * x0[i][c] + d0 * g0[i][c] + c1 * x1[i][c] + d1 * g1[i][c];
+                dxdp_out[m][c] = e0 * (x0[i][c] - x1[i][c]) + f0 * g0[i][c] + f1 * g1[i][c];
+            }
+        }
+        Ok(())
+    }
+
     /// Vertex positions at `pressure_pa` by linear interpolation (for comparison).
     pub fn positions_at_linear(
         &self,

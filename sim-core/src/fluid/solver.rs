@@ -862,6 +862,30 @@ impl FluidSolver {
         stats.max_div_rel = max_div / u_ref;
     }
 
+    /// Velocity (m/s, along the face's +axis) on face `face` of `cell` (0..6: -x, +x, -y, +y,
+    /// -z, +z).
+    #[inline]
+    pub fn cell_face_velocity_m_s(&self, cell: [usize; 3], face: usize) -> f32 {
+        let c = face / 2;
+        let mut f = cell;
+        if face % 2 == 1 {
+            f[c] += 1;
+            if self.layout.periodic[c] && f[c] == self.grid.dims()[c] {
+                f[c] = 0;
+            }
+        }
+        self.u[c][self.layout.face_index(c, f)]
+    }
+
+    /// Cell-centred velocity (m/s): the mean of the two faces along each axis.
+    #[inline]
+    pub fn centred_velocity_m_s(&self, cell: [usize; 3]) -> [f32; 3] {
+        std::array::from_fn(|c| {
+            0.5 * (self.cell_face_velocity_m_s(cell, 2 * c)
+                + self.cell_face_velocity_m_s(cell, 2 * c + 1))
+        })
+    }
+
     /// Velocity (m/s) interpolated at a point (clamped into the grid).
     pub fn sample_velocity_m_s(&self, point_m: [f64; 3]) -> [f64; 3] {
         let p = self.grid_units(point_m);

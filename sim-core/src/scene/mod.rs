@@ -1,0 +1,1102 @@
+//! The scene: hydraulics, deformation, voxelization, ports and fluid coupled in one real-time
+//! pipeline behind one [`Scene::step`].
+//!
+//! ```text
+//!  RigInputs ──► hydraulics ──► deformation ──► voxelize ──► ports ──► fluid ──► vortices ──► particles
+//!  (valves,      (pressure,     (atlas replay    (cavity      (labels,   (MAC      (overlay or  (blood,
+//!   pump,         flows,         of the cavity    surface ->   port and   grid      injected)    bubbles,
+//!   scope)        volume, dV/dt) surface, dx/dp)  cell states) wall vel.) step)                  fragments)
+//! ```
+//! Every stage decides whether it has work (the pressure moved, a vertex or the scope moved more
+//! than a fraction of a voxel, a port flows or the field is not at rest) and reports runs, skips
+//! and times in [`StepReport::counters`]. The hydraulics may run inside the scene (the offline
+//! runner) or in another loop that hands the scene its newest state (the daemon's 1 kHz loop):
+//! [`HydraulicsInput`]. The flux the fluid sees through the ports and moving walls equals the
+//! hydraulics' flows over the frame (see [`FluxBalance`]); `docs/scene.md` specifies it all.
+//!
+//! ```no_run
+//! use hydrometra_sim::scene::{prepare, HydraulicsInput, RigInputs, Scene, SceneDesc, SceneInputs};
+//! let desc = SceneDesc::builtin("default")?;
+//! let (assets, _) = prepare::load_or_build(&desc, None, &mut |_, _, _, _| {})?;
+//! let mut scene = Scene::new(desc, assets)?;
+//! let mut rig = RigInputs::default();
+//! rig.valve_in_opening = 1.0;
+//! rig.pump_set_pressure_pa = 12_000.0;
+//! for _ in 0..60 {
+//!     let report = scene.step(&SceneInputs { rig, hydraulics: HydraulicsInput::Own }, 1.0 / 60.0)?;
+//!     println!("{:.1} Pa, {} fluid cells", report.cavity_pressure_pa, report.fluid_cells);
+//! }
+//! # Ok::<(), hydrometra_sim::scene::SceneError>(())
+//! ```
+
+pub mod counters;
+pub mod desc;
+pub mod particles;
+mod ports;
+pub mod prepare;
+pub mod surface;
+pub mod vortices;
+pub mod voxelize;
+
+use std::time::Instant;
+
+pub use counters::{Counters, Stage, StageCounters};
+pub use desc::SceneDesc;
+pub use ports::{ScopeGeometry, ScopePart};
+pub use prepare::SceneAssets;
+pub use surface::CavitySurface;
+pub use voxelize::{VoxelBox, Voxelizer};
+
+use crate::atlas::{Atlas, AtlasError};
+use crate::fluid::{CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, StepStats};
+use crate::hydraulics::{HydraulicInputs, HydraulicModel, HydraulicState, ParamsError};
+use ports::{unit, FACE_NORMALS};
+use voxelize::{state, NO_TRIANGLE};
+
+/// Errors of the scene: every one names what failed and where.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// A scene file cannot be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The cause.
+        source: std::io::Error,
+    },
+    /// A scene description is invalid.
+    #[error("{origin}: {message}")]
+    Description {
+        /// The file or built-in name.
+        origin: String,
+        /// What is wrong, naming the key.
+        message: String,
+    },
+    /// No built-in scene of that name.
+    #[error("no built-in scene `{name}` (built-in: {}); a scene file path must exist, contain a `/` or end in .toml", known.join(", "))]
+    UnknownScene {
+        /// The name asked for.
+        name: String,
+        /// The built-in names.
+        known: Vec<&'static str>,
+    },
+    /// An atlas that does not belong to the scene's mesh.
+    #[error("{origin}: atlas does not match the scene: {message}")]
+    AtlasMismatch {
+        /// The atlas file.
+        origin: String,
+        /// What differs.
+        message: String,
+    },
+    /// An atlas error (corrupt file, bad argument).
+    #[error(transparent)]
+    Atlas(#[from] AtlasError),
+    /// Preparing the mesh or the atlas failed.
+    #[error("{0}")]
+    Prepare(String),
+    /// The hydraulic parameters are invalid.
+    #[error(transparent)]
+    Hydraulics(#[from] ParamsError),
+    /// The fluid solver refused its grid or parameters.
+    #[error(transparent)]
+    Fluid(#[from] FluidError),
+}
+
+/// The scope pose in the organ frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScopePose {
+    /// Tip position, m.
+    pub tip_position_m: [f64; 3],
+    /// View direction (need not be unit; a zero or non-finite one keeps the last).
+    pub view_direction: [f64; 3],
+    /// False when the pose is unknown (the scope is then left where it was).
+    pub valid: bool,
+}
+
+impl Default for ScopePose {
+    fn default() -> Self {
+        Self {
+            tip_position_m: [0.0; 3],
+            view_direction: [0.0, 0.0, 1.0],
+            valid: false,
+        }
+    }
+}
+
+/// What the rig says, in SI units.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RigInputs {
+    /// Inflow valve opening in [0, 1].
+    pub valve_in_opening: f64,
+    /// Outflow valve opening in [0, 1].
+    pub valve_out_opening: f64,
+    /// Pump set pressure, Pa.
+    pub pump_set_pressure_pa: f64,
+    /// The scope.
+    pub scope: ScopePose,
+    /// The case's perforation event.
+    pub perforation: bool,
+}
+
+/// Where the hydraulic state comes from.
+#[derive(Debug, Clone, Copy)]
+pub enum HydraulicsInput<'a> {
+    /// The scene steps its own model with the rig inputs (offline runner, tests).
+    Own,
+    /// Another loop steps the model; the scene follows this, its newest state.
+    External(&'a HydraulicState),
+}
+
+/// The inputs of one step.
+#[derive(Debug, Clone, Copy)]
+pub struct SceneInputs<'a> {
+    /// The rig.
+    pub rig: RigInputs,
+    /// The hydraulics.
+    pub hydraulics: HydraulicsInput<'a>,
+}
+
+/// What a voxel is, as published (the daemon maps it to the renderer contract).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum VoxelKind {
+    /// Tissue or outside the cavity.
+    #[default]
+    Solid = 0,
+    /// Fluid.
+    Fluid = 1,
+    /// The inflow port at the scope tip.
+    Inflow = 2,
+    /// The outflow holes of the sheath.
+    Outflow = 3,
+    /// The scope's sheath.
+    Scope = 4,
+    /// The cavity wall (a moving solid: its velocity is the wall's).
+    Wall = 5,
+    /// The open external os (fluid leaks out or in freely, pressure 0).
+    Open = 6,
+}
+
+/// Volume fluxes over the last frame, m^3/s; positive into the cavity.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FluxBalance {
+    /// The hydraulics' frame-mean inflow.
+    pub hydraulic_inflow_m3_per_s: f64,
+    /// The hydraulics' frame-mean outflow (positive out).
+    pub hydraulic_outflow_m3_per_s: f64,
+    /// The hydraulics' frame-mean losses: leak, absorption, perforation (positive out).
+    pub hydraulic_losses_m3_per_s: f64,
+    /// The hydraulics' cavity volume change over the frame, m^3/s.
+    pub hydraulic_dvdt_m3_per_s: f64,
+    /// Measured on the fluid's faces after the step: into the fluid through the inflow port.
+    pub fluid_inflow_m3_per_s: f64,
+    /// Measured: out of the fluid through the outflow holes (positive out).
+    pub fluid_outflow_m3_per_s: f64,
+    /// Measured: out of the fluid into the moving walls (positive out; equals dV/dt).
+    pub fluid_wall_m3_per_s: f64,
+    /// Measured: out through the open external os (positive out; carries the losses).
+    pub fluid_open_m3_per_s: f64,
+    /// Incompatible flux the projection removed from closed fluid regions (m^3/s).
+    pub closed_region_mismatch_m3_per_s: f64,
+    /// The wall velocities from the atlas (`dx/dp dp/dt`) were scaled by this to carry dV/dt
+    /// exactly over the staircase wall (1 when exact; 0 when no wall moved).
+    pub wall_flux_scale: f64,
+    /// The inflow could not enter the fluid (tip in tissue, or not in the grid).
+    pub inflow_blocked: bool,
+    /// The outflow holes have no fluid around them.
+    pub outflow_blocked: bool,
+}
+
+/// The report of one step.
+#[derive(Debug, Clone, Default)]
+pub struct StepReport {
+    /// Steps so far.
+    pub frame: u64,
+    /// Scene time, s.
+    pub time_s: f64,
+    /// Cavity pressure the surface was replayed at, Pa.
+    pub cavity_pressure_pa: f64,
+    /// The hydraulics' cavity volume, m^3.
+    pub cavity_volume_m3: f64,
+    /// Volume enclosed by the replayed surface, m^3.
+    pub surface_volume_m3: f64,
+    /// Fluid cells now.
+    pub fluid_cells: usize,
+    /// Volume of the fluid cells, m^3 (the conservative voxelization's volume).
+    pub grid_fluid_volume_m3: f64,
+    /// Whether the fluid stage idled for too few fluid cells.
+    pub fluid_idle: bool,
+    /// Cells whose label changed in this step.
+    pub relabelled_cells: usize,
+    /// The fluid step's own counters (when it ran).
+    pub fluid: Option<StepStats>,
+    /// The fluxes.
+    pub flux: FluxBalance,
+    /// Per-stage counters (cumulative).
+    pub counters: Counters,
+}
+
+/// The cavity surface as published: closed (the opening's cap last), normals into the fluid.
+#[derive(Debug, Clone, Copy)]
+pub struct CavityView<'a> {
+    /// Triangles (three vertex indices each).
+    pub triangles: &'a [[u32; 3]],
+    /// Vertex positions, m.
+    pub positions_m: &'a [[f32; 3]],
+    /// Changes when the triangles change.
+    pub topology_revision: u64,
+    /// The last `cap_triangles` close the external os.
+    pub cap_triangles: usize,
+    /// The pressure the positions belong to, Pa.
+    pub pressure_pa: f64,
+}
+
+/// The flow field on the voxel grid.
+pub struct FlowField<'a> {
+    scene: &'a Scene,
+    solver: &'a FluidSolver,
+}
+
+impl FlowField<'_> {
+    /// Cells per axis.
+    pub fn dims(&self) -> [usize; 3] {
+        self.scene.cells.dims
+    }
+    /// Centre of cell (0, 0, 0), m.
+    pub fn first_centre_m(&self) -> [f64; 3] {
+        self.scene.cells.centre_m(0, 0, 0)
+    }
+    /// Cell edge, m.
+    pub fn spacing_m(&self) -> f64 {
+        self.scene.cells.spacing_m
+    }
+    /// Kind of every cell, x fastest.
+    pub fn kinds(&self) -> &[VoxelKind] {
+        &self.scene.kinds
+    }
+    /// Cell-centred velocities (m/s) into `out` (one per cell, x fastest): the mean of the faces
+    /// in fluid and open cells, the prescribed velocity in ports and walls, zero elsewhere;
+    /// plus the vortex overlay where it is display-only.
+    pub fn velocities_into(&self, out: &mut [[f32; 3]]) {
+        let [nx, ny, nz] = self.dims();
+        let grid = self.solver.grid();
+        let mut n = 0;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    if n >= out.len() {
+                        return;
+                    }
+                    out[n] = match self.scene.kinds[n] {
+                        VoxelKind::Fluid | VoxelKind::Open => {
+                            self.solver.centred_velocity_m_s([i, j, k])
+                        }
+                        VoxelKind::Inflow | VoxelKind::Outflow | VoxelKind::Wall => {
+                            grid.velocity_at(n)
+                        }
+                        _ => [0.0; 3],
+                    };
+                    n += 1;
+                }
+            }
+        }
+        if let Some(v) = &self.scene.vortices {
+            v.overlay_into(self.scene, out);
+        }
+    }
+    /// The fluid solver (face velocities, pressure, sampling).
+    pub fn solver(&self) -> &FluidSolver {
+        self.solver
+    }
+}
+
+/// Hydraulic figures at the end of the previous frame.
+#[derive(Debug, Clone, Copy)]
+struct HydraulicMark {
+    time_s: f64,
+    pressure_pa: f64,
+    volume_m3: f64,
+    inflow_m3: f64,
+    outflow_m3: f64,
+    lost_m3: f64,
+}
+
+fn mark(h: &HydraulicState) -> HydraulicMark {
+    let t = &h.totals;
+    HydraulicMark {
+        time_s: h.time_s,
+        pressure_pa: h.cavity_pressure_pa,
+        volume_m3: h.cavity_volume_m3,
+        inflow_m3: t.inflow_m3,
+        outflow_m3: t.outflow_m3,
+        lost_m3: t.leak_m3 + t.absorbed_m3 + t.perforation_m3,
+    }
+}
+
+/// One port or wall cell and its faces on fluid.
+#[derive(Debug, Clone, Copy)]
+struct BoundaryCell {
+    cell: u32,
+    /// Bit f set: face f (0..6) borders fluid.
+    faces: u8,
+}
+
+/// The coupled pipeline.
+pub struct Scene {
+    desc: SceneDesc,
+    atlas: Atlas,
+    surface: CavitySurface,
+    voxelizer: Voxelizer,
+    cells: VoxelBox,
+    kinds: Vec<VoxelKind>,
+    labels: Vec<CellLabel>,
+    fluid: Option<FluidSolver>,
+    hydraulics: HydraulicModel,
+    hydraulic_state: HydraulicState,
+    last: Option<HydraulicMark>,
+    scope: Option<ScopeGeometry>,
+    scope_built: Option<ScopeGeometry>,
+    inflow: Vec<BoundaryCell>,
+    outflow: Vec<BoundaryCell>,
+    walls: Vec<BoundaryCell>,
+    open: Vec<BoundaryCell>,
+    candidates: Vec<(f64, BoundaryCell, f64)>,
+    wall_velocity: Vec<[f32; 3]>,
+    labels_dirty: bool,
+    topology_revision: u64,
+    report: StepReport,
+    /// Rankine vortices (issue: vortices and particles), present when the scene asks.
+    pub(crate) vortices: Option<vortices::Vortices>,
+    /// Particles, present when the scene asks.
+    pub(crate) particles: Option<particles::Particles>,
+}
+
+impl Scene {
+    /// Builds the scene's stages: the grid box covers the cavity at the atlas's highest pressure
+    /// (plus a cell of wall), clipped to the region of interest.
+    pub fn new(desc: SceneDesc, assets: SceneAssets) -> Result<Self, SceneError> {
+        desc.validate()?;
+        let SceneAssets { mesh, atlas } = assets;
+        let mut surface = CavitySurface::new(&mesh)?;
+        let top = atlas.pressure_pa[atlas.level_count() - 1];
+        surface.replay(&atlas, top)?;
+        let h = desc.voxel_m();
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in surface.positions_m() {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a] as f64);
+                hi[a] = hi[a].max(p[a] as f64);
+            }
+        }
+        if let (Some(rlo), Some(rhi)) = (desc.fluid.roi_min_mm, desc.fluid.roi_max_mm) {
+            for a in 0..3 {
+                lo[a] = lo[a].max(rlo[a] * 1e-3);
+                hi[a] = hi[a].min(rhi[a] * 1e-3);
+            }
+        }
+        if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
+            return Err(SceneError::Description {
+                origin: desc.origin.clone(),
+                message: format!(
+                    "`fluid.roi_min_mm`: the region of interest misses the cavity \
+                     ({lo:?} .. {hi:?} m)"
+                ),
+            });
+        }
+        let dims: [usize; 3] = std::array::from_fn(|a| ((hi[a] - lo[a]) / h).ceil() as usize + 2);
+        let cells = VoxelBox {
+            dims,
+            origin_m: std::array::from_fn(|a| lo[a] - h),
+            spacing_m: h,
+        };
+        if cells.cell_count() > 64_000_000 {
+            return Err(SceneError::Description {
+                origin: desc.origin.clone(),
+                message: format!(
+                    "`fluid.voxel_mm` = {}: {dims:?} = {} cells is too many",
+                    desc.fluid.voxel_mm,
+                    cells.cell_count()
+                ),
+            });
+        }
+        let voxelizer = Voxelizer::new(cells, surface.triangles().to_vec(), surface.vertex_count());
+        let fluid = if desc.stages.fluid {
+            let grid = FluidGrid::new(dims, h, cells.origin_m, [false; 3])?;
+            let params = FluidParams {
+                advection: desc.fluid.advection,
+                tolerance: desc.fluid.divergence_tolerance,
+                ..FluidParams::default()
+            };
+            let mut solver = FluidSolver::new(grid, params)?;
+            // Start all solid: the first step labels the cavity.
+            let g = solver.grid_mut();
+            for k in 0..dims[2] {
+                for j in 0..dims[1] {
+                    for i in 0..dims[0] {
+                        g.set_label([i, j, k], CellLabel::Solid)?;
+                    }
+                }
+            }
+            Some(solver)
+        } else {
+            None
+        };
+        let compliance = prepare::compliance_of(&atlas).map_err(|e| {
+            SceneError::Prepare(format!("{}: the atlas's P-V curve: {e}", desc.origin))
+        })?;
+        let hydraulics = HydraulicModel::with_compliance(desc.hydraulics.clone(), Box::new(compliance))?;
+        let hydraulic_state = *hydraulics.state();
+        let n = cells.cell_count();
+        let mut counters = Counters::default();
+        for s in [Stage::Deformation, Stage::Voxelize] {
+            counters.get_mut(s).present = true;
+        }
+        counters.get_mut(Stage::Ports).present = fluid.is_some();
+        counters.get_mut(Stage::Fluid).present = fluid.is_some();
+        counters.get_mut(Stage::Vortices).present = desc.stages.vortices;
+        counters.get_mut(Stage::Particles).present = desc.stages.particles;
+        let vortices = desc.stages.vortices.then(vortices::Vortices::default);
+        let particles = desc.stages.particles.then(particles::Particles::default);
+        Ok(Self {
+            surface,
+            voxelizer,
+            cells,
+            kinds: vec![VoxelKind::Solid; n],
+            labels: vec![CellLabel::Solid; n],
+            fluid,
+            hydraulics,
+            hydraulic_state,
+            last: None,
+            scope: None,
+            scope_built: None,
+            inflow: Vec::new(),
+            outflow: Vec::new(),
+            walls: Vec::new(),
+            open: Vec::new(),
+            candidates: Vec::new(),
+            wall_velocity: vec![[0.0; 3]; n],
+            labels_dirty: true,
+            topology_revision: 1,
+            report: StepReport {
+                counters,
+                ..StepReport::default()
+            },
+            vortices,
+            particles,
+            desc,
+            atlas,
+        })
+    }
+
+    /// The description.
+    pub fn desc(&self) -> &SceneDesc {
+        &self.desc
+    }
+    /// The atlas.
+    pub fn atlas(&self) -> &Atlas {
+        &self.atlas
+    }
+    /// The last step's report.
+    pub fn report(&self) -> &StepReport {
+        &self.report
+    }
+    /// The hydraulic state the last step followed.
+    pub fn hydraulic_state(&self) -> &HydraulicState {
+        &self.hydraulic_state
+    }
+    /// The scene's own hydraulic model (stepped under [`HydraulicsInput::Own`]).
+    pub fn hydraulic_model(&mut self) -> &mut HydraulicModel {
+        &mut self.hydraulics
+    }
+    /// The voxel box.
+    pub fn cells(&self) -> &VoxelBox {
+        &self.cells
+    }
+    /// The voxelizer (cell states of the cavity surface).
+    pub fn voxelizer(&self) -> &Voxelizer {
+        &self.voxelizer
+    }
+    /// The scope as last placed, if ever.
+    pub fn scope(&self) -> Option<&ScopeGeometry> {
+        self.scope.as_ref()
+    }
+    /// The cavity surface.
+    pub fn cavity(&self) -> CavityView<'_> {
+        CavityView {
+            triangles: self.surface.triangles(),
+            positions_m: self.surface.positions_m(),
+            topology_revision: self.topology_revision,
+            cap_triangles: self.surface.cap_triangles(),
+            pressure_pa: self.surface.pressure_pa(),
+        }
+    }
+    /// The flow field, if the scene has a fluid stage.
+    pub fn flow(&self) -> Option<FlowField<'_>> {
+        self.fluid.as_ref().map(|solver| FlowField {
+            scene: self,
+            solver,
+        })
+    }
+    /// The particles, if the scene has them.
+    pub fn particles(&self) -> Option<&particles::Particles> {
+        self.particles.as_ref()
+    }
+
+    /// Advances the scene by `dt_s` seconds.
+    pub fn step(&mut self, inputs: &SceneInputs<'_>, dt_s: f64) -> Result<&StepReport, SceneError> {
+        let started = Instant::now();
+        let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s.min(1.0) } else { 0.0 };
+        self.report.frame += 1;
+        self.report.time_s += dt_s;
+        self.report.relabelled_cells = 0;
+
+        // 1. Hydraulics.
+        let t = Instant::now();
+        match inputs.hydraulics {
+            HydraulicsInput::Own => {
+                let rig = &inputs.rig;
+                let hin = HydraulicInputs {
+                    valve_in_opening: rig.valve_in_opening,
+                    valve_out_opening: rig.valve_out_opening,
+                    pump_set_pressure_pa: rig.pump_set_pressure_pa,
+                    perforation: rig.perforation,
+                };
+                // The daemon's 1 kHz tick: the same substeps offline.
+                let n = (dt_s / 1e-3).ceil().max(1.0) as usize;
+                for _ in 0..n {
+                    self.hydraulics.step(&hin, dt_s / n as f64);
+                }
+                self.hydraulic_state = *self.hydraulics.state();
+                let c = self.report.counters.get_mut(Stage::Hydraulics);
+                c.present = true;
+                c.ran(ms(t));
+            }
+            HydraulicsInput::External(state) => {
+                self.hydraulic_state = *state;
+                self.report.counters.get_mut(Stage::Hydraulics).skipped();
+            }
+        }
+        let now = mark(&self.hydraulic_state);
+        let (flux_targets, dpdt) = self.frame_flows(now, dt_s);
+        self.last = Some(now);
+        self.report.cavity_volume_m3 = now.volume_m3;
+
+        // 2. Deformation.
+        let t = Instant::now();
+        let p = self.hydraulic_state.cavity_pressure_pa;
+        let p = if p.is_finite() { p } else { 0.0 };
+        let moved = (p - self.surface.pressure_pa()).abs() > self.desc.skip.pressure_tolerance_pa
+            || self.surface.pressure_pa().is_nan();
+        if moved {
+            self.surface.replay(&self.atlas, p)?;
+            self.report.surface_volume_m3 = self.surface.enclosed_volume_m3();
+            self.report.counters.get_mut(Stage::Deformation).ran(ms(t));
+        } else {
+            self.report.counters.get_mut(Stage::Deformation).skipped();
+        }
+        self.report.cavity_pressure_pa = self.surface.pressure_pa();
+
+        // 3. Voxelization.
+        let t = Instant::now();
+        let threshold = self.desc.skip.voxel_move_fraction * self.cells.spacing_m;
+        let stats = self.voxelizer.update(self.surface.positions_m(), threshold);
+        if stats.moved_vertices > 0 {
+            self.report.counters.get_mut(Stage::Voxelize).ran(ms(t));
+            if stats.changed_cells > 0 {
+                self.labels_dirty = true;
+            }
+        } else {
+            self.report.counters.get_mut(Stage::Voxelize).skipped();
+        }
+
+        // The scope.
+        if inputs.rig.scope.valid {
+            let s = &inputs.rig.scope;
+            if let Some(dir) = unit(s.view_direction) {
+                if s.tip_position_m.iter().all(|v| v.is_finite()) {
+                    self.scope = Some(ScopeGeometry {
+                        tip_m: s.tip_position_m,
+                        dir,
+                        radius_m: 0.5e-3 * self.desc.scope.sheath_outer_diameter_mm,
+                        holes_m: self.desc.scope.outflow_holes_from_tip_mm.map(|v| v * 1e-3),
+                    });
+                }
+            }
+        }
+        if self.scope_moved() {
+            self.labels_dirty = true;
+        }
+
+        if self.fluid.is_none() {
+            self.finish(started);
+            return Ok(&self.report);
+        }
+
+        // 4. Ports: labels (when the cavity or the scope moved) and boundary velocities.
+        let t = Instant::now();
+        let relabel = self.labels_dirty;
+        if relabel {
+            self.compose_labels()?;
+            self.labels_dirty = false;
+        }
+        let flows_on = flux_targets.0.abs() + flux_targets.1.abs() + flux_targets.3.abs() > 0.0;
+        if relabel || flows_on || self.report.flux.wall_flux_scale != 0.0 {
+            self.set_boundary_velocities(flux_targets, dpdt);
+            self.report.counters.get_mut(Stage::Ports).ran(ms(t));
+        } else {
+            self.report.counters.get_mut(Stage::Ports).skipped();
+        }
+
+        // 5. Fluid.
+        let t = Instant::now();
+        let min_cells = self.desc.fluid.min_fluid_cells;
+        let rest = self.desc.skip.rest_speed_m_s;
+        let solver = self.fluid.as_mut().ok_or_else(|| SceneError::Prepare("no fluid".into()))?;
+        let fluid_cells = self.report.fluid_cells;
+        self.report.fluid_idle = fluid_cells < min_cells;
+        let at_rest = !flows_on && !relabel && solver.max_speed_m_s() < rest;
+        if self.report.fluid_idle || at_rest || dt_s == 0.0 {
+            self.report.fluid = None;
+            self.report.counters.get_mut(Stage::Fluid).skipped();
+        } else {
+            let stats = solver.step(dt_s)?;
+            self.report.fluid = Some(stats);
+            self.report.counters.get_mut(Stage::Fluid).ran(ms(t));
+            self.measure_fluxes(flux_targets);
+            self.report.flux.closed_region_mismatch_m3_per_s = stats.closed_region_mismatch_m_s
+                * self.cells.spacing_m
+                * self.cells.spacing_m;
+        }
+
+        // 6. Vortices and particles (after the fluid).
+        let t = Instant::now();
+        let ran = match self.vortices.take() {
+            Some(mut v) => {
+                let ran = v.step(self, dt_s);
+                self.vortices = Some(v);
+                Some(ran)
+            }
+            None => None,
+        };
+        match ran {
+            Some(true) => self.report.counters.get_mut(Stage::Vortices).ran(ms(t)),
+            Some(false) => self.report.counters.get_mut(Stage::Vortices).skipped(),
+            None => {}
+        }
+        let t = Instant::now();
+        let ran = match self.particles.take() {
+            Some(mut p) => {
+                let ran = p.step(&*self, dt_s);
+                self.particles = Some(p);
+                Some(ran)
+            }
+            None => None,
+        };
+        match ran {
+            Some(true) => self.report.counters.get_mut(Stage::Particles).ran(ms(t)),
+            Some(false) => self.report.counters.get_mut(Stage::Particles).skipped(),
+            None => {}
+        }
+
+        self.finish(started);
+        Ok(&self.report)
+    }
+
+    fn finish(&mut self, started: Instant) {
+        self.report.counters.step.ran(ms(started));
+        for s in Stage::ALL {
+            let c = self.report.counters.get_mut(s);
+            if !c.present {
+                c.ran_last = false;
+            }
+        }
+    }
+
+    /// Frame-mean flows `(in, out, losses, dV/dt)` in m^3/s from the cumulative totals, and
+    /// `dp/dt` (Pa/s). The first frame, a new procedure or a zero `dt` give the instantaneous
+    /// flows.
+    fn frame_flows(&self, now: HydraulicMark, dt_s: f64) -> ((f64, f64, f64, f64), f64) {
+        let f = &self.hydraulic_state.flows;
+        let instantaneous = (
+            f.inflow_m3_per_s,
+            f.outflow_m3_per_s,
+            f.leak_m3_per_s + f.absorption_m3_per_s + f.perforation_m3_per_s,
+            f.net_m3_per_s(),
+        );
+        match self.last {
+            Some(prev) if now.time_s > prev.time_s && now.inflow_m3 >= prev.inflow_m3 => {
+                let dt = now.time_s - prev.time_s;
+                let q_in = (now.inflow_m3 - prev.inflow_m3) / dt;
+                let q_out = (now.outflow_m3 - prev.outflow_m3) / dt;
+                let lost = (now.lost_m3 - prev.lost_m3) / dt;
+                let dvdt = (now.volume_m3 - prev.volume_m3) / dt;
+                ((q_in, q_out, lost, dvdt), (now.pressure_pa - prev.pressure_pa) / dt)
+            }
+            Some(prev) if dt_s > 0.0 && now.time_s == prev.time_s => {
+                // The external model did not advance: nothing flowed.
+                ((0.0, 0.0, 0.0, 0.0), 0.0)
+            }
+            _ => (instantaneous, 0.0),
+        }
+    }
+
+    fn scope_moved(&self) -> bool {
+        match (self.scope, self.scope_built) {
+            (None, _) => false,
+            (Some(_), None) => true,
+            (Some(a), Some(b)) => {
+                let h = self.cells.spacing_m;
+                let f = self.desc.skip.voxel_move_fraction.max(1e-6);
+                let dx = (0..3).map(|i| (a.tip_m[i] - b.tip_m[i]).powi(2)).sum::<f64>().sqrt();
+                let cos = (0..3).map(|i| a.dir[i] * b.dir[i]).sum::<f64>();
+                // The far end of the 200 mm sheath moves by L sin(angle): only the part in the
+                // grid matters, so the angle is compared over the grid's diagonal.
+                let diag = (0..3)
+                    .map(|i| (self.cells.dims[i] as f64 * h).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let sin = (1.0 - cos.min(1.0) * cos.min(1.0)).max(0.0).sqrt();
+                dx > f * h || sin * diag > f * h
+            }
+        }
+    }
+
+    /// Kinds and labels of every cell from the voxelizer and the scope; rebuilds the boundary
+    /// cell lists.
+    fn compose_labels(&mut self) -> Result<(), SceneError> {
+        let cells = self.cells;
+        let [nx, ny, nz] = cells.dims;
+        let h = cells.spacing_m;
+        let states = self.voxelizer.states();
+        let owners = self.voxelizer.owners();
+        let first_cap = self.surface.first_cap_triangle() as u32;
+        // Cavity first.
+        for n in 0..cells.cell_count() {
+            self.kinds[n] = match states[n] {
+                state::INSIDE => VoxelKind::Fluid,
+                state::BAND if owners[n] != NO_TRIANGLE && owners[n] >= first_cap => {
+                    VoxelKind::Open
+                }
+                state::BAND => VoxelKind::Wall,
+                _ => VoxelKind::Solid,
+            };
+        }
+        // The scope on top.
+        self.scope_built = self.scope;
+        if let Some(sc) = self.scope {
+            let x0 = cells.origin_m[0];
+            for k in 0..nz {
+                for j in 0..ny {
+                    let c = cells.centre_m(0, j, k);
+                    let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) else {
+                        continue;
+                    };
+                    for i in a..=b {
+                        let p = cells.centre_m(i, j, k);
+                        let part = sc.part(p, h);
+                        if part != ScopePart::None {
+                            self.kinds[cells.index(i, j, k)] = VoxelKind::Scope;
+                        }
+                    }
+                }
+            }
+        }
+        // Boundary lists: walls beside fluid, port candidates at the tip and in the hole band.
+        self.walls.clear();
+        self.open.clear();
+        self.inflow.clear();
+        self.outflow.clear();
+        self.candidates.clear();
+        let mut fluid_cells = 0usize;
+        for k in 0..nz {
+            for j in 0..ny {
+                for i in 0..nx {
+                    let n = cells.index(i, j, k);
+                    let kind = self.kinds[n];
+                    if kind == VoxelKind::Fluid {
+                        fluid_cells += 1;
+                        continue;
+                    }
+                    if kind == VoxelKind::Solid {
+                        continue;
+                    }
+                    let faces = self.fluid_faces(i, j, k);
+                    if faces == 0 {
+                        continue;
+                    }
+                    let b = BoundaryCell {
+                        cell: n as u32,
+                        faces,
+                    };
+                    match kind {
+                        VoxelKind::Wall => self.walls.push(b),
+                        VoxelKind::Open => self.open.push(b),
+                        VoxelKind::Scope => {
+                            if let Some(sc) = self.scope {
+                                let p = cells.centre_m(i, j, k);
+                                match sc.part(p, h) {
+                                    ScopePart::Tip => {
+                                        let g = face_weight(faces, sc.dir);
+                                        let (_, r) = sc.axial_radial(p);
+                                        self.candidates.push((r, b, g));
+                                    }
+                                    ScopePart::Holes => self.outflow.push(b),
+                                    _ => {}
+                                }
+                            }
+                        }
+                        _ => {}
+                    }
+                }
+            }
+        }
+        // The inflow port: nearest the axis first, as many as bring the fluid-facing area closest
+        // to the channel's.
+        self.candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let area = self.desc.scope.inflow_channel_area_mm2 * 1e-6;
+        let face = h * h;
+        let (mut g, mut best, mut best_err) = (0.0, 0, f64::INFINITY);
+        for (m, c) in self.candidates.iter().enumerate() {
+            g += c.2 * face;
+            let err = (g - area).abs();
+            if g > 0.0 && err < best_err {
+                best_err = err;
+                best = m + 1;
+            }
+        }
+        self.inflow.extend(self.candidates[..best].iter().map(|c| c.1));
+        for b in &self.inflow {
+            self.kinds[b.cell as usize] = VoxelKind::Inflow;
+        }
+        for b in &self.outflow {
+            self.kinds[b.cell as usize] = VoxelKind::Outflow;
+        }
+        self.report.fluid_cells = fluid_cells;
+        self.report.grid_fluid_volume_m3 = fluid_cells as f64 * h * h * h;
+
+        // Labels into the solver.
+        let mut changed = 0;
+        if let Some(solver) = self.fluid.as_mut() {
+            let g = solver.grid_mut();
+            for k in 0..nz {
+                for j in 0..ny {
+                    for i in 0..nx {
+                        let n = cells.index(i, j, k);
+                        let label = match self.kinds[n] {
+                            VoxelKind::Fluid => CellLabel::Fluid,
+                            VoxelKind::Open => CellLabel::Outflow,
+                            VoxelKind::Solid => CellLabel::Solid,
+                            _ => CellLabel::Velocity,
+                        };
+                        if self.labels[n] != label {
+                            self.labels[n] = label;
+                            g.set_label([i, j, k], label)?;
+                            changed += 1;
+                        }
+                    }
+                }
+            }
+            // Cells that stopped being ports or walls move no more.
+            for n in 0..cells.cell_count() {
+                if self.labels[n] != CellLabel::Velocity && self.wall_velocity[n] != [0.0; 3] {
+                    self.wall_velocity[n] = [0.0; 3];
+                    let c = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                    g.set_velocity(c, [0.0; 3])?;
+                }
+            }
+        }
+        self.report.relabelled_cells = changed;
+        Ok(())
+    }
+
+    /// Bits of the faces of cell `(i, j, k)` that border fluid.
+    fn fluid_faces(&self, i: usize, j: usize, k: usize) -> u8 {
+        let c = &self.cells;
+        let [nx, ny, nz] = c.dims;
+        let mut bits = 0u8;
+        let neighbours = [
+            (i > 0).then(|| c.index(i.wrapping_sub(1), j, k)),
+            (i + 1 < nx).then(|| c.index(i + 1, j, k)),
+            (j > 0).then(|| c.index(i, j.wrapping_sub(1), k)),
+            (j + 1 < ny).then(|| c.index(i, j + 1, k)),
+            (k > 0).then(|| c.index(i, j, k.wrapping_sub(1))),
+            (k + 1 < nz).then(|| c.index(i, j, k + 1)),
+        ];
+        for (f, n) in neighbours.iter().enumerate() {
+            if let Some(n) = n {
+                if self.kinds[*n] == VoxelKind::Fluid {
+                    bits |= 1 << f;
+                }
+            }
+        }
+        bits
+    }
+
+    /// Port and wall velocities with exact fluxes: `targets = (in, out, losses, dV/dt)`.
+    fn set_boundary_velocities(&mut self, targets: (f64, f64, f64, f64), dpdt: f64) {
+        let (q_in, q_out, _losses, dvdt) = targets;
+        let cells = self.cells;
+        let h2 = cells.spacing_m * cells.spacing_m;
+        let [nx, ny, _] = cells.dims;
+        let coords = |n: u32| {
+            let n = n as usize;
+            [n % nx, (n / nx) % ny, n / (nx * ny)]
+        };
+        let Some(solver) = self.fluid.as_mut() else {
+            return;
+        };
+        let flux = &mut self.report.flux;
+        // Inflow: u d, u = Q_in / G_in.
+        flux.inflow_blocked = false;
+        flux.outflow_blocked = false;
+        if let Some(sc) = self.scope_built {
+            let g_in: f64 = self.inflow.iter().map(|b| face_weight(b.faces, sc.dir)).sum::<f64>() * h2;
+            let u = if g_in > 0.0 { q_in / g_in } else { 0.0 };
+            flux.inflow_blocked = g_in <= 0.0 && q_in > 0.0;
+            for b in &self.inflow {
+                let v = sc.dir.map(|d| (u * d) as f32);
+                self.wall_velocity[b.cell as usize] = v;
+                let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+            }
+            // Outflow holes: -u r_hat, u = Q_out / G_out.
+            let mut g_out = 0.0;
+            for b in &self.outflow {
+                let r = radial(&sc, cells.centre_m_of(b.cell));
+                g_out += face_weight(b.faces, r) * h2;
+            }
+            let u = if g_out > 0.0 { q_out / g_out } else { 0.0 };
+            flux.outflow_blocked = g_out <= 0.0 && q_out > 0.0;
+            for b in &self.outflow {
+                let r = radial(&sc, cells.centre_m_of(b.cell));
+                let v = r.map(|c| (-u * c) as f32);
+                self.wall_velocity[b.cell as usize] = v;
+                let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+            }
+        } else {
+            flux.inflow_blocked = q_in > 0.0;
+            flux.outflow_blocked = q_out > 0.0;
+        }
+        // Walls: dx/dp dp/dt at the owning triangle, scaled so that the flux into the walls is
+        // dV/dt exactly.
+        let owners = self.voxelizer.owners();
+        let tris = self.surface.triangles();
+        let dxdp = self.surface.dxdp_m_per_pa();
+        let mut raw_out = 0.0; // flux out of the fluid into the walls, raw
+        for b in &self.walls {
+            let t = owners[b.cell as usize];
+            let v = if t == NO_TRIANGLE {
+                [0.0; 3]
+            } else {
+                let [a, bb, c] = tris[t as usize].map(|i| dxdp[i as usize]);
+                std::array::from_fn(|x| (a[x] + bb[x] + c[x]) as f64 / 3.0 * dpdt)
+            };
+            // Out of the fluid = -(v . n_into_fluid).
+            raw_out -= face_weight(b.faces, v) * h2;
+            self.wall_velocity[b.cell as usize] = v.map(|x| x as f32);
+        }
+        let scale = if dvdt == 0.0 {
+            0.0
+        } else if raw_out * dvdt > 0.0 && (raw_out / dvdt).abs() > 1e-3 {
+            dvdt / raw_out
+        } else {
+            // The atlas's wall motion does not carry dV/dt's sign here (a staircase artefact or
+            // an external pressure jump): a uniform normal motion instead.
+            let mut area = 0.0;
+            for b in &self.walls {
+                let n = face_normal_sum(b.faces);
+                self.wall_velocity[b.cell as usize] = n.map(|x| -x as f32);
+                area += face_weight(b.faces, n) * h2;
+            }
+            if area > 0.0 {
+                dvdt / area
+            } else {
+                0.0
+            }
+        };
+        flux.wall_flux_scale = scale;
+        for b in &self.walls {
+            let v = self.wall_velocity[b.cell as usize].map(|x| (x as f64 * scale) as f32);
+            self.wall_velocity[b.cell as usize] = v;
+            let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+        }
+        flux.hydraulic_inflow_m3_per_s = q_in;
+        flux.hydraulic_outflow_m3_per_s = q_out;
+        flux.hydraulic_losses_m3_per_s = targets.2;
+        flux.hydraulic_dvdt_m3_per_s = dvdt;
+    }
+
+    /// Measures the fluxes through the boundary cells' fluid faces after a step.
+    fn measure_fluxes(&mut self, _targets: (f64, f64, f64, f64)) {
+        let Some(solver) = self.fluid.as_ref() else {
+            return;
+        };
+        let cells = self.cells;
+        let h2 = cells.spacing_m * cells.spacing_m;
+        let [nx, ny, _] = cells.dims;
+        // Flux out of the fluid into boundary cell b.
+        let out_of_fluid = |b: &BoundaryCell| -> f64 {
+            let n = b.cell as usize;
+            let c = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            let mut s = 0.0;
+            for f in 0..6 {
+                if b.faces >> f & 1 == 1 {
+                    // Face f of the boundary cell; its normal points into the fluid.
+                    let u = solver.cell_face_velocity_m_s(c, f) as f64;
+                    let sign = if f % 2 == 1 { 1.0 } else { -1.0 };
+                    s -= sign * u * h2;
+                }
+            }
+            s
+        };
+        let flux = &mut self.report.flux;
+        flux.fluid_inflow_m3_per_s = -self.inflow.iter().map(out_of_fluid).sum::<f64>();
+        flux.fluid_outflow_m3_per_s = self.outflow.iter().map(out_of_fluid).sum();
+        flux.fluid_wall_m3_per_s = self.walls.iter().map(out_of_fluid).sum();
+        flux.fluid_open_m3_per_s = self.open.iter().map(out_of_fluid).sum();
+    }
+}
+
+impl VoxelBox {
+    /// Centre of the cell with linear index `n`, m.
+    pub fn centre_m_of(&self, n: u32) -> [f64; 3] {
+        let n = n as usize;
+        let [nx, ny, _] = self.dims;
+        self.centre_m(n % nx, (n / nx) % ny, n / (nx * ny))
+    }
+}
+
+/// Sum over the set faces of `v . n` (n: the face's unit normal from the cell into the fluid).
+fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
+    let mut s = 0.0;
+    for (f, n) in FACE_NORMALS.iter().enumerate() {
+        if faces >> f & 1 == 1 {
+            s += v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+        }
+    }
+    s
+}
+
+/// Sum of the unit normals of the set faces.
+fn face_normal_sum(faces: u8) -> [f64; 3] {
+    let mut s = [0.0; 3];
+    for (f, n) in FACE_NORMALS.iter().enumerate() {
+        if faces >> f & 1 == 1 {
+            for a in 0..3 {
+                s[a] += n[a];
+            }
+        }
+    }
+    s
+}
+
+/// Unit vector from the scope's axis to `p` (perpendicular to the axis).
+fn radial(sc: &ScopeGeometry, p: [f64; 3]) -> [f64; 3] {
+    let q: [f64; 3] = std::array::from_fn(|a| p[a] - sc.tip_m[a]);
+    let s = q[0] * sc.dir[0] + q[1] * sc.dir[1] + q[2] * sc.dir[2];
+    let r: [f64; 3] = std::array::from_fn(|a| q[a] - s * sc.dir[a]);
+    unit(r).unwrap_or([0.0; 3])
+}
+
+fn ms(t: Instant) -> f64 {
+    t.elapsed().as_secs_f64() * 1e3
+}

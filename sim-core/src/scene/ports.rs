@@ -1,0 +1,132 @@
+//! The hysteroscope in the grid: the sheath's cells, the inflow port at the tip and the outflow
+//! holes, and the flux-exact velocities of ports and moving walls.
+//!
+//! Geometry (organ frame): the sheath is a cylinder of the outer radius around the axis through
+//! the tip along the view direction `d`, from the tip back 200 mm (out of every grid). A cell
+//! belongs to it when its centre lies inside (centre rule). With `s` the centre's axial coordinate
+//! from the tip (negative behind it) and `r` its distance from the axis:
+//! - the **tip layer** (`-h < s <= 0`) holds the inflow port: the tip cells with a face on fluid,
+//!   nearest the axis first, as many as bring the port's fluid-facing area (faces weighted by
+//!   `d . n`) closest to the channel area;
+//! - the **hole band** (`-far <= s <= -near`) holds the outflow holes: every sheath cell there with
+//!   a face on fluid;
+//! - the rest is sheath (a wall at rest).
+//!
+//! A port's velocity is set so that its flux equals the hydraulics' flow exactly: the inflow cells
+//! move at `u d` with `u = Q_in / G_in`, `G_in = sum over their fluid faces of (d . n) h^2`; the
+//! hole cells at `-u r_hat` (into the sheath) with `u = Q_out / G_out`, `G_out = sum (r_hat . n) h^2`.
+//! `n` is the unit normal of the face from the port cell into the fluid.
+
+/// Sheath length behind the tip, m (longer than any grid).
+pub const SHEATH_LENGTH_M: f64 = 0.2;
+
+/// The scope pose the ports were built for.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScopeGeometry {
+    /// Tip, m.
+    pub tip_m: [f64; 3],
+    /// Unit view direction.
+    pub dir: [f64; 3],
+    /// Outer radius of the sheath, m.
+    pub radius_m: f64,
+    /// Hole band, m behind the tip: `[near, far]`.
+    pub holes_m: [f64; 2],
+}
+
+/// Where a cell centre lies relative to the scope.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScopePart {
+    /// Not in the sheath.
+    None,
+    /// In the tip layer.
+    Tip,
+    /// In the hole band.
+    Holes,
+    /// Elsewhere in the sheath.
+    Sheath,
+}
+
+impl ScopeGeometry {
+    /// Axial coordinate `s` and axis distance `r` of a point.
+    #[inline]
+    pub fn axial_radial(&self, p: [f64; 3]) -> (f64, f64) {
+        let q = [p[0] - self.tip_m[0], p[1] - self.tip_m[1], p[2] - self.tip_m[2]];
+        let s = q[0] * self.dir[0] + q[1] * self.dir[1] + q[2] * self.dir[2];
+        let r2 = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - s * s).max(0.0);
+        (s, r2.sqrt())
+    }
+
+    /// The part of the scope a cell centre `p` lies in, for cells of edge `h`.
+    #[inline]
+    pub fn part(&self, p: [f64; 3], h: f64) -> ScopePart {
+        let (s, r) = self.axial_radial(p);
+        if r > self.radius_m || s > 0.0 || s < -SHEATH_LENGTH_M {
+            ScopePart::None
+        } else if s > -h {
+            ScopePart::Tip
+        } else if s <= -self.holes_m[0] && s >= -self.holes_m[1] {
+            ScopePart::Holes
+        } else {
+            ScopePart::Sheath
+        }
+    }
+
+    /// The x-interval (cell indices, inclusive) of row `(y, z)` (centres in m) whose centres may
+    /// lie in the sheath, for a grid whose cell `i` has its centre at `x0 + (i + 0.5) h`;
+    /// `None` if the row misses it. Conservative (the caller tests each centre).
+    pub fn row_span(&self, y: f64, z: f64, x0: f64, h: f64, nx: usize) -> Option<(usize, usize)> {
+        let d = self.dir;
+        let (b, c) = (y - self.tip_m[1], z - self.tip_m[2]);
+        let e = b * d[1] + c * d[2];
+        let (qa, qb, qc) = (
+            1.0 - d[0] * d[0],
+            -2.0 * d[0] * e,
+            b * b + c * c - e * e - self.radius_m * self.radius_m,
+        );
+        // x' = x - tip_x: a x'^2 + b x' + c <= 0 (distance to the line) and -L <= x' d0 + e <= 0.
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        if qa > 1e-12 {
+            let disc = qb * qb - 4.0 * qa * qc;
+            if disc < 0.0 {
+                return None;
+            }
+            let sq = disc.sqrt();
+            lo = (-qb - sq) / (2.0 * qa);
+            hi = (-qb + sq) / (2.0 * qa);
+        } else if qc > 0.0 {
+            return None;
+        }
+        if d[0].abs() > 1e-12 {
+            let (s0, s1) = ((-SHEATH_LENGTH_M - e) / d[0], -e / d[0]);
+            lo = lo.max(s0.min(s1));
+            hi = hi.min(s0.max(s1));
+        } else if e > 0.0 || e < -SHEATH_LENGTH_M {
+            return None;
+        }
+        if lo > hi {
+            return None;
+        }
+        let to_cell = |x: f64| (x + self.tip_m[0] - x0) / h - 0.5;
+        let (a, z) = (to_cell(lo).floor() - 1.0, to_cell(hi).ceil() + 1.0);
+        if z < 0.0 || a > nx as f64 - 1.0 {
+            return None;
+        }
+        Some((a.max(0.0) as usize, z.min(nx as f64 - 1.0) as usize))
+    }
+}
+
+/// Unit normal of face `f` (0..6: -x, +x, -y, +y, -z, +z) of a cell.
+pub const FACE_NORMALS: [[f64; 3]; 6] = [
+    [-1.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0],
+    [0.0, -1.0, 0.0],
+    [0.0, 1.0, 0.0],
+    [0.0, 0.0, -1.0],
+    [0.0, 0.0, 1.0],
+];
+
+/// Normalises a direction; `None` for a zero or non-finite one.
+pub fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    (n.is_finite() && n > 1e-9).then(|| v.map(|c| c / n))
+}

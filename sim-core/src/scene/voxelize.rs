@@ -1,0 +1,572 @@
+//! Conservative, incremental voxelization of a closed triangle surface.
+//!
+//! A cell is **inside** when its whole box lies inside the surface: its centre is inside (winding
+//! number of an x-ray through the centre, non-zero) and no triangle touches the box. A cell that a
+//! triangle touches is **band** (the wall; it keeps the lowest index of the triangles touching it,
+//! for the wall velocity); every other cell is **outside**.
+//!
+//! Robustness:
+//! - The band test clips each triangle to the closed slab of a row of cells (`j <= y <= j+1`,
+//!   `k <= z <= k+1`, widened by [`EPS`] cells) and takes the x-extent of the clipped polygon: exact
+//!   up to rounding, widened, so a sliver or a zero-area triangle still marks every cell it touches.
+//! - The crossing test evaluates each edge function from the edge's endpoints in vertex-index order
+//!   (so two triangles sharing an edge get the same number with opposite signs) with a symbolic
+//!   perturbation of the ray point for ties (`p + (eps, eps^2)` in y, z): a ray through an edge or a
+//!   vertex crosses a watertight surface exactly once, whatever the rounding.
+//! - The crossing's x is a convex combination of the vertices' x with the (same-signed) edge
+//!   functions as weights, so a triangle nearly parallel to the ray cannot produce a stray x. Only
+//!   band cells can sit within rounding of a crossing, and band cells are never inside.
+//!
+//! Incremental: the surface is held at its *voxel positions*; [`Voxelizer::update`] moves a vertex's
+//! voxel position only when the vertex moved more than a threshold since, and re-tests only the rows
+//! of cells that the moved triangles' old and new boxes cover. Because every row is computed by the
+//! same function of the voxel positions, the result equals [`Voxelizer::full`] of those positions
+//! after any sequence of moves (tested).
+
+/// Widening of the band test, in cells.
+pub const EPS: f64 = 1e-6;
+
+/// Cell states.
+pub mod state {
+    /// Outside the surface.
+    pub const OUTSIDE: u8 = 0;
+    /// Touched by a triangle (the wall band).
+    pub const BAND: u8 = 1;
+    /// Entirely inside the surface.
+    pub const INSIDE: u8 = 2;
+}
+
+/// No triangle.
+pub const NO_TRIANGLE: u32 = u32::MAX;
+
+/// A box of cubic cells: cell `(i, j, k)` spans `origin + h [i, i+1) x [j, j+1) x [k, k+1)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VoxelBox {
+    /// Cells per axis.
+    pub dims: [usize; 3],
+    /// Lower corner of cell (0, 0, 0), m.
+    pub origin_m: [f64; 3],
+    /// Cell edge, m.
+    pub spacing_m: f64,
+}
+
+impl VoxelBox {
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    /// Linear index, x fastest.
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+    /// Centre of a cell, m.
+    pub fn centre_m(&self, i: usize, j: usize, k: usize) -> [f64; 3] {
+        let c = [i, j, k];
+        std::array::from_fn(|a| self.origin_m[a] + (c[a] as f64 + 0.5) * self.spacing_m)
+    }
+}
+
+/// What one call did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct VoxelizeStats {
+    /// Vertices whose voxel position moved.
+    pub moved_vertices: usize,
+    /// Triangles re-rasterized.
+    pub moved_triangles: usize,
+    /// Rows of cells re-tested.
+    pub rows: usize,
+    /// Cells whose state changed.
+    pub changed_cells: usize,
+}
+
+/// Per-triangle range of cells (inclusive) its box touches.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct CellRange {
+    lo: [i32; 3],
+    hi: [i32; 3],
+}
+
+impl CellRange {
+    const EMPTY: CellRange = CellRange {
+        lo: [0; 3],
+        hi: [-1; 3],
+    };
+    /// Empty in (y, z): no row of the box. The x range is not clamped (a triangle beyond either
+    /// end of the rows still crosses them).
+    fn is_empty(&self) -> bool {
+        (1..3).any(|a| self.hi[a] < self.lo[a])
+    }
+}
+
+/// Rows per side of a bin of the (y, z) triangle index.
+const BIN: usize = 4;
+
+/// The voxelizer of one closed surface on one box.
+#[derive(Debug, Clone)]
+pub struct Voxelizer {
+    cells: VoxelBox,
+    triangles: Vec<[u32; 3]>,
+    /// Voxel positions in cell units (relative to the box's corner).
+    pos: Vec<[f64; 3]>,
+    /// The positions in metres the voxel positions were taken from.
+    pos_m: Vec<[f32; 3]>,
+    initialised: bool,
+    range: Vec<CellRange>,
+    bins_dims: [usize; 2],
+    bins: Vec<Vec<u32>>,
+    state: Vec<u8>,
+    owner: Vec<u32>,
+    // Scratch, reused.
+    moved: Vec<bool>,
+    tri_moved: Vec<bool>,
+    row_dirty: Vec<bool>,
+    dirty_rows: Vec<u32>,
+    crossings: Vec<(f64, i32)>,
+    row_state: Vec<u8>,
+    row_owner: Vec<u32>,
+}
+
+impl Voxelizer {
+    /// A voxelizer for `triangles` (indices into the positions later passed) on `cells`.
+    pub fn new(cells: VoxelBox, triangles: Vec<[u32; 3]>, vertex_count: usize) -> Self {
+        let n = cells.cell_count();
+        let bins_dims = [cells.dims[1].div_ceil(BIN), cells.dims[2].div_ceil(BIN)];
+        let t = triangles.len();
+        Self {
+            cells,
+            pos: vec![[0.0; 3]; vertex_count],
+            pos_m: vec![[0.0; 3]; vertex_count],
+            initialised: false,
+            range: vec![CellRange::EMPTY; t],
+            bins_dims,
+            bins: vec![Vec::new(); bins_dims[0] * bins_dims[1]],
+            state: vec![state::OUTSIDE; n],
+            owner: vec![NO_TRIANGLE; n],
+            moved: vec![false; vertex_count],
+            tri_moved: vec![false; t],
+            row_dirty: vec![false; cells.dims[1] * cells.dims[2]],
+            dirty_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
+            crossings: Vec::with_capacity(64),
+            row_state: vec![0; cells.dims[0]],
+            row_owner: vec![NO_TRIANGLE; cells.dims[0]],
+            triangles,
+        }
+    }
+
+    /// The box.
+    pub fn cells(&self) -> &VoxelBox {
+        &self.cells
+    }
+    /// The triangles.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+    /// Per-cell state ([`state`]).
+    pub fn states(&self) -> &[u8] {
+        &self.state
+    }
+    /// Per-cell lowest index of a triangle touching it ([`NO_TRIANGLE`] off the band).
+    pub fn owners(&self) -> &[u32] {
+        &self.owner
+    }
+    /// The positions (m) the current labels were computed from.
+    pub fn voxel_positions_m(&self) -> &[[f32; 3]] {
+        &self.pos_m
+    }
+
+    fn to_cells(&self, p: [f32; 3]) -> [f64; 3] {
+        let h = self.cells.spacing_m;
+        std::array::from_fn(|a| (p[a] as f64 - self.cells.origin_m[a]) / h)
+    }
+
+    fn triangle_range(&self, t: usize) -> CellRange {
+        let [a, b, c] = self.triangles[t].map(|v| self.pos[v as usize]);
+        let mut r = CellRange::EMPTY;
+        for ax in 0..3 {
+            let lo = a[ax].min(b[ax]).min(c[ax]) - EPS;
+            let hi = a[ax].max(b[ax]).max(c[ax]) + EPS;
+            if !(lo.is_finite() && hi.is_finite()) {
+                return CellRange::EMPTY;
+            }
+            let n = self.cells.dims[ax] as f64;
+            r.lo[ax] = lo.floor().clamp(-1.0, n) as i32;
+            r.hi[ax] = hi.floor().clamp(-1.0, n) as i32;
+            if ax > 0 {
+                r.lo[ax] = r.lo[ax].max(0);
+                r.hi[ax] = r.hi[ax].min(self.cells.dims[ax] as i32 - 1);
+            }
+        }
+        r
+    }
+
+    fn bin_range(&self, r: &CellRange) -> Option<([usize; 2], [usize; 2])> {
+        if r.is_empty() {
+            return None;
+        }
+        Some((
+            [r.lo[1] as usize / BIN, r.lo[2] as usize / BIN],
+            [r.hi[1] as usize / BIN, r.hi[2] as usize / BIN],
+        ))
+    }
+
+    fn unbin(&mut self, t: usize) {
+        if let Some((lo, hi)) = self.bin_range(&self.range[t]) {
+            for bz in lo[1]..=hi[1] {
+                for by in lo[0]..=hi[0] {
+                    let bin = &mut self.bins[by + self.bins_dims[0] * bz];
+                    if let Some(at) = bin.iter().position(|&x| x as usize == t) {
+                        bin.swap_remove(at);
+                    }
+                }
+            }
+        }
+    }
+
+    fn bin(&mut self, t: usize) {
+        if let Some((lo, hi)) = self.bin_range(&self.range[t]) {
+            for bz in lo[1]..=hi[1] {
+                for by in lo[0]..=hi[0] {
+                    self.bins[by + self.bins_dims[0] * bz].push(t as u32);
+                }
+            }
+        }
+    }
+
+    fn mark_rows(&mut self, r: CellRange) {
+        if r.is_empty() {
+            return;
+        }
+        let ny = self.cells.dims[1];
+        for k in r.lo[2]..=r.hi[2] {
+            for j in r.lo[1]..=r.hi[1] {
+                let row = j as usize + ny * k as usize;
+                if !self.row_dirty[row] {
+                    self.row_dirty[row] = true;
+                    self.dirty_rows.push(row as u32);
+                }
+            }
+        }
+    }
+
+    /// Voxelizes from scratch at `positions_m` (one per vertex).
+    pub fn full(&mut self, positions_m: &[[f32; 3]]) -> VoxelizeStats {
+        assert_eq!(positions_m.len(), self.pos.len(), "one position per vertex");
+        for (v, p) in positions_m.iter().enumerate() {
+            self.pos[v] = self.to_cells(*p);
+            self.pos_m[v] = *p;
+        }
+        for bin in &mut self.bins {
+            bin.clear();
+        }
+        for t in 0..self.triangles.len() {
+            self.range[t] = self.triangle_range(t);
+            self.bin(t);
+        }
+        self.initialised = true;
+        self.dirty_rows.clear();
+        for (row, d) in self.row_dirty.iter_mut().enumerate() {
+            *d = true;
+            self.dirty_rows.push(row as u32);
+        }
+        let mut stats = self.process_rows();
+        stats.moved_vertices = positions_m.len();
+        stats.moved_triangles = self.triangles.len();
+        stats
+    }
+
+    /// Moves the voxel position of every vertex that moved more than `threshold_m` since its last
+    /// voxel position, and re-tests the rows the moved triangles touch (old and new positions).
+    /// The first call voxelizes fully.
+    pub fn update(&mut self, positions_m: &[[f32; 3]], threshold_m: f64) -> VoxelizeStats {
+        if !self.initialised {
+            return self.full(positions_m);
+        }
+        assert_eq!(positions_m.len(), self.pos.len(), "one position per vertex");
+        let t2 = (threshold_m * threshold_m) as f32;
+        let mut moved_vertices = 0;
+        for (v, p) in positions_m.iter().enumerate() {
+            let q = self.pos_m[v];
+            let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
+            // `!(d2 <= t2)` also moves a vertex that became NaN (it then touches no cell).
+            let m = !(d2 <= t2) || (threshold_m <= 0.0 && *p != q);
+            self.moved[v] = m;
+            if m {
+                moved_vertices += 1;
+            }
+        }
+        if moved_vertices == 0 {
+            return VoxelizeStats::default();
+        }
+        let mut moved_triangles = 0;
+        for t in 0..self.triangles.len() {
+            let m = self.triangles[t].iter().any(|&v| self.moved[v as usize]);
+            self.tri_moved[t] = m;
+            if m {
+                moved_triangles += 1;
+                let old = self.range[t];
+                self.mark_rows(old);
+                self.unbin(t);
+            }
+        }
+        for (v, p) in positions_m.iter().enumerate() {
+            if self.moved[v] {
+                self.pos[v] = self.to_cells(*p);
+                self.pos_m[v] = *p;
+            }
+        }
+        for t in 0..self.triangles.len() {
+            if self.tri_moved[t] {
+                self.range[t] = self.triangle_range(t);
+                self.bin(t);
+                let new = self.range[t];
+                self.mark_rows(new);
+            }
+        }
+        let mut stats = self.process_rows();
+        stats.moved_vertices = moved_vertices;
+        stats.moved_triangles = moved_triangles;
+        stats
+    }
+
+    fn process_rows(&mut self) -> VoxelizeStats {
+        let mut stats = VoxelizeStats::default();
+        let rows = std::mem::take(&mut self.dirty_rows);
+        let ny = self.cells.dims[1];
+        for &row in &rows {
+            let row = row as usize;
+            self.row_dirty[row] = false;
+            let (j, k) = (row % ny, row / ny);
+            stats.changed_cells += self.process_row(j, k);
+        }
+        stats.rows = rows.len();
+        self.dirty_rows = rows;
+        self.dirty_rows.clear();
+        stats
+    }
+
+    /// Recomputes one row of cells; returns how many changed.
+    fn process_row(&mut self, j: usize, k: usize) -> usize {
+        let nx = self.cells.dims[0];
+        self.row_state.fill(state::OUTSIDE);
+        self.row_owner.fill(NO_TRIANGLE);
+        self.crossings.clear();
+        let bin = (j / BIN) + self.bins_dims[0] * (k / BIN);
+        let (py, pz) = (j as f64 + 0.5, k as f64 + 0.5);
+        for n in 0..self.bins[bin].len() {
+            let t = self.bins[bin][n] as usize;
+            let r = self.range[t];
+            if (j as i32) < r.lo[1] || (j as i32) > r.hi[1] || (k as i32) < r.lo[2] || (k as i32) > r.hi[2] {
+                continue;
+            }
+            let tri = self.triangles[t];
+            let v = tri.map(|i| self.pos[i as usize]);
+            // Band: the triangle clipped to the row's slab, its x-extent.
+            if let Some((x0, x1)) = clip_x_extent(&v, j as f64 - EPS, j as f64 + 1.0 + EPS, k as f64 - EPS, k as f64 + 1.0 + EPS) {
+                let lo = (x0 - EPS).floor().max(0.0);
+                let hi = (x1 + EPS).floor().min(nx as f64 - 1.0);
+                if lo <= hi {
+                    for i in lo as usize..=hi as usize {
+                        self.row_state[i] = state::BAND;
+                        if (t as u32) < self.row_owner[i] {
+                            self.row_owner[i] = t as u32;
+                        }
+                    }
+                }
+            }
+            // Crossing of the x-ray through the cell centres.
+            if let Some(c) = crossing(&tri, &v, py, pz) {
+                self.crossings.push(c);
+            }
+        }
+        if !self.crossings.is_empty() {
+            self.crossings
+                .sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            let mut winding = 0i32;
+            let mut next = 0;
+            for i in 0..nx {
+                let x = i as f64 + 0.5;
+                while next < self.crossings.len() && self.crossings[next].0 < x {
+                    winding += self.crossings[next].1;
+                    next += 1;
+                }
+                if winding != 0 && self.row_state[i] == state::OUTSIDE {
+                    self.row_state[i] = state::INSIDE;
+                }
+            }
+        }
+        let base = self.cells.index(0, j, k);
+        let mut changed = 0;
+        for i in 0..nx {
+            let (s, o) = (self.row_state[i], self.row_owner[i]);
+            if self.state[base + i] != s || self.owner[base + i] != o {
+                changed += 1;
+                self.state[base + i] = s;
+                self.owner[base + i] = o;
+            }
+        }
+        changed
+    }
+}
+
+/// The x-extent of triangle `v` clipped to `y0 <= y <= y1`, `z0 <= z <= z1`, if not empty.
+fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Option<(f64, f64)> {
+    // Quick accept: the whole triangle inside the slab.
+    let inside = |p: &[f64; 3]| p[1] >= y0 && p[1] <= y1 && p[2] >= z0 && p[2] <= z1;
+    if v.iter().all(inside) {
+        let lo = v[0][0].min(v[1][0]).min(v[2][0]);
+        let hi = v[0][0].max(v[1][0]).max(v[2][0]);
+        return Some((lo, hi));
+    }
+    let mut a = [[0.0f64; 3]; 9];
+    let mut b = [[0.0f64; 3]; 9];
+    a[..3].copy_from_slice(v);
+    let mut n = 3;
+    // Planes as (axis, bound, keep >= bound?).
+    for (axis, bound, ge) in [(1, y0, true), (1, y1, false), (2, z0, true), (2, z1, false)] {
+        let mut m = 0;
+        let keep = |p: &[f64; 3]| if ge { p[axis] >= bound } else { p[axis] <= bound };
+        for s in 0..n {
+            let p = a[s];
+            let q = a[(s + 1) % n];
+            let (kp, kq) = (keep(&p), keep(&q));
+            if kp {
+                b[m] = p;
+                m += 1;
+            }
+            if kp != kq {
+                let t = (bound - p[axis]) / (q[axis] - p[axis]);
+                let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 };
+                let mut x: [f64; 3] = std::array::from_fn(|c| p[c] + t * (q[c] - p[c]));
+                x[axis] = bound;
+                b[m] = x;
+                m += 1;
+            }
+        }
+        n = m;
+        if n == 0 {
+            return None;
+        }
+        std::mem::swap(&mut a, &mut b);
+    }
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for p in &a[..n] {
+        lo = lo.min(p[0]);
+        hi = hi.max(p[0]);
+    }
+    Some((lo, hi))
+}
+
+/// Sign of the edge function of edge `(ia, a) -> (ib, b)` at `(py, pz)` perturbed by
+/// `(eps, eps^2)`, evaluated from the endpoints in vertex-index order so both triangles sharing the
+/// edge see the same value.
+#[inline]
+fn edge_sign(ia: u32, a: &[f64; 3], ib: u32, b: &[f64; 3], py: f64, pz: f64) -> (i32, f64) {
+    let (flip, p, q) = if ia < ib { (1, a, b) } else { (-1, b, a) };
+    // orient(p, q, x) = (q.y - p.y)(x.z - p.z) - (q.z - p.z)(x.y - p.y)
+    let dy = q[1] - p[1];
+    let dz = q[2] - p[2];
+    let f = dy * (pz - p[2]) - dz * (py - p[1]);
+    let s = if f > 0.0 {
+        1
+    } else if f < 0.0 {
+        -1
+    } else if dz != 0.0 {
+        // d/dy of f is -dz.
+        if -dz > 0.0 {
+            1
+        } else {
+            -1
+        }
+    } else if dy > 0.0 {
+        1
+    } else if dy < 0.0 {
+        -1
+    } else {
+        0
+    };
+    (flip * s, flip as f64 * f)
+}
+
+/// Where the x-ray through `(py, pz)` crosses triangle `tri` (positions `v`), with the sign of the
+/// triangle's (y, z) orientation.
+#[inline]
+fn crossing(tri: &[u32; 3], v: &[[f64; 3]; 3], py: f64, pz: f64) -> Option<(f64, i32)> {
+    // Quick reject on the (y, z) box.
+    let (ymin, ymax) = (v[0][1].min(v[1][1]).min(v[2][1]), v[0][1].max(v[1][1]).max(v[2][1]));
+    let (zmin, zmax) = (v[0][2].min(v[1][2]).min(v[2][2]), v[0][2].max(v[1][2]).max(v[2][2]));
+    if py < ymin || py > ymax || pz < zmin || pz > zmax {
+        return None;
+    }
+    // Edge k is opposite vertex k: (1, 2), (2, 0), (0, 1).
+    let (s0, w0) = edge_sign(tri[1], &v[1], tri[2], &v[2], py, pz);
+    let (s1, w1) = edge_sign(tri[2], &v[2], tri[0], &v[0], py, pz);
+    let (s2, w2) = edge_sign(tri[0], &v[0], tri[1], &v[1], py, pz);
+    if s0 == 0 || s0 != s1 || s1 != s2 {
+        return None;
+    }
+    let sum = w0 + w1 + w2;
+    let x = if sum != 0.0 && sum.is_finite() {
+        (w0 * v[0][0] + w1 * v[1][0] + w2 * v[2][0]) / sum
+    } else {
+        (v[0][0] + v[1][0] + v[2][0]) / 3.0
+    };
+    Some((x, s0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A closed octahedron-like UV sphere of radius `r` at `c`.
+    pub(crate) fn uv_sphere(c: [f64; 3], r: f64, n: usize) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let mut p = vec![[c[0] as f32, c[1] as f32, (c[2] + r) as f32]];
+        for a in 1..n {
+            let th = std::f64::consts::PI * a as f64 / n as f64;
+            for b in 0..2 * n {
+                let ph = std::f64::consts::PI * b as f64 / n as f64;
+                p.push([
+                    (c[0] + r * th.sin() * ph.cos()) as f32,
+                    (c[1] + r * th.sin() * ph.sin()) as f32,
+                    (c[2] + r * th.cos()) as f32,
+                ]);
+            }
+        }
+        p.push([c[0] as f32, c[1] as f32, (c[2] - r) as f32]);
+        let ring = |a: usize, b: usize| (1 + (a - 1) * 2 * n + b % (2 * n)) as u32;
+        let mut t = Vec::new();
+        for b in 0..2 * n {
+            t.push([0, ring(1, b), ring(1, b + 1)]);
+        }
+        for a in 1..n - 1 {
+            for b in 0..2 * n {
+                t.push([ring(a, b), ring(a + 1, b), ring(a + 1, b + 1)]);
+                t.push([ring(a, b), ring(a + 1, b + 1), ring(a, b + 1)]);
+            }
+        }
+        let last = (p.len() - 1) as u32;
+        for b in 0..2 * n {
+            t.push([last, ring(n - 1, b + 1), ring(n - 1, b)]);
+        }
+        (p, t)
+    }
+
+    #[test]
+    fn a_sphere_is_inside_where_it_should_be() {
+        let cells = VoxelBox {
+            dims: [20, 20, 20],
+            origin_m: [0.0; 3],
+            spacing_m: 1.0,
+        };
+        let (p, t) = uv_sphere([10.0, 10.0, 10.0], 7.0, 24);
+        let mut v = Voxelizer::new(cells, t, p.len());
+        v.full(&p);
+        let inside = v.states().iter().filter(|&&s| s == state::INSIDE).count();
+        // Cells fully inside a radius-7 sphere (polygonised) on unit cells: about (4/3) pi (7 -
+        // sqrt(3)/2)^3 ~ 967 at the least.
+        assert!(inside > 800 && inside < 1440, "{inside}");
+        assert_eq!(v.states()[cells.index(10, 10, 10)], state::INSIDE);
+        assert_eq!(v.states()[cells.index(0, 0, 0)], state::OUTSIDE);
+    }
+}
