@@ -34,6 +34,9 @@ enum Command {
     /// Run the FEM pressure sweep of an anatomy and write the deformation atlas, VTU/PVD series
     /// and P-V curve.
     Precompute(hydrometra_daemon::cli::precompute::PrecomputeArgs),
+    /// The coupled scene: print the default, prepare its atlas, run it offline, benchmark it.
+    #[command(subcommand)]
+    Scene(hydrometra_daemon::cli::scene::SceneCommand),
     /// FEM verification cases (thick sphere).
     #[command(subcommand)]
     Fem(hydrometra_daemon::cli::fem::FemCommand),
@@ -61,5 +64,6 @@ fn main() -> Result<()> {
         Command::Anatomy(args) => hydrometra_daemon::cli::anatomy::run(&args),
         Command::Precompute(args) => hydrometra_daemon::cli::precompute::run(&args),
         Command::Fem(cmd) => hydrometra_daemon::cli::fem::run(&cmd),
+        Command::Scene(cmd) => hydrometra_daemon::cli::scene::run(cmd),
     }
 }

@@ -4,6 +4,7 @@ pub mod hydraulics;
 pub mod monitor;
 pub mod procedure;
 pub mod rig;
+pub mod scene;
 
 pub mod anatomy;
 pub mod fem;

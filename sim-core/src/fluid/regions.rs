@@ -20,6 +20,9 @@ pub(crate) struct Regions {
     /// Scratch accumulators, one per region.
     sum: Vec<f64>,
     queue: Vec<u32>,
+    /// Sum over the closed regions of `|sum of v|` removed by the last `remove_closed_means*`
+    /// (for the divergence right-hand side `h div u`, times `h^2` it is the flux removed, m^3/s).
+    pub removed_total: f64,
 }
 
 impl Regions {
@@ -74,6 +77,7 @@ impl Regions {
     /// Subtracts its region's mean from every row of a closed region. Returns the largest absolute
     /// mean removed.
     pub fn remove_closed_means(&mut self, v: &mut [f64]) -> f64 {
+        self.removed_total = 0.0;
         if !self.any_closed() {
             return 0.0;
         }
@@ -82,14 +86,17 @@ impl Regions {
             self.sum[self.of_row[r] as usize] += x;
         }
         let mut worst = 0.0f64;
+        let mut total = 0.0f64;
         for (id, s) in self.sum.iter_mut().enumerate() {
             *s = if self.closed[id] {
+                total += s.abs();
                 *s / self.size[id] as f64
             } else {
                 0.0
             };
             worst = worst.max(s.abs());
         }
+        self.removed_total = total;
         for (r, x) in v.iter_mut().enumerate() {
             *x -= self.sum[self.of_row[r] as usize];
         }
@@ -99,6 +106,7 @@ impl Regions {
     /// As [`Regions::remove_closed_means`] for a dense (padded) vector whose rows sit at
     /// `pad_of_row`; the means are accumulated in f64.
     pub fn remove_closed_means_dense<T: Real>(&mut self, v: &mut [T], pad_of_row: &[u32]) -> f64 {
+        self.removed_total = 0.0;
         if !self.any_closed() {
             return 0.0;
         }
@@ -107,14 +115,17 @@ impl Regions {
             self.sum[self.of_row[r] as usize] += v[p as usize].to_f64();
         }
         let mut worst = 0.0f64;
+        let mut total = 0.0f64;
         for (id, s) in self.sum.iter_mut().enumerate() {
             *s = if self.closed[id] {
+                total += s.abs();
                 *s / self.size[id] as f64
             } else {
                 0.0
             };
             worst = worst.max(s.abs());
         }
+        self.removed_total = total;
         for (r, &p) in pad_of_row.iter().enumerate() {
             let x = &mut v[p as usize];
             *x = T::from_f64(x.to_f64() - self.sum[self.of_row[r] as usize]);

@@ -151,6 +151,9 @@ pub struct StepStats {
     /// Largest incompatible mean `|h div u|` removed from a closed region (m/s): a flux mismatch of
     /// its ports that no pressure can remove.
     pub closed_region_mismatch_m_s: f64,
+    /// The whole incompatible flux removed from closed regions, summed over them (m^3/s; largest
+    /// over the substeps).
+    pub closed_region_flux_m3_per_s: f64,
     /// Fluid cells.
     pub fluid_cells: usize,
 }
@@ -794,6 +797,9 @@ impl FluidSolver {
             .set_parallel_rows(self.params.parallel_threshold_cells);
         let mismatch = self.divergence_rhs();
         stats.closed_region_mismatch_m_s = stats.closed_region_mismatch_m_s.max(mismatch);
+        stats.closed_region_flux_m3_per_s = stats
+            .closed_region_flux_m3_per_s
+            .max(self.pressure.regions.removed_total * h * h);
         let to_q = dt / (rho * h);
         let periodic = self.grid.periodic().iter().any(|&p| p);
         let pressure_pa = &self.pressure_pa;

@@ -236,7 +236,8 @@ pub struct StepReport {
     pub counters: Counters,
 }
 
-/// The cavity surface as published: closed (the opening's cap last), normals into the fluid.
+/// The cavity surface as published: closed (the first `cap_triangles` close the external os),
+/// normals into the fluid.
 #[derive(Debug, Clone, Copy)]
 pub struct CavityView<'a> {
     /// Triangles (three vertex indices each).
@@ -245,7 +246,7 @@ pub struct CavityView<'a> {
     pub positions_m: &'a [[f32; 3]],
     /// Changes when the triangles change.
     pub topology_revision: u64,
-    /// The last `cap_triangles` close the external os.
+    /// The first `cap_triangles` close the external os.
     pub cap_triangles: usize,
     /// The pressure the positions belong to, Pa.
     pub pressure_pa: f64,
@@ -421,23 +422,16 @@ impl Scene {
         }
         let voxelizer = Voxelizer::new(cells, surface.triangles().to_vec(), surface.vertex_count());
         let fluid = if desc.stages.fluid {
-            let grid = FluidGrid::new(dims, h, cells.origin_m, [false; 3])?;
+            // All solid at first: the first step labels the cavity.
+            let mut grid = FluidGrid::new(dims, h, cells.origin_m, [false; 3])?;
+            let far = cells.origin_m.map(|o| o + 1.0);
+            grid.fill_box(cells.origin_m, far, CellLabel::Solid, [0.0; 3]);
             let params = FluidParams {
                 advection: desc.fluid.advection,
                 tolerance: desc.fluid.divergence_tolerance,
                 ..FluidParams::default()
             };
-            let mut solver = FluidSolver::new(grid, params)?;
-            // Start all solid: the first step labels the cavity.
-            let g = solver.grid_mut();
-            for k in 0..dims[2] {
-                for j in 0..dims[1] {
-                    for i in 0..dims[0] {
-                        g.set_label([i, j, k], CellLabel::Solid)?;
-                    }
-                }
-            }
-            Some(solver)
+            Some(FluidSolver::new(grid, params)?)
         } else {
             None
         };
@@ -469,11 +463,12 @@ impl Scene {
             last: None,
             scope: None,
             scope_built: None,
-            inflow: Vec::new(),
-            outflow: Vec::new(),
-            walls: Vec::new(),
-            open: Vec::new(),
-            candidates: Vec::new(),
+            // Boundary lists hold at most every cell: reserved once, never grown per frame.
+            inflow: Vec::with_capacity(n),
+            outflow: Vec::with_capacity(n),
+            walls: Vec::with_capacity(n),
+            open: Vec::with_capacity(n),
+            candidates: Vec::with_capacity(n),
             wall_velocity: vec![[0.0; 3]; n],
             labels_dirty: true,
             topology_revision: 1,
@@ -529,6 +524,10 @@ impl Scene {
             cap_triangles: self.surface.cap_triangles(),
             pressure_pa: self.surface.pressure_pa(),
         }
+    }
+    /// The cavity surface (its replay state and topology).
+    pub fn cavity_surface(&self) -> &CavitySurface {
+        &self.surface
     }
     /// The flow field, if the scene has a fluid stage.
     pub fn flow(&self) -> Option<FlowField<'_>> {
@@ -639,7 +638,11 @@ impl Scene {
             self.compose_labels()?;
             self.labels_dirty = false;
         }
-        let flows_on = flux_targets.0.abs() + flux_targets.1.abs() + flux_targets.3.abs() > 0.0;
+        // Boundaries move fluid when some flow exceeds one face's worth at the rest speed.
+        let floor = self.desc.skip.rest_speed_m_s * self.cells.spacing_m * self.cells.spacing_m;
+        let flows_on = [flux_targets.0, flux_targets.1, flux_targets.3]
+            .iter()
+            .any(|q| q.abs() > floor);
         if relabel || flows_on || self.report.flux.wall_flux_scale != 0.0 {
             self.set_boundary_velocities(flux_targets, dpdt);
             self.report.counters.get_mut(Stage::Ports).ran(ms(t));
@@ -663,9 +666,7 @@ impl Scene {
             self.report.fluid = Some(stats);
             self.report.counters.get_mut(Stage::Fluid).ran(ms(t));
             self.measure_fluxes(flux_targets);
-            self.report.flux.closed_region_mismatch_m3_per_s = stats.closed_region_mismatch_m_s
-                * self.cells.spacing_m
-                * self.cells.spacing_m;
+            self.report.flux.closed_region_mismatch_m3_per_s = stats.closed_region_flux_m3_per_s;
         }
 
         // 6. Vortices and particles (after the fluid).
@@ -769,12 +770,12 @@ impl Scene {
         let h = cells.spacing_m;
         let states = self.voxelizer.states();
         let owners = self.voxelizer.owners();
-        let first_cap = self.surface.first_cap_triangle() as u32;
+        let caps = self.surface.cap_triangles() as u32;
         // Cavity first.
         for n in 0..cells.cell_count() {
             self.kinds[n] = match states[n] {
                 state::INSIDE => VoxelKind::Fluid,
-                state::BAND if owners[n] != NO_TRIANGLE && owners[n] >= first_cap => {
+                state::BAND if owners[n] < caps => {
                     VoxelKind::Open
                 }
                 state::BAND => VoxelKind::Wall,

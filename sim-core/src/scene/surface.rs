@@ -13,8 +13,9 @@ pub struct CavitySurface {
     atlas_ids: Vec<u32>,
     /// Surface vertices of the opening loop, in order.
     loop_local: Vec<u32>,
-    /// Triangles on the surface numbering (normals into the fluid): the endometrium first, then
-    /// `cap_triangles` closing the opening.
+    /// Triangles on the surface numbering (normals into the fluid): first the `cap_triangles`
+    /// closing the opening, then the endometrium. (The voxelizer gives a band cell its
+    /// lowest-index triangle, so a cell the cap touches is open even where the wall touches it.)
     triangles: Vec<[u32; 3]>,
     cap_triangles: usize,
     /// Replayed positions, m, and `dx/dp`, m/Pa, per surface vertex (the centroid last).
@@ -70,7 +71,8 @@ impl CavitySurface {
             .collect();
         cap.sort_unstable();
         let cap_triangles = cap.len();
-        triangles.extend(cap);
+        cap.extend(triangles);
+        let triangles = cap;
         let vertices = atlas_ids.len() + 1;
         Ok(Self {
             atlas_ids,
@@ -87,17 +89,13 @@ impl CavitySurface {
     pub fn vertex_count(&self) -> usize {
         self.positions_m.len()
     }
-    /// Triangles, the cap last.
+    /// Triangles, the cap first.
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles
     }
-    /// Number of cap triangles (the last ones).
+    /// Number of cap triangles (the first ones).
     pub fn cap_triangles(&self) -> usize {
         self.cap_triangles
-    }
-    /// Index of the first cap triangle.
-    pub fn first_cap_triangle(&self) -> usize {
-        self.triangles.len() - self.cap_triangles
     }
     /// The mesh vertex of each surface vertex but the centroid.
     pub fn atlas_ids(&self) -> &[u32] {

@@ -1,0 +1,251 @@
+//! The coupled scene on a real (coarse) uterus and its FEM atlas: the fluxes the fluid sees equal
+//! the hydraulics' every step, stages skip when their inputs do not change and say so in their
+//! counters, the resting slit idles the fluid, runs are deterministic, and steady steps allocate
+//! nothing.
+//!
+//! The atlas (8k-tet default anatomy, 7 levels to 150 mmHg) is built once per test run and cached
+//! under the target directory (`CARGO_TARGET_TMPDIR`), shared by the test processes.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use hydrometra_sim::scene::{
+    prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
+    Stage, VoxelKind,
+};
+use hydrometra_sim::units::mmhg_to_pa;
+
+struct Counting;
+static ALLOCS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+const DT: f64 = 1.0 / 60.0;
+
+/// The coarse test scene and its assets (built once, cached).
+fn coarse(voxel_mm: f64) -> (SceneDesc, SceneAssets) {
+    let text = format!(
+        "name = \"coarse\"\n[anatomy]\nparity = \"parous\"\n[anatomy.mesh]\ntarget_tets = 8000\n\
+         [atlas]\nlevels = 7\n[fluid]\nvoxel_mm = {voxel_mm}\n"
+    );
+    let desc = SceneDesc::parse(&text, "coarse test scene", None).unwrap();
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("scene-atlas-cache");
+    let (assets, _) = prepare::load_or_build(&desc, Some(&dir), &mut |_, _, _, _| {}).unwrap();
+    (desc, assets)
+}
+
+/// A scope pose inside the distended cavity of any anatomy: the tip at the centroid of the
+/// surface at the atlas's top pressure, looking from the external os towards it.
+fn scope_in_cavity(scene: &Scene) -> ScopePose {
+    let atlas = scene.atlas();
+    let mut s = scene.cavity_surface().clone();
+    s.replay(atlas, atlas.pressure_pa[atlas.level_count() - 1]).unwrap();
+    let p = s.positions_m();
+    let n = p.len() - 1; // the last vertex is the opening's centroid
+    let c: [f64; 3] = std::array::from_fn(|a| p[..n].iter().map(|q| q[a] as f64).sum::<f64>() / n as f64);
+    let os = p[n].map(f64::from);
+    ScopePose {
+        tip_position_m: c,
+        view_direction: [c[0] - os[0], c[1] - os[1], c[2] - os[2]],
+        valid: true,
+    }
+}
+
+fn inputs(valve_in: f64, valve_out: f64, pump_mmhg: f64, scope: ScopePose) -> RigInputs {
+    RigInputs {
+        valve_in_opening: valve_in,
+        valve_out_opening: valve_out,
+        pump_set_pressure_pa: mmhg_to_pa(pump_mmhg),
+        scope,
+        perforation: false,
+    }
+}
+
+fn own(rig: RigInputs) -> SceneInputs<'static> {
+    SceneInputs {
+        rig,
+        hydraulics: HydraulicsInput::Own,
+    }
+}
+
+#[test]
+fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
+    let (desc, assets) = coarse(1.2);
+    let mut scene = Scene::new(desc, assets).unwrap();
+    let scope = scope_in_cavity(&scene);
+    let mut checked = 0;
+    let mut saw = [false; 3];
+    // Distend with the inflow, then rinse (outflow open), then let it drain.
+    for f in 0..360 {
+        let rig = match f {
+            0..=149 => inputs(1.0, 0.0, 100.0, scope),
+            150..=269 => inputs(1.0, 0.6, 100.0, scope),
+            _ => inputs(0.0, 1.0, 0.0, scope),
+        };
+        scene.step(&own(rig), DT).unwrap();
+        let r = scene.report();
+        let Some(stats) = r.fluid else { continue };
+        let fl = r.flux;
+        assert!(stats.projection_converged, "frame {f}: {stats:?}");
+        // A relative bound from single-precision face velocities and an absolute floor of
+        // 1e-5 ml/min.
+        let close = |fluid: f64, hyd: f64, what: &str| {
+            let tol = 1e-5 * hyd.abs() + 1e-13;
+            assert!((fluid - hyd).abs() <= tol, "frame {f}: {what}: fluid {fluid:e} hydraulics {hyd:e}");
+        };
+        if !fl.inflow_blocked {
+            close(fl.fluid_inflow_m3_per_s, fl.hydraulic_inflow_m3_per_s, "inflow");
+        }
+        if !fl.outflow_blocked {
+            close(fl.fluid_outflow_m3_per_s, fl.hydraulic_outflow_m3_per_s, "outflow");
+        }
+        close(fl.fluid_wall_m3_per_s, fl.hydraulic_dvdt_m3_per_s, "walls (dV/dt)");
+        // The open os carries the losses, up to what the projection tolerance allows: each fluid
+        // cell may keep tol * U * h^2 of flux imbalance.
+        let h = scene.cells().spacing_m;
+        let u = scene.flow().unwrap().solver().max_speed_m_s().max(1e-3);
+        let slack = r.fluid_cells as f64 * 1e-5 * u * h * h
+            + fl.closed_region_mismatch_m3_per_s.abs();
+        let in_minus_out = fl.fluid_inflow_m3_per_s - fl.fluid_outflow_m3_per_s - fl.fluid_wall_m3_per_s;
+        assert!(
+            (in_minus_out - fl.fluid_open_m3_per_s).abs() <= slack,
+            "frame {f}: the fluid is not incompressible: in - out - walls {in_minus_out:e}, open {:e}",
+            fl.fluid_open_m3_per_s
+        );
+        if !fl.inflow_blocked && !fl.outflow_blocked && fl.closed_region_mismatch_m3_per_s == 0.0 {
+            assert!(
+                (fl.fluid_open_m3_per_s - fl.hydraulic_losses_m3_per_s).abs() <= slack,
+                "frame {f}: open {:e} losses {:e}",
+                fl.fluid_open_m3_per_s,
+                fl.hydraulic_losses_m3_per_s
+            );
+        }
+        saw[0] |= fl.hydraulic_inflow_m3_per_s > 1e-6 && !fl.inflow_blocked;
+        saw[1] |= fl.hydraulic_outflow_m3_per_s > 1e-6 && !fl.outflow_blocked;
+        saw[2] |= fl.hydraulic_dvdt_m3_per_s.abs() > 1e-8;
+        checked += 1;
+    }
+    assert!(checked > 200, "the fluid ran {checked} times");
+    assert_eq!(saw, [true; 3], "inflow, outflow and moving walls each carried flow");
+}
+
+#[test]
+fn the_resting_slit_idles_and_unchanged_inputs_skip_every_stage() {
+    let (desc, assets) = coarse(1.2);
+    let min_cells = desc.fluid.min_fluid_cells;
+    let mut scene = Scene::new(desc, assets).unwrap();
+    let scope = scope_in_cavity(&scene);
+    // At rest, valves closed, pump off: one replay and voxelization, then skips; the fluid idles
+    // (the slit) or skips.
+    let rest = inputs(0.0, 0.0, 0.0, scope);
+    for _ in 0..30 {
+        scene.step(&own(rest), DT).unwrap();
+    }
+    let r = scene.report();
+    let c = &r.counters;
+    assert_eq!(c.get(Stage::Deformation).runs, 1, "{:?}", c.get(Stage::Deformation));
+    assert_eq!(c.get(Stage::Deformation).skips, 29);
+    assert_eq!(c.get(Stage::Voxelize).runs, 1);
+    assert_eq!(c.get(Stage::Fluid).runs, 0, "nothing flows at rest");
+    assert_eq!(c.get(Stage::Fluid).skips, 30);
+    assert!(!c.get(Stage::Vortices).present && !c.get(Stage::Particles).present);
+    if r.fluid_cells < min_cells {
+        assert!(r.fluid_idle);
+    }
+    // Distend: every stage runs.
+    for _ in 0..120 {
+        scene.step(&own(inputs(1.0, 0.3, 100.0, scope)), DT).unwrap();
+    }
+    let c = scene.report().counters.clone();
+    assert!(c.get(Stage::Deformation).runs > 60);
+    assert!(c.get(Stage::Voxelize).runs > 10);
+    assert!(c.get(Stage::Fluid).runs > 60);
+    assert!(!scene.report().fluid_idle);
+    assert!(scene.report().fluid_cells > 10 * min_cells);
+    // Close everything and hold: the cavity drains through the cervical leak until the walls
+    // touch, the field decays; once at rest the fluid stage skips, and stays skipped.
+    let before = c.get(Stage::Fluid).skips;
+    let mut rested_at = None;
+    for f in 0..7200 {
+        scene.step(&own(inputs(0.0, 0.0, 0.0, scope)), DT).unwrap();
+        if rested_at.is_none() && scene.report().counters.get(Stage::Fluid).skips > before {
+            rested_at = Some(f);
+        }
+        if rested_at.is_some_and(|r| f > r + 60) {
+            break;
+        }
+    }
+    let rested_at = rested_at.expect("the fluid never came to rest");
+    eprintln!("at rest after {:.1} s", rested_at as f64 * DT);
+    let c = &scene.report().counters;
+    assert!(!c.get(Stage::Fluid).ran_last);
+    let runs = c.get(Stage::Fluid).runs;
+    for _ in 0..60 {
+        scene.step(&own(inputs(0.0, 0.0, 0.0, scope)), DT).unwrap();
+    }
+    assert_eq!(scene.report().counters.get(Stage::Fluid).runs, runs, "the fluid woke up at rest");
+}
+
+#[test]
+fn runs_are_deterministic() {
+    let run = || {
+        let (desc, assets) = coarse(1.5);
+        let mut scene = Scene::new(desc, assets).unwrap();
+        let scope = scope_in_cavity(&scene);
+        for f in 0..90 {
+            let sway = 1e-3 * (f as f64 * 0.2).sin();
+            let mut s = scope;
+            s.tip_position_m[0] += sway;
+            scene.step(&own(inputs(1.0, 0.5, 90.0, s)), DT).unwrap();
+        }
+        let flow = scene.flow().unwrap();
+        let mut v = vec![[0.0f32; 3]; flow.kinds().len()];
+        flow.velocities_into(&mut v);
+        let kinds: Vec<u8> = flow.kinds().iter().map(|k| *k as u8).collect();
+        (v, kinds, scene.cavity().positions_m.to_vec())
+    };
+    let a = run();
+    let b = run();
+    assert!(a.1 == b.1, "labels differ");
+    assert!(a.2 == b.2, "surfaces differ");
+    assert!(a.0 == b.0, "velocities differ");
+    assert!(a.1.contains(&(VoxelKind::Inflow as u8)));
+}
+
+#[test]
+fn steady_steps_do_not_allocate() {
+    let (desc, assets) = coarse(1.2);
+    let mut scene = Scene::new(desc, assets).unwrap();
+    let scope = scope_in_cavity(&scene);
+    let rig = inputs(1.0, 0.5, 100.0, scope);
+    // Distend to a steady state (labels stop changing).
+    for _ in 0..600 {
+        scene.step(&own(rig), DT).unwrap();
+    }
+    std::thread::sleep(std::time::Duration::from_millis(5));
+    scene.step(&own(rig), DT).unwrap();
+    let before = ALLOCS.load(Ordering::Relaxed);
+    let mut fluid_runs = 0;
+    for _ in 0..60 {
+        let r = scene.step(&own(rig), DT).unwrap();
+        fluid_runs += usize::from(r.fluid.is_some());
+    }
+    let after = ALLOCS.load(Ordering::Relaxed);
+    assert!(fluid_runs > 50, "the fluid ran {fluid_runs} times");
+    assert_eq!(after - before, 0, "{} allocations in 60 steady steps", after - before);
+}
