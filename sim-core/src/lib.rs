@@ -6,9 +6,9 @@
 
 pub mod anatomy;
 pub mod atlas;
-mod duo;
 pub mod fem;
 pub mod fluid;
+mod fork_join;
 pub mod hydraulics;
 pub mod mesh;
 pub mod units;

@@ -69,7 +69,7 @@ pub(crate) struct PressureSolver {
 
 const CHUNK: usize = 2048;
 
-/// Multigrid levels split their kernels in two halves (on [`crate::duo`]) from `parallel_rows /
+/// Multigrid levels split their kernels in two halves (on [`crate::fork_join`]) from `parallel_rows /
 /// SPLIT_DIVISOR` fluid cells: 2,000 by default. A hand-over is a cache-line round trip there, so
 /// it pays from a few thousand cells (measured on the 2-core machine: the 1.2 mm cavity's level 0,
 /// 3.8k cells, gains ~25 % of the projection, the 0.6 mm cavity's levels 0 and 1 ~25 %; rayon's

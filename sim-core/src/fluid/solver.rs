@@ -541,7 +541,7 @@ impl FluidSolver {
 
     fn substep(&mut self, dt: f64, stats: &mut StepStats) {
         let h = self.grid.spacing_m();
-        // Every stage splits in two halves from the multigrid's threshold (on the duo helper, whose
+        // Every stage splits in two halves from the multigrid's threshold (on the fork-join helper, whose
         // hand-over is a cache-line round trip, not a thread wake-up).
         let parallel = self.split();
 
@@ -735,7 +735,7 @@ impl FluidSolver {
             );
             let (a, b) = ps.bd.split_at_mut(mid);
             let (ra, rb) = rows.split_at(m);
-            crate::duo::join(|| rows_kernel(ra, a, 0), || rows_kernel(rb, b, mid));
+            crate::fork_join::join(|| rows_kernel(ra, a, 0), || rows_kernel(rb, b, mid));
         } else {
             rows_kernel(rows, &mut ps.bd, 0);
         }
@@ -771,7 +771,7 @@ impl FluidSolver {
                 let mid = runs[m][0] as usize;
                 let (a, b) = self.u[c].split_at_mut(mid);
                 let ((ra, rb), (ca, cb)) = (runs.split_at(m), cells.split_at(m));
-                crate::duo::join(|| kernel(ra, ca, a, 0), || kernel(rb, cb, b, mid));
+                crate::fork_join::join(|| kernel(ra, ca, a, 0), || kernel(rb, cb, b, mid));
             } else {
                 kernel(runs, cells, &mut self.u[c], 0);
             }

@@ -52,8 +52,8 @@ struct Shared {
 unsafe impl Sync for Shared {}
 
 fn shared() -> Option<&'static Shared> {
-    static DUO: OnceLock<Option<&'static Shared>> = OnceLock::new();
-    *DUO.get_or_init(|| {
+    static HELPER: OnceLock<Option<&'static Shared>> = OnceLock::new();
+    *HELPER.get_or_init(|| {
         if thread::available_parallelism().map_or(1, |n| n.get()) < 2 {
             return None;
         }
@@ -65,13 +65,13 @@ fn shared() -> Option<&'static Shared> {
             helper: OnceLock::new(),
         }));
         let handle = thread::Builder::new()
-            .name("hydrometra-duo".into())
+            .name("hydrometra-fj".into())
             .spawn(move || helper(s))
             .ok()?;
         // Only `join` unparks, and the helper's first wait is a bounded park, so setting the
         // handle after the spawn loses nothing.
         let _ = s.helper.set(handle.thread().clone());
-        tracing::trace!("duo helper thread started");
+        tracing::trace!("fork-join helper thread started");
         Some(s)
     })
 }
@@ -194,12 +194,12 @@ pub(crate) fn join<RA, RB: Send>(
         drop(finish);
     }
     if s.panicked.swap(false, Ordering::Relaxed) {
-        panic!("a task on the duo helper thread panicked");
+        panic!("a task on the fork-join helper thread panicked");
     }
     match rb {
         Some(rb) => (ra, rb),
         // The task ran (by the helper or here) unless it panicked, handled above.
-        None => panic!("duo task did not run"),
+        None => panic!("fork-join task did not run"),
     }
 }
 
