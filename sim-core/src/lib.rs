@@ -9,6 +9,8 @@ pub mod atlas;
 pub mod fem;
 pub mod fluid;
 mod fork_join;
+#[cfg(any(test, feature = "harness"))]
+pub mod harness;
 pub mod hydraulics;
 pub mod mesh;
 pub mod units;

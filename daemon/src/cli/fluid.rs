@@ -5,16 +5,16 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::fluid::benchmark::{
-    bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
-};
 use hydrometra_sim::fluid::case::Case;
 use hydrometra_sim::fluid::cavity::{
     CAVITY_SEMI_AXES_M, UTERINE_HALF_LENGTH_M, UTERINE_HALF_THICKNESS_M, UTERINE_HALF_WIDTH_M,
     UTERINE_TAPER,
 };
-use hydrometra_sim::fluid::soak::run_soak;
 use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
+use hydrometra_sim::harness::benchmark::{
+    bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
+};
+use hydrometra_sim::harness::soak::run_soak;
 
 /// `hydrometra fluid ...`
 #[derive(Subcommand, Debug)]
@@ -365,7 +365,7 @@ fn bench(a: BenchArgs) -> Result<()> {
 }
 
 fn validate(a: ValidateArgs) -> Result<()> {
-    use hydrometra_sim::fluid::validation::{ethier_steinman, square_duct, taylor_green};
+    use hydrometra_sim::harness::validation::{ethier_steinman, square_duct, taylor_green};
     let mut rows = Vec::new();
     let duct_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
     for &n in duct_n {
