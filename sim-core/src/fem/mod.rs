@@ -35,6 +35,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod analytic;
+mod assembly;
 pub mod element;
 pub mod linear;
 pub mod material;
