@@ -19,5 +19,7 @@ use crate::fluid::{
 
 pub mod benchmark;
 pub mod soak;
+// Index loops mirror the mesh formulas, as in `fem`.
+#[allow(clippy::needless_range_loop)]
 pub mod testmesh;
 pub mod validation;
