@@ -336,7 +336,37 @@ def crate_roots(ws):
                 yield f"{member}:{root.relative_to(ws / member)}", root
 
 
+def self_test():
+    """The checker on a scratch workspace: a re-export and a test-module `super::*` are no cycle, a
+    `use` each way (directly or via a re-export) is."""
+    import tempfile
+
+    files = {
+        "Cargo.toml": '[workspace]\nmembers = ["a"]\n',
+        "a/src/lib.rs": "pub mod m;\npub mod n;\npub use m::Thing;\n",
+        "a/src/m.rs": "use crate::n::helper;\npub struct Thing;\n#[cfg(test)]\nmod tests { use super::*; }\n",
+        "a/src/n.rs": "// use super::m::Thing; (a comment is no import)\npub fn helper() {}\n",
+    }
+    with tempfile.TemporaryDirectory() as d:
+        root = Path(d)
+        for name, text in files.items():
+            (root / name).parent.mkdir(parents=True, exist_ok=True)
+            (root / name).write_text(text)
+        crate = Crate("a", root / "a/src/lib.rs")
+        acyclic = [c for c in strongly_connected(sorted(m.file for m in crate.modules.values()), crate.edges()) if len(c) > 1]
+        assert not acyclic, f"false cycle {acyclic}"
+        # n now names Thing through the crate root's re-export: m <-> n.
+        (root / "a/src/n.rs").write_text("pub fn helper() -> crate::Thing { crate::Thing }\n")
+        crate = Crate("a", root / "a/src/lib.rs")
+        cycles = [c for c in strongly_connected(sorted(m.file for m in crate.modules.values()), crate.edges()) if len(c) > 1]
+        assert len(cycles) == 1 and len(cycles[0]) == 2, f"missed cycle: {cycles}"
+    print("module-cycles: self-test passed")
+
+
 def main():
+    if sys.argv[1:] == ["--self-test"]:
+        self_test()
+        return 0
     ws = Path(sys.argv[1] if len(sys.argv) > 1 else ".").resolve()
     failed = False
     checked = 0
