@@ -23,3 +23,8 @@ pub mod soak;
 #[allow(clippy::needless_range_loop)]
 pub mod testmesh;
 pub mod validation;
+
+/// The solver's two-way fork-join, switchable to `rayon::join` or chili to measure against.
+pub mod fork_join {
+    pub use crate::fork_join::{helper_tasks, set_backend, Backend};
+}
