@@ -741,7 +741,7 @@ impl Level {
     /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
     /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
     /// With `dot` (not with `init`), returns `sum b x` of the result, else 0.
-    fn half_sweep(&mut self, colour: usize, init: bool, dot: bool) -> f64 {
+    pub(super) fn half_sweep(&mut self, colour: usize, init: bool, dot: bool) -> f64 {
         let mut x = std::mem::take(&mut self.x);
         let mut sum = 0.0;
         if init {
