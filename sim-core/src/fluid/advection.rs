@@ -1212,8 +1212,9 @@ mod tests {
     /// single-cell axis).
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn avx2_trace_matches_the_scalar_trace() {
+    fn avx2_trace_matches_the_scalar_trace_where_available() {
         if !avx2::available() {
+            eprintln!("SKIP avx2_trace_matches_the_scalar_trace_where_available: no AVX2+FMA");
             return;
         }
         let mut st = 11u64;
