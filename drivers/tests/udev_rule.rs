@@ -122,7 +122,7 @@ fn rule_matches_the_rig_and_sets_symlink_group_mode_and_modemmanager_ignore() {
 }
 
 #[test]
-fn rule_passes_udevadm_verify_when_available() {
+fn rule_passes_udevadm_verify_where_available() {
     // Only where systemd's udevadm has `verify` (systemd >= 254); the parse test above always runs.
     let has_verify = std::process::Command::new("udevadm")
         .args(["verify", "--help"])
@@ -130,7 +130,10 @@ fn rule_passes_udevadm_verify_when_available() {
         .map(|o| o.status.success())
         .unwrap_or(false);
     if !has_verify {
-        eprintln!("udevadm verify not available; skipped");
+        eprintln!(
+            "SKIP rule_passes_udevadm_verify_where_available: udevadm verify not available \
+             (systemd >= 254)"
+        );
         return;
     }
     let out = std::process::Command::new("udevadm")

@@ -6,9 +6,11 @@
 
 pub mod anatomy;
 pub mod atlas;
-mod duo;
 pub mod fem;
 pub mod fluid;
+mod fork_join;
+#[cfg(any(test, feature = "harness"))]
+pub mod harness;
 pub mod hydraulics;
 pub mod mesh;
 pub mod scene;

@@ -12,8 +12,8 @@
 use hydrometra_sim::fem::analytic;
 use hydrometra_sim::fem::material::{Material, MaterialSet};
 use hydrometra_sim::fem::system::System;
-use hydrometra_sim::fem::testmesh::{self, TestCase};
 use hydrometra_sim::fem::{Element, FemModel, Solver};
+use hydrometra_sim::harness::testmesh::{self, TestCase};
 
 fn model(case: &TestCase, mat: &Material) -> FemModel {
     FemModel::from_parts(

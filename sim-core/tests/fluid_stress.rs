@@ -1,7 +1,8 @@
-//! Stability stress (see `fluid::soak`): 10^5 random steps with inflow switching, CFL up to 50 and
+//! Stability stress (see `harness::soak`): 10^5 random steps with inflow switching, CFL up to 50 and
 //! labels flipping. No NaN, every projection converged, and the flow bounded by what the port injects.
 
-use hydrometra_sim::fluid::{soak::run_soak, AdvectionScheme};
+use hydrometra_sim::fluid::AdvectionScheme;
+use hydrometra_sim::harness::soak::run_soak;
 
 #[test]
 fn random_soak_of_100k_steps_stays_finite_and_bounded() {

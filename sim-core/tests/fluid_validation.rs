@@ -1,8 +1,10 @@
 //! Validation of the fluid solver against analytic flows (references.md section 2).
 
-use hydrometra_sim::fluid::validation::{duct_series, ethier_steinman, square_duct, taylor_green};
 use hydrometra_sim::fluid::{
     AdvectionScheme, CellLabel, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
+};
+use hydrometra_sim::harness::validation::{
+    duct_series, ethier_steinman, square_duct, taylor_green,
 };
 
 fn duct(n: usize, dt_factor: f64) -> (f64, f64) {

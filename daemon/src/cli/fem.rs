@@ -4,7 +4,8 @@
 use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::fem::material::MaterialSet;
-use hydrometra_sim::fem::{analytic, testmesh, Element, FemModel, Solver};
+use hydrometra_sim::fem::{analytic, Element, FemModel, Solver};
+use hydrometra_sim::harness::testmesh;
 use std::path::PathBuf;
 use std::time::Instant;
 

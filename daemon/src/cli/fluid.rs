@@ -5,16 +5,17 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::fluid::benchmark::{
-    bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
-};
 use hydrometra_sim::fluid::case::Case;
 use hydrometra_sim::fluid::cavity::{
     CAVITY_SEMI_AXES_M, UTERINE_HALF_LENGTH_M, UTERINE_HALF_THICKNESS_M, UTERINE_HALF_WIDTH_M,
     UTERINE_TAPER,
 };
-use hydrometra_sim::fluid::soak::run_soak;
 use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
+use hydrometra_sim::harness::benchmark::{
+    bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
+};
+use hydrometra_sim::harness::fork_join::{set_backend, Backend};
+use hydrometra_sim::harness::soak::run_soak;
 
 /// `hydrometra fluid ...`
 #[derive(Subcommand, Debug)]
@@ -73,9 +74,16 @@ pub struct BenchArgs {
     /// Advection scheme of our solver (and of the baseline).
     #[arg(long, value_enum, default_value_t = AdvectionArg::SemiLagrangian)]
     pub advection: AdvectionArg,
-    /// Skip the Gauss-Seidel baseline (only our solver's rows).
+    /// Skip the Gauss-Seidel baselines (only our solver's rows).
     #[arg(long)]
     pub no_baseline: bool,
+    /// Fork-joins to run our solver on, comma separated (each one a row; the baselines use the
+    /// helper): the home-made spinning helper, `rayon::join`, chili's heartbeat join.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "helper")]
+    pub fork_join: Vec<ForkJoinArg>,
+    /// Runs per row, interleaved across the rows of a voxel size (pooled in the table).
+    #[arg(long, default_value_t = 1)]
+    pub repeats: usize,
     /// Benchmark geometry: the uterine stand-in (matches the paper's fluid-cell counts) or the
     /// earlier ellipsoid (for comparison with older figures).
     #[arg(long, value_enum, default_value_t = CavityArg::Uterine)]
@@ -86,7 +94,7 @@ pub struct BenchArgs {
     /// Divergence tolerance of our projection (max |div u| h / U).
     #[arg(long, default_value_t = 1e-5)]
     pub tolerance: f64,
-    /// Gauss-Seidel sweeps per step of the baseline.
+    /// Gauss-Seidel sweeps per step of the baselines.
     #[arg(long, default_value_t = 20)]
     pub sweeps: usize,
     /// Voxel sizes (mm), comma separated.
@@ -98,6 +106,27 @@ pub struct BenchArgs {
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+/// A fork-join on the command line.
+#[derive(clap::ValueEnum, Clone, Copy, Debug)]
+pub enum ForkJoinArg {
+    /// The solver's spinning helper thread.
+    Helper,
+    /// `rayon::join`.
+    Rayon,
+    /// `chili::Scope::join`.
+    Chili,
+}
+
+impl From<ForkJoinArg> for Backend {
+    fn from(f: ForkJoinArg) -> Self {
+        match f {
+            ForkJoinArg::Helper => Backend::Helper,
+            ForkJoinArg::Rayon => Backend::Rayon,
+            ForkJoinArg::Chili => Backend::Chili,
+        }
+    }
 }
 
 /// Benchmark geometry on the command line.
@@ -222,6 +251,16 @@ fn run_case(a: RunArgs) -> Result<()> {
     Ok(())
 }
 
+/// One solver configuration of the benchmark table.
+#[derive(Clone, Copy, Debug)]
+struct Config {
+    label: &'static str,
+    projection: ProjectionMethod,
+    fork_join: Backend,
+    /// Run with one thread (the fork-join then runs both halves in the caller).
+    one_thread: bool,
+}
+
 fn bench(a: BenchArgs) -> Result<()> {
     if a.threads > 0 {
         rayon::ThreadPoolBuilder::new()
@@ -230,6 +269,7 @@ fn bench(a: BenchArgs) -> Result<()> {
             .context("configuring the rayon thread pool")?;
     }
     anyhow::ensure!(a.steps > 0, "--steps must be at least 1");
+    anyhow::ensure!(a.repeats > 0, "--repeats must be at least 1");
     let dt_s = match a.hz {
         Some(hz) => {
             anyhow::ensure!(
@@ -255,46 +295,75 @@ fn bench(a: BenchArgs) -> Result<()> {
         CavityArg::Uterine => Cavity::Uterine,
         CavityArg::Ellipsoid => Cavity::Ellipsoid,
     };
-    let mut rows: Vec<(BenchRow, Option<BenchRow>)> = Vec::new();
-    let mut cpu: Vec<(f64, f64)> = Vec::new();
+    // Ours with each fork-join asked for, then the baselines: the like-for-like one (warm start,
+    // dense SIMD kernels, the same fork-join) and the paper-class one as the paper ran it.
+    let mut configs: Vec<Config> = a
+        .fork_join
+        .iter()
+        .map(|&f| Config {
+            label: match f {
+                ForkJoinArg::Helper => "ours (MG-PCG), helper fork-join",
+                ForkJoinArg::Rayon => "ours (MG-PCG), rayon::join",
+                ForkJoinArg::Chili => "ours (MG-PCG), chili join",
+            },
+            projection: ProjectionMethod::MultigridPcg,
+            fork_join: f.into(),
+            one_thread: false,
+        })
+        .collect();
+    let sweeps = a.sweeps;
+    if !a.no_baseline {
+        configs.push(Config {
+            label: "GS red-black, warm, dense SIMD, 2 halves (like for like)",
+            projection: ProjectionMethod::RedBlackGaussSeidel { sweeps },
+            fork_join: Backend::Helper,
+            one_thread: false,
+        });
+        configs.push(Config {
+            label: "GS lexicographic, cold, 1 thread, compressed rows (paper-class)",
+            projection: ProjectionMethod::GaussSeidel { sweeps },
+            fork_join: Backend::Helper,
+            one_thread: true,
+        });
+    }
+    // Rows of one voxel size and configuration over the repeats, interleaved so that load drifts
+    // touch every configuration alike.
+    let mut rows: Vec<(Config, Vec<BenchRow>)> = Vec::new();
     for &mm in &a.voxels_mm {
         let h = mm * 1e-3;
-        let ours = FluidParams {
-            tolerance: a.tolerance,
-            projection: ProjectionMethod::MultigridPcg,
-            advection,
-            ..Default::default()
-        };
-        let base = FluidParams {
-            tolerance: a.tolerance,
-            projection: ProjectionMethod::GaussSeidel { sweeps: a.sweeps },
-            advection,
-            ..Default::default()
-        };
-        let c0 = process_cpu_s();
-        let r1 = bench_shape(cavity, h, a.jet_m_s, dt_s, a.warmup, a.steps, ours)?;
-        let c1 = process_cpu_s();
-        let r2 = if a.no_baseline {
-            None
-        } else {
-            Some(bench_shape(
-                cavity, h, a.jet_m_s, dt_s, a.warmup, a.steps, base,
-            )?)
-        };
-        let c2 = process_cpu_s();
-        let per_step = |c: Option<f64>, d: Option<f64>| match (c, d) {
-            (Some(c), Some(d)) => (d - c) * 1e3 / (a.warmup + a.steps) as f64,
-            _ => f64::NAN,
-        };
-        cpu.push((per_step(c0, c1), per_step(c1, c2)));
+        let first = rows.len();
+        for c in &configs {
+            rows.push((*c, Vec::new()));
+        }
+        for _ in 0..a.repeats {
+            for (i, c) in configs.iter().enumerate() {
+                set_backend(c.fork_join);
+                let params = FluidParams {
+                    tolerance: a.tolerance,
+                    projection: c.projection,
+                    advection,
+                    ..Default::default()
+                };
+                let run = || bench_shape(cavity, h, a.jet_m_s, dt_s, a.warmup, a.steps, params);
+                let r = if c.one_thread {
+                    rayon::ThreadPoolBuilder::new()
+                        .num_threads(1)
+                        .build()
+                        .context("building a one-thread pool")?
+                        .install(run)?
+                } else {
+                    run()?
+                };
+                rows[first + i].1.push(r);
+            }
+        }
+        set_backend(Backend::Helper);
         tracing::info!("{mm} mm done");
-        rows.push((r1, r2));
     }
     if a.json {
         let out: Vec<_> = rows
             .iter()
-            .zip(&cpu)
-            .map(|((o, b), (co, cb))| serde_json::json!({"ours": o, "baseline": b, "ours_cpu_ms_per_step": co, "baseline_cpu_ms_per_step": cb}))
+            .map(|(c, r)| serde_json::json!({"solver": c.label, "runs": r}))
             .collect();
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
@@ -313,59 +382,92 @@ fn bench(a: BenchArgs) -> Result<()> {
         }
     };
     println!(
-        "{shape}, jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baseline {} Gauss-Seidel sweeps.",
+        "{shape}, jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps per run, {} run(s) per row interleaved, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baselines {} Gauss-Seidel sweeps per step.",
         a.jet_m_s,
         dt_s,
         advection,
         a.warmup,
         a.steps,
+        a.repeats,
         rayon::current_num_threads(),
         a.tolerance,
         a.sweeps
     );
+    println!("ms: wall time per step (mean ± sem over all timed steps of all runs; p99 of all steps). CPU: CLOCK_PROCESS_CPUTIME_ID (all threads) and CLOCK_THREAD_CPUTIME_ID (stepping thread) around the timed steps only. div h/U: max |div u| h / U after each step, its mean and worst over the steps.");
     println!();
-    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | ours ms mean ± sem | ours p99 | ours CPU ms | ours advect / diffuse / project / other ms | ours CG its | ours max div h/U | GS ms mean ± sem | GS p99 | GS CPU ms | GS mean div h/U |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
-    for ((o, b), (co, cb)) in rows.iter().zip(&cpu) {
+    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | solver | ms mean ± sem | p99 | CPU ms all threads | CPU ms stepping thread | advect / diffuse / project / other ms | projection its | mean div h/U | max div h/U |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for (c, runs) in &rows {
+        let Some(o) = runs.first() else { continue };
         let paper = PAPER_VOXELS_M
             .iter()
             .position(|&v| (v - o.voxel_m).abs() < 1e-9);
         let (pf, pm) = paper.map_or(("-".into(), "-".into()), |i| {
             (PAPER_FLUID_VOXELS[i].to_string(), PAPER_MS[i].to_string())
         });
-        let gs = b.as_ref().map_or_else(
-            || "- | - | - | -".to_string(),
-            |b| {
-                format!(
-                    "{:.2} ± {:.2} | {:.2} | {:.2} | {:.1e}",
-                    b.ms_mean, b.ms_sem, b.ms_p99, cb, b.div_rel_mean
-                )
-            },
-        );
+        let m = merge(runs);
         println!(
-            "| {:.1} | {} | {} ({}) | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.1} | {:.2e} | {gs} |",
+            "| {:.1} | {} | {} ({}) | {} | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.1} | {:.2e} | {:.2e} |",
             o.voxel_m * 1e3,
             o.voxels_total,
             o.fluid_voxels,
             pf,
             pm,
-            o.ms_mean,
-            o.ms_sem,
-            o.ms_p99,
-            co,
-            o.advect_ms_mean,
-            o.diffuse_ms_mean,
-            o.project_ms_mean,
-            o.other_ms_mean,
-            o.iterations_mean,
-            o.div_rel_max,
+            c.label,
+            m.ms_mean,
+            m.ms_sem,
+            m.ms_p99,
+            m.cpu_ms_per_step,
+            m.caller_cpu_ms_per_step,
+            m.advect_ms_mean,
+            m.diffuse_ms_mean,
+            m.project_ms_mean,
+            m.other_ms_mean,
+            m.iterations_mean,
+            m.div_rel_mean,
+            m.div_rel_max,
         );
     }
     Ok(())
 }
 
+/// The runs of one row as one: means weighted by steps, the sem of the pooled steps (from each
+/// run's mean and sem), the largest p99 and worst divergence.
+fn merge(runs: &[BenchRow]) -> BenchRow {
+    let mut m = runs[0].clone();
+    if runs.len() == 1 {
+        return m;
+    }
+    let n: f64 = runs.iter().map(|r| r.steps as f64).sum();
+    let mean =
+        |f: fn(&BenchRow) -> f64| runs.iter().map(|r| f(r) * r.steps as f64).sum::<f64>() / n;
+    m.ms_mean = mean(|r| r.ms_mean);
+    // Pooled variance: within-run variance (sem^2 * steps) plus the spread of the run means.
+    let var = runs
+        .iter()
+        .map(|r| {
+            let k = r.steps as f64;
+            r.ms_sem.powi(2) * k * k + k * (r.ms_mean - m.ms_mean).powi(2)
+        })
+        .sum::<f64>()
+        / n;
+    m.ms_sem = (var / n).sqrt();
+    m.ms_p99 = runs.iter().map(|r| r.ms_p99).fold(0.0, f64::max);
+    m.cpu_ms_per_step = mean(|r| r.cpu_ms_per_step);
+    m.caller_cpu_ms_per_step = mean(|r| r.caller_cpu_ms_per_step);
+    m.advect_ms_mean = mean(|r| r.advect_ms_mean);
+    m.diffuse_ms_mean = mean(|r| r.diffuse_ms_mean);
+    m.project_ms_mean = mean(|r| r.project_ms_mean);
+    m.other_ms_mean = mean(|r| r.other_ms_mean);
+    m.iterations_mean = mean(|r| r.iterations_mean);
+    m.div_rel_mean = mean(|r| r.div_rel_mean);
+    m.div_rel_max = runs.iter().map(|r| r.div_rel_max).fold(0.0, f64::max);
+    m.steps = n as usize;
+    m
+}
+
 fn validate(a: ValidateArgs) -> Result<()> {
-    use hydrometra_sim::fluid::validation::{ethier_steinman, square_duct, taylor_green};
+    use hydrometra_sim::harness::validation::{ethier_steinman, square_duct, taylor_green};
     let mut rows = Vec::new();
     let duct_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
     for &n in duct_n {
@@ -404,19 +506,6 @@ fn validate(a: ValidateArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// CPU time (user + system, all threads) of this process so far, from /proc/self/stat (Linux);
-/// None elsewhere. Under a loaded machine this is closer to the unloaded wall time than wall time is.
-fn process_cpu_s() -> Option<f64> {
-    let stat = std::fs::read_to_string("/proc/self/stat").ok()?;
-    // Fields after the command name (which is in parentheses and may contain spaces).
-    let rest = &stat[stat.rfind(')')? + 2..];
-    let f: Vec<&str> = rest.split_whitespace().collect();
-    let utime: f64 = f.get(11)?.parse().ok()?;
-    let stime: f64 = f.get(12)?.parse().ok()?;
-    // Linux reports in clock ticks of 1/100 s (USER_HZ) on every mainstream configuration.
-    Some((utime + stime) / 100.0)
 }
 
 fn soak(a: SoakArgs) -> Result<()> {

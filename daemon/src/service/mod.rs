@@ -7,8 +7,8 @@ pub mod latency;
 pub mod notify;
 pub mod publisher;
 pub mod realtime;
-pub mod rig_input;
-pub mod rig_link;
+pub mod rig_connection;
+pub mod rig_source;
 pub mod sim;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -22,7 +22,7 @@ use hydrometra_ipc::ServiceNames;
 use config::Config;
 use latency::LatencySummary;
 use publisher::PublisherThread;
-use rig_input::RigSource;
+use rig_source::RigSource;
 use sim::{LoopSettings, SimLoop, Telemetry};
 
 /// Capacity of the sim -> publisher channel: 64 ms of statuses at 1 kHz before statuses drop.
@@ -159,7 +159,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
     let priority = config.sim_loop.realtime_priority;
     realtime::apply("main", priority);
-    let rig = rig_link::RigInput::start(&config.rig)?;
+    let rig = rig_connection::RigConnection::start(&config.rig)?;
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
     let publisher =

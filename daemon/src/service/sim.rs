@@ -10,7 +10,7 @@ use hydrometra_drivers::state::{LinkState, ScopePose};
 use hydrometra_ipc::{alarms, Status};
 
 use super::latency::LatencyHistogram;
-use super::rig_input::{RigSource, RigView};
+use super::rig_source::{RigSource, RigView};
 
 /// The inputs a simulation stage sees on one tick: the rig's calibrated values, or the safe
 /// inputs when the rig is lost or stale.

@@ -19,7 +19,7 @@ use std::time::Duration;
 use serde::Deserialize;
 use toml::Spanned;
 
-use super::scenario::{line_of, ScenarioError};
+use super::scenario_error::{line_of, ScenarioError};
 
 /// One fault.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -236,89 +236,5 @@ impl FaultPlanFile {
             chunk_max_bytes,
             events,
         })
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::super::scenario::Scenario;
-    use super::*;
-
-    const BASE: &str = r#"[[keyframe]]
-t_s = 0.0
-valve_in = 0.0
-valve_out = 0.0
-pump_mmhg = 80.0
-tip_mm = [0.0, 0.0, 20.0]
-view_dir = [0.0, 0.0, 1.0]
-"#;
-
-    #[test]
-    fn every_fault_kind_parses() {
-        let text = format!(
-            "{BASE}[faults]\nchunk_max_bytes = 3\n\
-             [[faults.event]]\nat_s = 9.0\nkind = \"unplug\"\nduration_s = 1.5\n\
-             [[faults.event]]\nat_s = 1.0\nkind = \"garbage_burst\"\nbytes = 50\n\
-             [[faults.event]]\nat_s = 2.0\nkind = \"bit_flips\"\ncount = 3\n\
-             [[faults.event]]\nat_s = 3.0\nkind = \"drop_frames\"\ncount = 4\n\
-             [[faults.event]]\nat_s = 4.0\nkind = \"heartbeat_stop\"\nduration_s = 2.0\n\
-             [[faults.event]]\nat_s = 5.0\nkind = \"wrong_version\"\ncount = 2\n\
-             [[faults.event]]\nat_s = 6.0\nkind = \"fault_report\"\ncode = 7\n\
-             [[faults.event]]\nat_s = 7.0\nkind = \"chunking\"\nmax_bytes = 0\n"
-        );
-        let s = Scenario::from_toml_str(&text, "f").unwrap();
-        assert_eq!(s.faults.chunk_max_bytes, 3);
-        let kinds: Vec<Fault> = s.faults.events.iter().map(|e| e.fault).collect();
-        assert_eq!(
-            kinds,
-            vec![
-                Fault::GarbageBurst { bytes: 50 },
-                Fault::BitFlips { count: 3 },
-                Fault::DropFrames { count: 4 },
-                Fault::HeartbeatStop {
-                    duration: Duration::from_secs(2)
-                },
-                Fault::WrongVersion { count: 2 },
-                Fault::FaultReport {
-                    code: 7,
-                    severity: 1,
-                    detail: 0
-                },
-                Fault::Chunking { max_bytes: 0 },
-                Fault::Unplug {
-                    duration: Duration::from_millis(1500)
-                },
-            ]
-        );
-    }
-
-    #[test]
-    fn bad_fault_events_name_line_and_key() {
-        let text = format!("{BASE}[faults]\n[[faults.event]]\nat_s = 1.0\nkind = \"unplugg\"\n");
-        let e = Scenario::from_toml_str(&text, "f.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("line 11") && e.contains("faults.event[0].kind") && e.contains("unplugg"),
-            "{e}"
-        );
-        let text = format!(
-            "{BASE}[faults]\n[[faults.event]]\nat_s = 1.0\nkind = \"bit_flips\"\ncount = -2\n"
-        );
-        let e = Scenario::from_toml_str(&text, "f.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("line 12") && e.contains("faults.event[0].count"),
-            "{e}"
-        );
-        let text = format!("{BASE}[faults]\n[[faults.event]]\nat_s = 1.0\nkind = \"unplug\"\n");
-        let e = Scenario::from_toml_str(&text, "f.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("faults.event[0].duration_s") && e.contains("missing"),
-            "{e}"
-        );
     }
 }

@@ -18,6 +18,7 @@
 mod device;
 pub mod faults;
 pub mod scenario;
+mod scenario_error;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};

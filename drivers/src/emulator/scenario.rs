@@ -23,41 +23,8 @@ use serde::Deserialize;
 use toml::Spanned;
 
 use super::faults::{FaultPlan, FaultPlanFile};
-
-/// A bad scenario file; the message names the origin, line and key.
-#[derive(Debug, thiserror::Error)]
-pub enum ScenarioError {
-    /// The file could not be read.
-    #[error("cannot read scenario file {path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The OS error.
-        source: std::io::Error,
-    },
-    /// TOML syntax, unknown key or wrong type (the parser's message has line and column).
-    #[error("scenario {origin}: {message}")]
-    Parse {
-        /// File name or other origin.
-        origin: String,
-        /// The parser's message.
-        message: String,
-    },
-    /// A value out of range.
-    #[error("scenario {origin}, line {line}: key `{key}` = {value}: expected {expected}")]
-    Invalid {
-        /// File name or other origin.
-        origin: String,
-        /// 1-based line of the value.
-        line: usize,
-        /// Key path, e.g. `keyframe[3].valve_in`.
-        key: String,
-        /// The offending value.
-        value: String,
-        /// What is allowed.
-        expected: String,
-    },
-}
+use super::scenario_error::line_of;
+pub use super::scenario_error::ScenarioError;
 
 /// One interpolated scenario state (clinical units, organ frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -145,15 +112,6 @@ struct KeyframeFile {
 
 fn default_true() -> bool {
     true
-}
-
-/// 1-based line of a byte offset.
-pub(crate) fn line_of(text: &str, offset: usize) -> usize {
-    text.as_bytes()[..offset.min(text.len())]
-        .iter()
-        .filter(|&&b| b == b'\n')
-        .count()
-        + 1
 }
 
 const DEFAULT_SCENARIO: &str = include_str!("../../scenarios/default.toml");
@@ -497,6 +455,92 @@ view_dir = [1.0, 0.0, 0.0]
                 at_s: 5.0,
                 fault: super::super::Fault::GarbageBurst { bytes: 64 }
             }]
+        );
+    }
+}
+
+/// The `[faults]` table as read from a scenario file (the fault kinds themselves are in `faults`).
+#[cfg(test)]
+mod fault_table_tests {
+    use super::*;
+    use crate::emulator::faults::Fault;
+    use std::time::Duration;
+
+    const BASE: &str = r#"[[keyframe]]
+t_s = 0.0
+valve_in = 0.0
+valve_out = 0.0
+pump_mmhg = 80.0
+tip_mm = [0.0, 0.0, 20.0]
+view_dir = [0.0, 0.0, 1.0]
+"#;
+
+    #[test]
+    fn every_fault_kind_parses() {
+        let text = format!(
+            "{BASE}[faults]\nchunk_max_bytes = 3\n\
+             [[faults.event]]\nat_s = 9.0\nkind = \"unplug\"\nduration_s = 1.5\n\
+             [[faults.event]]\nat_s = 1.0\nkind = \"garbage_burst\"\nbytes = 50\n\
+             [[faults.event]]\nat_s = 2.0\nkind = \"bit_flips\"\ncount = 3\n\
+             [[faults.event]]\nat_s = 3.0\nkind = \"drop_frames\"\ncount = 4\n\
+             [[faults.event]]\nat_s = 4.0\nkind = \"heartbeat_stop\"\nduration_s = 2.0\n\
+             [[faults.event]]\nat_s = 5.0\nkind = \"wrong_version\"\ncount = 2\n\
+             [[faults.event]]\nat_s = 6.0\nkind = \"fault_report\"\ncode = 7\n\
+             [[faults.event]]\nat_s = 7.0\nkind = \"chunking\"\nmax_bytes = 0\n"
+        );
+        let s = Scenario::from_toml_str(&text, "f").unwrap();
+        assert_eq!(s.faults.chunk_max_bytes, 3);
+        let kinds: Vec<Fault> = s.faults.events.iter().map(|e| e.fault).collect();
+        assert_eq!(
+            kinds,
+            vec![
+                Fault::GarbageBurst { bytes: 50 },
+                Fault::BitFlips { count: 3 },
+                Fault::DropFrames { count: 4 },
+                Fault::HeartbeatStop {
+                    duration: Duration::from_secs(2)
+                },
+                Fault::WrongVersion { count: 2 },
+                Fault::FaultReport {
+                    code: 7,
+                    severity: 1,
+                    detail: 0
+                },
+                Fault::Chunking { max_bytes: 0 },
+                Fault::Unplug {
+                    duration: Duration::from_millis(1500)
+                },
+            ]
+        );
+    }
+
+    #[test]
+    fn bad_fault_events_name_line_and_key() {
+        let text = format!("{BASE}[faults]\n[[faults.event]]\nat_s = 1.0\nkind = \"unplugg\"\n");
+        let e = Scenario::from_toml_str(&text, "f.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 11") && e.contains("faults.event[0].kind") && e.contains("unplugg"),
+            "{e}"
+        );
+        let text = format!(
+            "{BASE}[faults]\n[[faults.event]]\nat_s = 1.0\nkind = \"bit_flips\"\ncount = -2\n"
+        );
+        let e = Scenario::from_toml_str(&text, "f.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 12") && e.contains("faults.event[0].count"),
+            "{e}"
+        );
+        let text = format!("{BASE}[faults]\n[[faults.event]]\nat_s = 1.0\nkind = \"unplug\"\n");
+        let e = Scenario::from_toml_str(&text, "f.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("faults.event[0].duration_s") && e.contains("missing"),
+            "{e}"
         );
     }
 }

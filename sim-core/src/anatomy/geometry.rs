@@ -12,10 +12,8 @@
 //! * `gap(x, z)`: the slit's antero-posterior opening at rest, zero on the footprint's rim.
 
 use super::error::AnatomyError;
-use super::params::AnatomyParams;
-use super::pathology::Lesion;
-
-const MM: f64 = 1e-3;
+use super::lesion::Lesion;
+use super::params::{AnatomyParams, MM};
 
 /// Fraction of the resting gap kept over protruding lesions.
 pub(crate) const LESION_GAP_FRACTION: f64 = 0.25;
@@ -68,8 +66,10 @@ pub(crate) const CANAL_FUSIFORM: f64 = 1.3;
 const P_Z: f64 = 2.4;
 
 impl Geometry {
-    /// Builds the geometry; `spacing_m` is the mesh lattice spacing, used for the resolution checks.
-    pub fn new(p: &AnatomyParams, spacing_m: f64) -> Result<Self, AnatomyError> {
+    /// Builds the organ without lesions (`lesions` empty; `pathology` places them:
+    /// `Geometry::with_lesions`); `spacing_m` is the mesh lattice spacing, used for the resolution
+    /// checks.
+    pub fn without_lesions(p: &AnatomyParams, spacing_m: f64) -> Result<Self, AnatomyError> {
         let lu = p.uterine_length_mm * MM;
         let tf = p.fundal_wall_mm * MM;
         let lc = p.cavity_length_mm * MM;
@@ -249,7 +249,7 @@ impl Geometry {
             .collect();
         let bend = Bend::new(p, cx, z_io, cervix_r);
         let os_half_width_m = 0.5 * wos;
-        let mut g = Geometry {
+        let g = Geometry {
             uterine_length_m: lu,
             corpus_half_width_m: 0.5 * p.corpus_width_mm * MM,
             corpus_half_depth_m: 0.5 * p.ap_depth_mm * MM,
@@ -300,7 +300,6 @@ impl Geometry {
                 ),
             ));
         }
-        g.lesions = super::pathology::place_lesions(p, &g, spacing_m)?;
         Ok(g)
     }
 

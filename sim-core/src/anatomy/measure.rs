@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::mesh::{Region, VertexLabel};
 
-use super::pathology::{ellipsoid_sdf, LesionKind};
+use super::lesion::{ellipsoid_sdf, LesionKind};
 use super::Anatomy;
 
 /// Dimensions measured on the mesh, mm and degrees, from the mesh alone (positions, cavity

@@ -24,6 +24,7 @@
 mod cavity;
 mod error;
 mod geometry;
+mod lesion;
 mod measure;
 mod mesher;
 mod params;
@@ -125,7 +126,7 @@ impl Anatomy {
 /// Lattice spacing for the target tetrahedron count: the organ volume (sampled on a 1.5 mm grid)
 /// divided into `target / TETS_PER_CELL` cubes.
 fn spacing_for(params: &AnatomyParams) -> Result<f64, AnatomyError> {
-    let g0 = Geometry::new(params, 0.0)?;
+    let g0 = Geometry::with_lesions(params, 0.0)?;
     let step = 1.5e-3;
     let (hx, hy) = (g0.corpus_half_width_m, g0.corpus_half_depth_m);
     let mut inside = 0usize;
@@ -155,7 +156,7 @@ fn spacing_for(params: &AnatomyParams) -> Result<f64, AnatomyError> {
 pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
     params.check_ranges()?;
     let h = spacing_for(params)?;
-    let geo = Geometry::new(params, h)?;
+    let geo = Geometry::with_lesions(params, h)?;
     let tol = 1e-12;
 
     // 1. Lattice cut to the serosa.
@@ -254,8 +255,8 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
             for l in &geo.lesions {
                 if l.region_contains(c, s) {
                     return match l.kind {
-                        pathology::LesionKind::Myoma { .. } => Region::Fibroid,
-                        pathology::LesionKind::Polyp(_) => Region::Polyp,
+                        lesion::LesionKind::Myoma { .. } => Region::Fibroid,
+                        lesion::LesionKind::Polyp(_) => Region::Polyp,
                     };
                 }
             }

@@ -5,6 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use super::error::AnatomyError;
 
+/// Metres per millimetre (the parameters are in mm, the geometry in m).
+pub(crate) const MM: f64 = 1e-3;
+
 /// Parity preset: supplies every parameter not given in a file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

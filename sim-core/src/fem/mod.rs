@@ -10,11 +10,13 @@
 //! - [`pressure`]: the follower pressure as the potential `-p V_cavity(x)` of the closed cavity.
 //! - [`newton`]: Newton with line search, tangent predictor, adaptive steps, volume control.
 //! - [`linear`]: faer sparse LDL^T with the symbolic analysis reused.
-//! - [`testmesh`] and [`analytic`]: thick sphere and cylinder meshes and their exact solutions
+//! - [`analytic`]: exact solutions of the thick sphere and cylinder (their meshes are in
+//!   `hydrometra_sim::harness::testmesh`, feature `harness`)
 //!   (incompressible integrals and the finite-kappa sphere by radial shooting).
 //!
 //! ```
-//! use hydrometra_sim::fem::{analytic, material::{Material, MaterialSet}, testmesh, FemModel, Solver};
+//! use hydrometra_sim::fem::{analytic, material::{Material, MaterialSet}, FemModel, Solver};
+//! use hydrometra_sim::harness::testmesh;
 //! let material = Material::neo_hookean(1.0, 100.0);
 //! let case = testmesh::thick_sphere_octant(1.0, 2.0, 4, 2);
 //! let model = FemModel::from_parts(case.positions_m, case.tets, &MaterialSet::uniform(material), case.fixed_dofs, case.cavity).unwrap();
@@ -33,6 +35,7 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod analytic;
+mod assembly;
 pub mod element;
 pub mod linear;
 pub mod material;
@@ -42,7 +45,6 @@ pub mod ordering;
 pub mod pressure;
 pub mod system;
 pub mod system10;
-pub mod testmesh;
 pub mod tet10;
 
 pub use model::{Element, FemModel};

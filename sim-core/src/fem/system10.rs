@@ -9,8 +9,8 @@
 //! potential is still a function of `x`, so the tangent is exactly symmetric. The matrix is the
 //! plain displacement Hessian (positive definite at stable equilibria), factorized by LDL^T.
 
+use super::assembly::{BlockPattern, Evaluation};
 use super::model::FemModel;
-use super::system::{BlockPattern, Evaluation};
 use super::tet10::Tet10Reference;
 use super::FemError;
 use rayon::prelude::*;

@@ -497,7 +497,7 @@ impl Pass<'_> {
         match split_block(out.len(), parallel) {
             Some(mid) => {
                 let (a, b) = out.split_at_mut(mid * BLOCK);
-                crate::duo::join(|| blocks(0, a), || blocks(mid, b));
+                crate::fork_join::join(|| blocks(0, a), || blocks(mid, b));
             }
             None => blocks(0, out),
         }
@@ -529,7 +529,7 @@ impl Pass<'_> {
                     lo.split_at_mut(at),
                     hi.split_at_mut(at),
                 );
-                crate::duo::join(|| blocks(0, o0, l0, h0), || blocks(mid, o1, l1, h1));
+                crate::fork_join::join(|| blocks(0, o0, l0, h0), || blocks(mid, o1, l1, h1));
             }
             None => blocks(0, out, lo, hi),
         }
@@ -571,7 +571,10 @@ impl Pass<'_> {
                 let (o0, o1) = out.split_at_mut(at);
                 let ((l0, l1), (h0, h1), (u0, u1)) =
                     (lo.split_at(at), hi.split_at(at), orig.split_at(at));
-                crate::duo::join(|| blocks(0, o0, l0, h0, u0), || blocks(mid, o1, l1, h1, u1));
+                crate::fork_join::join(
+                    || blocks(0, o0, l0, h0, u0),
+                    || blocks(mid, o1, l1, h1, u1),
+                );
             }
             None => blocks(0, out, lo, hi, orig),
         }
@@ -626,7 +629,7 @@ pub(crate) fn update_centred(
     };
     if parallel && nz >= 2 {
         let (a, b) = out.split_at_mut(nz / 2 * nx * ny);
-        crate::duo::join(|| slabs(0, a), || slabs(nz / 2, b));
+        crate::fork_join::join(|| slabs(0, a), || slabs(nz / 2, b));
     } else {
         slabs(0, out);
     }
@@ -1209,8 +1212,9 @@ mod tests {
     /// single-cell axis).
     #[cfg(target_arch = "x86_64")]
     #[test]
-    fn avx2_trace_matches_the_scalar_trace() {
+    fn avx2_trace_matches_the_scalar_trace_where_available() {
         if !avx2::available() {
+            eprintln!("SKIP avx2_trace_matches_the_scalar_trace_where_available: no AVX2+FMA");
             return;
         }
         let mut st = 11u64;

@@ -83,7 +83,8 @@ pub struct TimeSpec {
 pub struct SolverSpec {
     /// `semi_lagrangian` (default) or `maccormack`.
     pub advection: Option<String>,
-    /// `multigrid_pcg` (default), `jacobi_pcg` or `gauss_seidel`.
+    /// `multigrid_pcg` (default), `jacobi_pcg`, `gauss_seidel` (cold, lexicographic, one thread) or
+    /// `red_black_gauss_seidel` (warm-started, on the multigrid's dense kernels).
     pub projection: Option<String>,
     /// Gauss-Seidel sweeps per step (default 20).
     pub sweeps: Option<usize>,
@@ -328,25 +329,27 @@ impl Case {
                 ))
             }
         };
-        p.projection = match s.projection.as_deref() {
-            None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
-            Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
-            Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
-                sweeps: s.sweeps.unwrap_or(20),
-            },
-            Some(o) => {
-                return Err(invalid(
+        p.projection =
+            match s.projection.as_deref() {
+                None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
+                Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
+                Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
+                    sweeps: s.sweeps.unwrap_or(20),
+                },
+                Some("red_black_gauss_seidel") => ProjectionMethod::RedBlackGaussSeidel {
+                    sweeps: s.sweeps.unwrap_or(20),
+                },
+                Some(o) => return Err(invalid(
                     "solver.projection",
                     o,
-                    "expected multigrid_pcg, jacobi_pcg or gauss_seidel",
-                ))
-            }
-        };
-        if s.sweeps.is_some() && !matches!(p.projection, ProjectionMethod::GaussSeidel { .. }) {
+                    "expected multigrid_pcg, jacobi_pcg, gauss_seidel or red_black_gauss_seidel",
+                )),
+            };
+        if s.sweeps.is_some() && !p.projection.is_fixed_sweeps() {
             return Err(invalid(
                 "solver.sweeps",
                 s.sweeps,
-                "only used with projection = \"gauss_seidel\"",
+                "only used with projection = \"gauss_seidel\" or \"red_black_gauss_seidel\"",
             ));
         }
         if let Some(t) = s.tolerance {

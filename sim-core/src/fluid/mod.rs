@@ -24,7 +24,6 @@
 //! ```
 
 mod advection;
-pub mod benchmark;
 pub mod case;
 pub mod cavity;
 mod grid;
@@ -33,10 +32,8 @@ mod multigrid;
 mod pressure;
 mod regions;
 mod sample;
-pub mod soak;
 mod solver;
 mod topology;
-pub mod validation;
 mod viscosity;
 
 pub use advection::AdvectionScheme;

@@ -415,7 +415,7 @@ pub(crate) fn run(level: &Level, op: SpanOp<'_>) -> f64 {
     let mid = level.spans[k][0] as usize;
     let (sa, sb) = level.spans.split_at(k);
     let (oa, ob) = op.split(mid);
-    let (ra, rb) = crate::duo::join(
+    let (ra, rb) = crate::fork_join::join(
         || dispatch(level, sa, 0, oa),
         || dispatch(level, sb, mid, ob),
     );
@@ -441,7 +441,7 @@ pub(crate) fn for_spans<T: Send>(
     let mid = level.spans[k][0] as usize;
     let (a, b) = out.split_at_mut(mid);
     let (sa, sb) = level.spans.split_at(k);
-    let (ra, rb) = crate::duo::join(|| f(sa, a, 0), || f(sb, b, mid));
+    let (ra, rb) = crate::fork_join::join(|| f(sa, a, 0), || f(sb, b, mid));
     ra.max(rb)
 }
 
@@ -459,7 +459,7 @@ pub(crate) fn max_abs_spans(level: &Level, v: &[f64]) -> f64 {
         return max(&level.spans);
     }
     let (sa, sb) = level.spans.split_at(k);
-    let (ra, rb) = crate::duo::join(|| max(sa), || max(sb));
+    let (ra, rb) = crate::fork_join::join(|| max(sa), || max(sb));
     ra.max(rb)
 }
 
@@ -741,7 +741,7 @@ impl Level {
     /// One colour's half-sweep of Gauss-Seidel on `x` (`colour` 0 = red, 1 = black). With `init`,
     /// `x` is taken as zero (it is written, not read: the first half-sweep of a V-cycle level).
     /// With `dot` (not with `init`), returns `sum b x` of the result, else 0.
-    fn half_sweep(&mut self, colour: usize, init: bool, dot: bool) -> f64 {
+    pub(super) fn half_sweep(&mut self, colour: usize, init: bool, dot: bool) -> f64 {
         let mut x = std::mem::take(&mut self.x);
         let mut sum = 0.0;
         if init {
@@ -1008,7 +1008,7 @@ fn transfer(fine: &Level, coarse: &Level, restrict: Option<f32>, out: &mut [f32]
     };
     let (a, b) = out.split_at_mut(mid);
     let (ra, rb) = rows.split_at(m);
-    crate::duo::join(|| whole(ra, 0, a), || whole(rb, mid, b));
+    crate::fork_join::join(|| whole(ra, 0, a), || whole(rb, mid, b));
 }
 
 /// `coarse.b = scale * (sum of the children's residuals)` on the coarse fluid cells.

@@ -28,11 +28,29 @@ pub enum ProjectionMethod {
     MultigridPcg,
     /// CG preconditioned by the diagonal (Jacobi), to the divergence tolerance: the reference.
     JacobiPcg,
-    /// A fixed number of Gauss-Seidel sweeps from zero each step (the paper-class baseline).
+    /// A fixed number of Gauss-Seidel sweeps from zero each step (the paper-class baseline as
+    /// the paper ran it: cold start, lexicographic order, one thread, compressed rows).
     GaussSeidel {
         /// Sweeps per step.
         sweeps: usize,
     },
+    /// A fixed number of red-black Gauss-Seidel sweeps on our machinery: warm-started from the last
+    /// pressure like ours, on the dense f32 level-0 kernels of the multigrid smoother (SIMD, halves
+    /// split on the fork-join from the same size as ours). The like-for-like baseline.
+    RedBlackGaussSeidel {
+        /// Sweeps (red then black) per step.
+        sweeps: usize,
+    },
+}
+
+impl ProjectionMethod {
+    /// Whether the method runs a fixed number of sweeps instead of solving to the tolerance.
+    pub fn is_fixed_sweeps(&self) -> bool {
+        matches!(
+            self,
+            Self::GaussSeidel { .. } | Self::RedBlackGaussSeidel { .. }
+        )
+    }
 }
 
 /// Outcome of one pressure solve.
@@ -69,7 +87,7 @@ pub(crate) struct PressureSolver {
 
 const CHUNK: usize = 2048;
 
-/// Multigrid levels split their kernels in two halves (on [`crate::duo`]) from `parallel_rows /
+/// Multigrid levels split their kernels in two halves (on [`crate::fork_join`]) from `parallel_rows /
 /// SPLIT_DIVISOR` fluid cells: 2,000 by default. A hand-over is a cache-line round trip there, so
 /// it pays from a few thousand cells (measured on the 2-core machine: the 1.2 mm cavity's level 0,
 /// 3.8k cells, gains ~25 % of the projection, the 0.6 mm cavity's levels 0 and 1 ~25 %; rayon's
@@ -169,8 +187,12 @@ impl PressureSolver {
                 converged: true,
             };
         }
-        if method == ProjectionMethod::MultigridPcg {
-            return self.solve_multigrid(tol_abs, max_iterations);
+        match method {
+            ProjectionMethod::MultigridPcg => return self.solve_multigrid(tol_abs, max_iterations),
+            ProjectionMethod::RedBlackGaussSeidel { sweeps } => {
+                return self.red_black_gauss_seidel(sweeps, tol_abs)
+            }
+            _ => {}
         }
         let pad_of_row = &self.mg.levels[0].pad_of_row;
         for ((q, b), &p) in self.q.iter_mut().zip(&mut self.b).zip(pad_of_row) {
@@ -244,11 +266,9 @@ impl PressureSolver {
         }
     }
 
-    /// Multigrid-preconditioned CG on the dense operator, for the increment `d` of the warm start
-    /// `q`: the residual of the warm start is formed in f64, the increment is solved in f32 (dot
-    /// products accumulated in f64), and `q += d` in f64, so the f32 rounding only ever applies to
-    /// the (small) correction.
-    fn solve_multigrid(&mut self, tol_abs: f64, max_iterations: usize) -> SolveOutcome {
+    /// The residual `b - A q` of the warm start `q = dq` into level 0's `b` (in f64, rounded once
+    /// to f32; closed regions mean-free), and its largest magnitude.
+    fn warm_start_residual(&mut self) -> f32 {
         // Closed regions: pressure is defined up to a constant; keeping it mean-free keeps it small.
         let pad_of_row = &self.mg.levels[0].pad_of_row;
         self.regions
@@ -258,13 +278,10 @@ impl PressureSolver {
             regions,
             bd,
             dq,
-            dd,
-            dp,
-            dap,
             ..
         } = self;
         let periodic = mg.levels[0].periodic.iter().any(|&p| p);
-        let l0max = {
+        {
             let l0 = &mut mg.levels[0];
             if periodic {
                 l0.halo(dq);
@@ -299,7 +316,25 @@ impl PressureSolver {
             } else {
                 l0max
             }
-        };
+        }
+    }
+
+    /// Multigrid-preconditioned CG on the dense operator, for the increment `d` of the warm start
+    /// `q`: the residual of the warm start is formed in f64, the increment is solved in f32 (dot
+    /// products accumulated in f64), and `q += d` in f64, so the f32 rounding only ever applies to
+    /// the (small) correction.
+    fn solve_multigrid(&mut self, tol_abs: f64, max_iterations: usize) -> SolveOutcome {
+        let l0max = self.warm_start_residual();
+        let PressureSolver {
+            mg,
+            regions,
+            dq,
+            dd,
+            dp,
+            dap,
+            ..
+        } = self;
+        let periodic = mg.levels[0].periodic.iter().any(|&p| p);
         let tol = tol_abs as f32;
         let mut outcome = SolveOutcome {
             iterations: 0,
@@ -402,6 +437,39 @@ impl PressureSolver {
             0.0
         });
         outcome
+    }
+
+    /// The like-for-like baseline: `sweeps` red-black sweeps for the increment of the warm start, on
+    /// level 0's dense f32 smoother (the same kernels and thread split as the multigrid's).
+    fn red_black_gauss_seidel(&mut self, sweeps: usize, tol_abs: f64) -> SolveOutcome {
+        let l0max = self.warm_start_residual();
+        if l0max <= tol_abs as f32 {
+            return SolveOutcome {
+                iterations: 0,
+                converged: true,
+            };
+        }
+        let l0 = &mut self.mg.levels[0];
+        for sweep in 0..sweeps {
+            l0.half_sweep(0, sweep == 0, false);
+            l0.half_sweep(1, false, false);
+        }
+        let l0 = &self.mg.levels[0];
+        let x = &l0.x;
+        for_spans(l0, &mut self.dq, |spans, out, off| {
+            for &[s, e] in spans {
+                let (s, e) = (s as usize, e as usize);
+                for (q, &d) in out[s - off..e - off].iter_mut().zip(&x[s..e]) {
+                    *q += d as f64;
+                }
+            }
+            0.0
+        });
+        // Converged or not is measured by the caller on the projected velocity.
+        SolveOutcome {
+            iterations: sweeps,
+            converged: false,
+        }
     }
 
     /// The baseline: `sweeps` lexicographic Gauss-Seidel sweeps from q = 0 (on the compressed rows).

@@ -150,7 +150,7 @@ pub(crate) fn explicit(
             .irregular
             .split_at(set.irregular.partition_point(|f| (f.n as usize) < split));
         let (o0, o1) = out.split_at_mut(split);
-        crate::duo::join(
+        crate::fork_join::join(
             || {
                 run(r0, 0, o0);
                 others(i0, 0, o0);

@@ -28,6 +28,7 @@ mod compliance;
 mod deficit;
 mod model;
 mod params;
+mod procedure;
 mod record;
 mod solve;
 mod valve;
@@ -41,17 +42,17 @@ pub use deficit::{
     DeficitMonitor, DeficitStatus, ALARM_DEFICIT_RATE, ALARM_OVERPRESSURE, ALARM_TERMINATED,
     ALARM_WARNING_STAGE_0,
 };
-pub use model::{
-    CumulativeVolumes, HydraulicCounters, HydraulicInputs, HydraulicModel, HydraulicState,
-    ProcedureInfo,
-};
+pub use model::{HydraulicCounters, HydraulicInputs, HydraulicModel, HydraulicState};
 pub use params::{
     conductance_si, AbsorptionParams, CavityParams, CervixParams, DeficitLimit, DeficitParams,
     HydraulicParams, InflowParams, LineParams, OutflowParams, ParamsError, PerforationParams,
     PumpParams,
 };
+pub use procedure::{CumulativeVolumes, ProcedureInfo};
 pub use record::{crc32, ProcedureRecord, RecordError, RECORD_MAGIC, RECORD_VERSION};
 pub use valve::{sanitize_opening, ValveCurve};
 
+#[cfg(test)]
+mod compliance_tests;
 #[cfg(test)]
 mod tests;

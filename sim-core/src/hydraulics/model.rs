@@ -13,12 +13,11 @@
 //! `V_{n+1} = V_n + dt q(p)`, so the mass balance closes exactly (up to rounding) by construction,
 //! whatever the solver tolerance.
 
-use serde::{Deserialize, Serialize};
-
 use super::circuit::{Circuit, Flows};
 use super::compliance::CavityCompliance;
 use super::deficit::{DeficitMonitor, DeficitStatus};
 use super::params::{conductance_si, HydraulicParams, ParamsError};
+use super::procedure::{CumulativeVolumes, ProcedureInfo};
 use super::solve::{expand_bracket, solve_bracketed};
 use super::valve::sanitize_opening;
 use crate::units::{ml_per_min_to_m3_per_s, mmhg_to_pa};
@@ -34,30 +33,6 @@ pub struct HydraulicInputs {
     pub pump_set_pressure_pa: f64,
     /// The case's perforation event: once true, the perforation stays until a new procedure.
     pub perforation: bool,
-}
-
-/// Volumes accumulated since the procedure started, m^3 (each non-decreasing).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct CumulativeVolumes {
-    /// Delivered by the pump into the cavity.
-    pub inflow_m3: f64,
-    /// Collected by the suction canister.
-    pub outflow_m3: f64,
-    /// Leaked through the cervix.
-    pub leak_m3: f64,
-    /// Part of the leak caught by the drape and counted as collected.
-    pub leak_collected_m3: f64,
-    /// Absorbed into the circulation.
-    pub absorbed_m3: f64,
-    /// Lost through a perforation.
-    pub perforation_m3: f64,
-}
-
-impl CumulativeVolumes {
-    /// Everything measured as collected: outflow plus the collected part of the leak.
-    pub fn collected_m3(&self) -> f64 {
-        self.outflow_m3 + self.leak_collected_m3
-    }
 }
 
 /// The model's state after a step.
@@ -116,15 +91,6 @@ pub struct HydraulicCounters {
     pub bisections: u64,
     /// Steps where the solver hit its iteration limit or found no bracket (best estimate kept).
     pub unconverged_steps: u64,
-}
-
-/// Identity of the current procedure (set by the daemon; sim-core has no clock).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-pub struct ProcedureInfo {
-    /// Procedure id, chosen by the caller (e.g. its start time in ms).
-    pub id: u64,
-    /// Wall-clock start, ms since the Unix epoch.
-    pub started_unix_ms: u64,
 }
 
 /// The lumped hydraulic model of pump, lines, cavity, leak, absorption and perforation.

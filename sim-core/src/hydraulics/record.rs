@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use super::deficit::DeficitStatus;
-use super::model::{CumulativeVolumes, ProcedureInfo};
+use super::procedure::{CumulativeVolumes, ProcedureInfo};
 
 /// Magic word on the header line.
 pub const RECORD_MAGIC: &str = "hydrometra-procedure";
@@ -223,25 +223,40 @@ impl ProcedureRecord {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hydraulics::{HydraulicInputs, HydraulicModel, HydraulicParams};
-    use crate::units::mmhg_to_pa;
-
+    /// A record as the model writes it mid-procedure (built by hand: these tests are about the
+    /// file, not the model; values with full 53-bit mantissas so a lossy round trip would show).
     fn sample_record() -> ProcedureRecord {
-        let mut m = HydraulicModel::new(HydraulicParams::default()).unwrap();
-        m.start_new_procedure(ProcedureInfo {
-            id: 7,
-            started_unix_ms: 1_700_000_000_000,
-        });
-        let inputs = HydraulicInputs {
-            valve_in_opening: 1.0,
-            valve_out_opening: 0.5,
-            pump_set_pressure_pa: mmhg_to_pa(120.0),
-            perforation: true,
-        };
-        for _ in 0..2000 {
-            m.step(&inputs, 1e-3);
+        let ml = 1e-6;
+        ProcedureRecord {
+            procedure: ProcedureInfo {
+                id: 7,
+                started_unix_ms: 1_700_000_000_000,
+            },
+            saved_unix_ms: 1_700_000_002_000,
+            time_s: 2.0 / 3.0 + 1.0,
+            cavity_volume_m3: 7.0 * ml / 3.0,
+            cavity_pressure_pa: 120.0 * 133.322_387_415 / 7.0,
+            initial_cavity_volume_m3: ml / 3.0,
+            perforated: true,
+            totals: CumulativeVolumes {
+                inflow_m3: 40.0 * ml / 3.0,
+                outflow_m3: 20.0 * ml / 7.0,
+                leak_m3: ml / 11.0,
+                leak_collected_m3: ml / 13.0,
+                absorbed_m3: ml / 17.0,
+                perforation_m3: 5.0 * ml / 3.0,
+            },
+            deficit: DeficitStatus {
+                deficit_m3: 8.0 * ml / 3.0,
+                rate_m3_per_s: ml / 9.0,
+                limit_m3: 1000.0 * ml,
+                warning_stage: 1,
+                rate_alarm: true,
+                terminated: false,
+                terminated_at_s: None,
+                overpressure: false,
+            },
         }
-        m.record(1_700_000_002_000)
     }
 
     #[test]

@@ -34,6 +34,12 @@ pub struct BenchRow {
     pub ms_sem: f64,
     /// 99th percentile (ms).
     pub ms_p99: f64,
+    /// CPU time per timed step of the whole process (every thread: the stepping thread, the
+    /// fork-join helper, pool threads; their spinning included), ms, from
+    /// `CLOCK_PROCESS_CPUTIME_ID` read just before and after the timed steps.
+    pub cpu_ms_per_step: f64,
+    /// CPU time per timed step of the stepping thread alone (`CLOCK_THREAD_CPUTIME_ID`), ms.
+    pub caller_cpu_ms_per_step: f64,
     /// Projection share of the mean (ms).
     pub project_ms_mean: f64,
     /// Advection share of the mean (ms): centred velocity, extrapolation, the semi-Lagrangian (and
@@ -104,6 +110,7 @@ pub fn bench_shape(
         s.step(dt_s)?;
     }
     let mut ms = Vec::with_capacity(steps);
+    let (process0, thread0) = (cpu_s(CpuClock::Process), cpu_s(CpuClock::Thread));
     let (mut proj, mut adv, mut its, mut div, mut divmax) = (0.0, 0.0, 0usize, 0.0, 0.0f64);
     let (mut diffuse, mut total) = (0.0, 0.0);
     for _ in 0..steps {
@@ -118,6 +125,7 @@ pub fn bench_shape(
         div += st.max_div_rel;
         divmax = divmax.max(st.max_div_rel);
     }
+    let (process1, thread1) = (cpu_s(CpuClock::Process), cpu_s(CpuClock::Thread));
     let n = steps.max(1) as f64;
     let mean = ms.iter().sum::<f64>() / n;
     let var = ms.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
@@ -136,6 +144,8 @@ pub fn bench_shape(
         ms_mean: mean,
         ms_sem: (var / n).sqrt(),
         ms_p99: p99,
+        cpu_ms_per_step: (process1 - process0) * 1e3 / n,
+        caller_cpu_ms_per_step: (thread1 - thread0) * 1e3 / n,
         project_ms_mean: proj / n,
         advect_ms_mean: adv / n,
         diffuse_ms_mean: diffuse / n,
@@ -144,4 +154,30 @@ pub fn bench_shape(
         div_rel_mean: div / n,
         div_rel_max: divmax,
     })
+}
+
+/// Which CPU clock.
+#[derive(Clone, Copy)]
+enum CpuClock {
+    /// Every thread of the process.
+    Process,
+    /// The calling thread.
+    Thread,
+}
+
+/// CPU time consumed so far on `clock`, s (nanosecond resolution; NaN where unavailable).
+fn cpu_s(clock: CpuClock) -> f64 {
+    let id = match clock {
+        CpuClock::Process => libc::CLOCK_PROCESS_CPUTIME_ID,
+        CpuClock::Thread => libc::CLOCK_THREAD_CPUTIME_ID,
+    };
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: a valid clock id and a valid timespec to write.
+    if unsafe { libc::clock_gettime(id, &mut ts) } != 0 {
+        return f64::NAN;
+    }
+    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
 }

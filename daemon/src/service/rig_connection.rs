@@ -10,7 +10,7 @@ use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
 use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink};
 
 use super::config::{RigConfig, RigMode};
-use super::rig_input::{RigSource, RigView};
+use super::rig_source::{RigSource, RigView};
 
 impl RigSource for RigLink {
     fn view(&self) -> RigView {
@@ -25,7 +25,7 @@ impl RigSource for RigLink {
 }
 
 /// The running rig input.
-pub struct RigInput {
+pub struct RigConnection {
     link: Arc<RigLink>,
     emulator: Option<EmulatedRig>,
 }
@@ -46,7 +46,7 @@ pub fn load_scenario(name_or_path: &str) -> anyhow::Result<Scenario> {
     Scenario::load(path).with_context(|| format!("rig.emulated.scenario = {name_or_path:?}"))
 }
 
-impl RigInput {
+impl RigConnection {
     /// Starts the emulator (if configured) and the transport. A missing device is not an error:
     /// the transport keeps retrying and status reports the link as disconnected.
     pub fn start(config: &RigConfig) -> anyhow::Result<Self> {
@@ -103,7 +103,7 @@ impl RigInput {
         self.link.clone()
     }
 
-    /// Stops the transport (after every other holder of [`RigInput::source`] dropped it) and the
+    /// Stops the transport (after every other holder of [`RigConnection::source`] dropped it) and the
     /// emulator.
     pub fn shutdown(self) {
         match Arc::try_unwrap(self.link) {

@@ -1,0 +1,30 @@
+//! Harnesses: the analytic test meshes, the Table 1 benchmark, the validation cases and the stability
+//! soak. They drive the library the way the CLI, the tests and the benchmarks need; they are not its
+//! API and are compiled only with the `harness` feature (enabled by the daemon's CLI and by this
+//! crate's own tests and benchmarks).
+//!
+//! - [`testmesh`]: thick sphere and cylinder meshes for the FEM (exact solutions in
+//!   [`crate::fem::analytic`]).
+//! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
+//! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
+//! - [`soak`]: the random stability soak of the fluid solver.
+
+// The harness files moved here from `fluid` and `fem` and still name the library's items through
+// `super::`; these imports are what `super::` finds.
+use crate::fem::{element, pressure};
+use crate::fluid::{
+    cavity, AdvectionScheme, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver,
+    ProjectionMethod,
+};
+
+pub mod benchmark;
+pub mod soak;
+// Index loops mirror the mesh formulas, as in `fem`.
+#[allow(clippy::needless_range_loop)]
+pub mod testmesh;
+pub mod validation;
+
+/// The solver's two-way fork-join, switchable to `rayon::join` or chili to measure against.
+pub mod fork_join {
+    pub use crate::fork_join::{helper_tasks, set_backend, Backend};
+}
