@@ -138,6 +138,10 @@ pub struct SkipSpec {
     pub pressure_tolerance_pa: f64,
     /// The cavity is re-voxelized only where a vertex moved more than this fraction of a voxel.
     pub voxel_move_fraction: f64,
+    /// The scope is re-rasterized only when its tip (or the far end of its part in the grid)
+    /// moved more than this fraction of a voxel: its cells follow the centre rule, so a smaller
+    /// move changes at most a boundary cell, and every change costs a topology rebuild.
+    pub scope_move_fraction: f64,
     /// The fluid step is skipped when no port or wall moves fluid and every face is slower than
     /// this, m/s.
     pub rest_speed_m_s: f64,
@@ -148,6 +152,7 @@ impl Default for SkipSpec {
         Self {
             pressure_tolerance_pa: 1.0,
             voxel_move_fraction: 0.1,
+            scope_move_fraction: 0.5,
             rest_speed_m_s: 1e-4,
         }
     }
@@ -467,6 +472,14 @@ impl SceneDesc {
         non_negative("skip.pressure_tolerance_pa", k.pressure_tolerance_pa)?;
         non_negative("skip.rest_speed_m_s", k.rest_speed_m_s)?;
         non_negative("skip.voxel_move_fraction", k.voxel_move_fraction)?;
+        non_negative("skip.scope_move_fraction", k.scope_move_fraction)?;
+        if k.scope_move_fraction > 2.0 {
+            return Err(invalid(
+                o,
+                "skip.scope_move_fraction",
+                format!("{}: expected at most 2 voxels", k.scope_move_fraction),
+            ));
+        }
         if k.voxel_move_fraction > 0.5 {
             return Err(invalid(
                 o,

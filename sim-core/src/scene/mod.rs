@@ -747,7 +747,7 @@ impl Scene {
             (Some(_), None) => true,
             (Some(a), Some(b)) => {
                 let h = self.cells.spacing_m;
-                let f = self.desc.skip.voxel_move_fraction.max(1e-6);
+                let f = self.desc.skip.scope_move_fraction.max(1e-6);
                 let dx = (0..3).map(|i| (a.tip_m[i] - b.tip_m[i]).powi(2)).sum::<f64>().sqrt();
                 let cos = (0..3).map(|i| a.dir[i] * b.dir[i]).sum::<f64>();
                 // The far end of the 200 mm sheath moves by L sin(angle): only the part in the
