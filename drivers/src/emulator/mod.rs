@@ -17,6 +17,7 @@
 
 mod device;
 pub mod faults;
+pub mod replay;
 pub mod scenario;
 
 use std::path::{Path, PathBuf};
@@ -30,6 +31,7 @@ use tracing::warn;
 
 use crate::calibration::Calibration;
 pub use faults::{Fault, FaultEvent, FaultPlan};
+pub use replay::{ReplayError, ReplayItem, ReplayScript};
 pub use scenario::{Keyframe, Scenario, ScenarioError, ScenarioSample};
 
 /// Emulator settings. `Default`: 250 Hz samples, 10 Hz heartbeats, default calibration, no faults.
@@ -99,6 +101,9 @@ pub enum EmulatorError {
     /// The emulator thread could not be spawned.
     #[error("cannot spawn the emulator thread: {0}")]
     Spawn(std::io::Error),
+    /// The recording cannot be replayed.
+    #[error("cannot replay: {0}")]
+    Replay(#[from] ReplayError),
 }
 
 /// What the emulator has done so far (lets tests compare the host's counters exactly).
@@ -130,6 +135,8 @@ pub struct EmulatorStats {
     pub session_active: bool,
     /// Whether the device is plugged in.
     pub plugged: bool,
+    /// A replay has written its last recorded byte (always false for a scenario).
+    pub replay_done: bool,
 }
 
 pub(crate) struct EmuShared {
@@ -199,6 +206,43 @@ impl EmulatedRig {
         device.plug()?;
         let thread = std::thread::Builder::new()
             .name("rig-emulator".into())
+            .spawn(move || device.run())
+            .map_err(EmulatorError::Spawn)?;
+        Ok(EmulatedRig {
+            device_path,
+            origin,
+            owns_link_dir,
+            shared,
+            faults: tx,
+            thread: Some(thread),
+        })
+    }
+
+    /// Plays a recorded byte stream as a live device (see [`replay`]) on a pseudo-terminal at
+    /// `link_path` (a private temporary path if `None`), `speed` times real time.
+    pub fn start_replay(
+        script: ReplayScript,
+        speed: f64,
+        link_path: Option<PathBuf>,
+    ) -> Result<EmulatedRig, EmulatorError> {
+        let (device_path, owns_link_dir) = match link_path {
+            Some(p) => (p, None),
+            None => {
+                let dir = private_link_dir()?;
+                (dir.join("rig"), Some(dir))
+            }
+        };
+        let shared = Arc::new(EmuShared {
+            stop: AtomicBool::new(false),
+            stats: Mutex::new(EmulatorStats::default()),
+        });
+        let (tx, _rx) = mpsc::channel();
+        let mut device =
+            replay::ReplayDevice::new(script, speed, device_path.clone(), Arc::clone(&shared))?;
+        let origin = device.origin();
+        device.plug()?;
+        let thread = std::thread::Builder::new()
+            .name("rig-replay".into())
             .spawn(move || device.run())
             .map_err(EmulatorError::Spawn)?;
         Ok(EmulatedRig {
