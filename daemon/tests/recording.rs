@@ -422,3 +422,74 @@ fn python_mcap_reads_a_recording_and_decodes_status_with_the_ipc_md_layout() {
     );
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// Linear interpolation of `(t, v)` samples (sorted by t) at `t`.
+fn interpolate(series: &[(f64, f64)], t: f64) -> Option<f64> {
+    let i = series.partition_point(|p| p.0 < t);
+    let (a, b) = (series.get(i.checked_sub(1)?)?, series.get(i)?);
+    let w = if b.0 > a.0 { (t - a.0) / (b.0 - a.0) } else { 0.0 };
+    Some(a.1 + w * (b.1 - a.1))
+}
+
+fn run_daemon(args: &[&str], record_dir: &Path, tag: &str) -> PathBuf {
+    let prefix = format!("hydrometra-test/rec-{tag}-{}", std::process::id());
+    let status = std::process::Command::new(env!("CARGO_BIN_EXE_hydrometrad"))
+        .args(args)
+        .args(["--service-prefix", &prefix, "--record-dir"])
+        .arg(record_dir)
+        .env("RUST_LOG", "warn")
+        .stdin(std::process::Stdio::null())
+        .stdout(std::process::Stdio::null())
+        .status()
+        .expect("run hydrometrad");
+    assert!(status.success(), "hydrometrad {args:?} failed: {status}");
+    only_recording(record_dir)
+}
+
+#[test]
+fn hydrometrad_replay_reproduces_the_recorded_deficit_and_pressure_trajectory() {
+    let (dir_a, dir_b) = (temp_dir("traj-a"), temp_dir("traj-b"));
+    let recorded = run_daemon(&["--emulated", "default", "--duration", "12"], &dir_a, "a");
+    let recorded_s = recorded.to_string_lossy().to_string();
+    let replayed = run_daemon(
+        &["--replay", &recorded_s, "--duration", "12.5"],
+        &dir_b,
+        "b",
+    );
+    let (a, b) = (
+        Recording::load(&recorded).expect("recorded"),
+        Recording::load(&replayed).expect("replayed"),
+    );
+    let series = |r: &Recording, f: fn(&Status) -> f64| -> Vec<(f64, f64)> {
+        r.statuses
+            .iter()
+            .map(|(_, s)| (s.procedure_time_s, f(s)))
+            .collect()
+    };
+    let pressure = |s: &Status| hydrometra_sim::units::pa_to_mmhg(s.cavity_pressure_pa);
+    let deficit = |s: &Status| s.deficit_m3 * 1e6;
+    let (pa, pb) = (series(&a, pressure), series(&b, pressure));
+    let (da, db) = (series(&a, deficit), series(&b, deficit));
+    let mut worst_p: f64 = 0.0;
+    let mut worst_d: f64 = 0.0;
+    let mut compared = 0;
+    for (&(t, p), &(_, d)) in pa.iter().zip(&da) {
+        if t > 11.5 {
+            break;
+        }
+        if let (Some(pb), Some(db)) = (interpolate(&pb, t), interpolate(&db, t)) {
+            worst_p = worst_p.max((p - pb).abs());
+            worst_d = worst_d.max((d - db).abs());
+            compared += 1;
+        }
+    }
+    eprintln!("replay vs recording over {compared} statuses: |dp| max {worst_p:.3} mmHg, |d deficit| max {worst_d:.3} ml");
+    assert!(compared > 1000, "{compared} statuses compared");
+    // Tolerances (docs/recording.md): the replayed rig's first sample arrives a few ms earlier or
+    // later relative to the daemon's start than the recorded one did (handshake and scheduling
+    // jitter), which shifts the whole input history by that much.
+    assert!(worst_p <= 0.5, "pressure differs by {worst_p} mmHg");
+    assert!(worst_d <= 0.1, "deficit differs by {worst_d} ml");
+    let _ = std::fs::remove_dir_all(dir_a);
+    let _ = std::fs::remove_dir_all(dir_b);
+}
