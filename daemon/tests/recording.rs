@@ -427,7 +427,11 @@ fn python_mcap_reads_a_recording_and_decodes_status_with_the_ipc_md_layout() {
 fn interpolate(series: &[(f64, f64)], t: f64) -> Option<f64> {
     let i = series.partition_point(|p| p.0 < t);
     let (a, b) = (series.get(i.checked_sub(1)?)?, series.get(i)?);
-    let w = if b.0 > a.0 { (t - a.0) / (b.0 - a.0) } else { 0.0 };
+    let w = if b.0 > a.0 {
+        (t - a.0) / (b.0 - a.0)
+    } else {
+        0.0
+    };
     Some(a.1 + w * (b.1 - a.1))
 }
 

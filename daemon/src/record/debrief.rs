@@ -19,7 +19,7 @@ pub struct DebriefSettings {
     pub valve_band: f64,
     /// The pump setting must move by more than this to count as an adjustment, Pa.
     pub pump_band_pa: f64,
-    /// A control is at rest again after staying within its band this long, s.
+    /// A control is at rest again after changing by less than a fifth of its band for this long, s.
     pub settle_s: f64,
 }
 
@@ -29,7 +29,7 @@ impl Default for DebriefSettings {
             distended_pa: hydrometra_sim::units::mmhg_to_pa(40.0),
             valve_band: 0.05,
             pump_band_pa: hydrometra_sim::units::mmhg_to_pa(5.0),
-            settle_s: 0.3,
+            settle_s: 0.5,
         }
     }
 }
@@ -121,14 +121,15 @@ pub struct Metrics {
 }
 
 /// Counts adjustments of one control: an adjustment starts when the value leaves the band around
-/// its resting value and ends once it has stayed within the band around its latest value for
-/// `settle_s`.
+/// its resting value and ends once the value has changed by less than a fifth of the band for
+/// `settle_s` (so a slow, continuous turn is one adjustment, however long it takes).
 #[derive(Debug)]
 struct AdjustmentCounter {
     band: f64,
     settle_s: f64,
     rest: Option<f64>,
-    moving_since_still: Option<f64>,
+    /// While moving: the value and time of the last change larger than `band / 5`.
+    moving: Option<(f64, f64)>,
     count: u32,
 }
 
@@ -138,7 +139,7 @@ impl AdjustmentCounter {
             band,
             settle_s,
             rest: None,
-            moving_since_still: None,
+            moving: None,
             count: 0,
         }
     }
@@ -148,21 +149,19 @@ impl AdjustmentCounter {
             self.rest = Some(v);
             return;
         };
-        match self.moving_since_still {
+        match self.moving {
             None => {
                 if (v - rest).abs() > self.band {
                     self.count += 1;
-                    self.rest = Some(v);
-                    self.moving_since_still = Some(t);
+                    self.moving = Some((v, t));
                 }
             }
-            Some(still_since) => {
-                if (v - rest).abs() > self.band {
+            Some((anchor, since)) => {
+                if (v - anchor).abs() > self.band / 5.0 {
+                    self.moving = Some((v, t));
+                } else if t - since >= self.settle_s {
                     self.rest = Some(v);
-                    self.moving_since_still = Some(t);
-                } else if t - still_since >= self.settle_s {
-                    self.rest = Some(v);
-                    self.moving_since_still = None;
+                    self.moving = None;
                 }
             }
         }
@@ -626,8 +625,9 @@ mod tests {
 
     #[test]
     fn adjustments_count_moves_not_samples() {
-        let mut c = AdjustmentCounter::new(0.05, 0.3);
-        // Rest at 0, one slow turn to 0.5 over 1 s, rest, a second turn back, then noise.
+        let mut c = AdjustmentCounter::new(0.05, 0.5);
+        // Rest at 0, one slow turn to 0.5 over 1 s, rest, a second turn back, then noise, then a
+        // very slow turn (0.1 per second for 5 s): three adjustments.
         let mut t = 0.0;
         let mut push = |c: &mut AdjustmentCounter, v: f64| {
             c.push(t, v);
@@ -646,8 +646,11 @@ mod tests {
             push(&mut c, 0.5 - 0.01 * i as f64);
         }
         for i in 0..200 {
-            push(&mut c, 0.0 + 0.02 * ((i % 2) as f64));
+            push(&mut c, 0.0 + 0.005 * ((i % 2) as f64));
         }
-        assert_eq!(c.count, 2);
+        for i in 0..500 {
+            push(&mut c, 0.001 * i as f64);
+        }
+        assert_eq!(c.count, 3);
     }
 }
