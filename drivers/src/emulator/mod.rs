@@ -182,17 +182,7 @@ impl EmulatedRig {
                 expected: "a time > 0 s",
             });
         }
-        let (device_path, owns_link_dir) = match &options.link_path {
-            Some(p) => (p.clone(), None),
-            None => {
-                let dir = private_link_dir()?;
-                (dir.join("rig"), Some(dir))
-            }
-        };
-        let shared = Arc::new(EmuShared {
-            stop: AtomicBool::new(false),
-            stats: Mutex::new(EmulatorStats::default()),
-        });
+        let (device_path, owns_link_dir, shared) = new_device_parts(options.link_path.clone())?;
         let (tx, rx) = mpsc::channel();
         let mut device = device::Device::new(
             scenario,
@@ -225,17 +215,7 @@ impl EmulatedRig {
         speed: f64,
         link_path: Option<PathBuf>,
     ) -> Result<EmulatedRig, EmulatorError> {
-        let (device_path, owns_link_dir) = match link_path {
-            Some(p) => (p, None),
-            None => {
-                let dir = private_link_dir()?;
-                (dir.join("rig"), Some(dir))
-            }
-        };
-        let shared = Arc::new(EmuShared {
-            stop: AtomicBool::new(false),
-            stats: Mutex::new(EmulatorStats::default()),
-        });
+        let (device_path, owns_link_dir, shared) = new_device_parts(link_path)?;
         let (tx, _rx) = mpsc::channel();
         let mut device =
             replay::ReplayDevice::new(script, speed, device_path.clone(), Arc::clone(&shared))?;
@@ -299,6 +279,25 @@ impl Drop for EmulatedRig {
     fn drop(&mut self) {
         self.stop_inner();
     }
+}
+
+/// The device path (and the private directory holding it, if we made one) and the shared state
+/// of a new emulated device.
+type DeviceParts = (PathBuf, Option<PathBuf>, Arc<EmuShared>);
+
+fn new_device_parts(link_path: Option<PathBuf>) -> Result<DeviceParts, EmulatorError> {
+    let (device_path, owns_link_dir) = match link_path {
+        Some(p) => (p, None),
+        None => {
+            let dir = private_link_dir()?;
+            (dir.join("rig"), Some(dir))
+        }
+    };
+    let shared = Arc::new(EmuShared {
+        stop: AtomicBool::new(false),
+        stats: Mutex::new(EmulatorStats::default()),
+    });
+    Ok((device_path, owns_link_dir, shared))
 }
 
 fn private_link_dir() -> Result<PathBuf, EmulatorError> {
