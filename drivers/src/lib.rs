@@ -20,4 +20,6 @@ pub mod emulator;
 #[cfg(feature = "std")]
 pub mod state;
 #[cfg(feature = "std")]
+pub mod tap;
+#[cfg(feature = "std")]
 pub mod transport;

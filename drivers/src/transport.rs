@@ -18,6 +18,7 @@ use tracing::{debug, info, warn};
 use crate::calibration::Calibration;
 use crate::framing::FrameDecoder;
 use crate::state::{LinkCounters, LinkState, RigState};
+use crate::tap::Tap;
 use crate::wire::{
     encode_frame, FrameError, Heartbeat, HostHello, Message, SensorSample, MAX_ENCODED_LEN,
     PROTOCOL_VERSION,
@@ -92,6 +93,9 @@ pub struct LinkConfig {
     pub backoff_max: Duration,
     /// Longest single blocking read; bounds shutdown and timer latency. Default 10 ms.
     pub read_timeout: Duration,
+    /// Where the I/O thread copies every chunk of bytes it reads, as read, for a recorder.
+    /// Default none.
+    pub rx_tap: Option<RxTap>,
 }
 
 impl LinkConfig {
@@ -110,8 +114,68 @@ impl LinkConfig {
             backoff_initial: Duration::from_millis(50),
             backoff_max: Duration::from_secs(2),
             read_timeout: Duration::from_millis(10),
+            rx_tap: None,
         }
     }
+}
+
+/// Size of one [`RxChunk`]: the I/O thread's read buffer, so one read is one chunk.
+pub const RX_CHUNK_MAX_BYTES: usize = 512;
+
+/// One read from the port: the bytes exactly as received, before framing, with the host time.
+#[derive(Clone, Copy)]
+pub struct RxChunk {
+    /// Host `CLOCK_MONOTONIC` when the read returned, ns (the clock `Instant` uses on Linux).
+    pub host_monotonic_ns: u64,
+    /// Number of valid bytes in `bytes`.
+    pub len: u16,
+    /// The bytes; only `..len` are valid.
+    pub bytes: [u8; RX_CHUNK_MAX_BYTES],
+}
+
+impl RxChunk {
+    /// The received bytes.
+    pub fn data(&self) -> &[u8] {
+        &self.bytes[..usize::from(self.len).min(RX_CHUNK_MAX_BYTES)]
+    }
+}
+
+impl std::fmt::Debug for RxChunk {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RxChunk")
+            .field("host_monotonic_ns", &self.host_monotonic_ns)
+            .field("len", &self.len)
+            .finish()
+    }
+}
+
+/// The receive tap: the I/O thread offers every read to it, never blocking (see [`crate::tap`]).
+pub type RxTap = Tap<RxChunk>;
+
+impl RxTap {
+    /// Offers one read; never blocks. Returns false when it was dropped (full or no receiver).
+    pub fn offer_bytes(&self, host_monotonic_ns: u64, data: &[u8]) -> bool {
+        let mut chunk = RxChunk {
+            host_monotonic_ns,
+            len: 0,
+            bytes: [0; RX_CHUNK_MAX_BYTES],
+        };
+        let n = data.len().min(RX_CHUNK_MAX_BYTES);
+        chunk.bytes[..n].copy_from_slice(&data[..n]);
+        chunk.len = n as u16;
+        self.offer(chunk)
+    }
+}
+
+/// Host `CLOCK_MONOTONIC`, ns: the clock of [`RxChunk::host_monotonic_ns`] and of `Instant`.
+pub fn monotonic_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC is always supported on Linux.
+    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
+    (ts.tv_sec as u64).saturating_mul(1_000_000_000) + ts.tv_nsec as u64
 }
 
 /// Identity of the connected rig, from its device hello.
@@ -571,7 +635,7 @@ impl IoThread {
         let mut last_frame_at = Instant::now();
         let mut last_heartbeat_at = Instant::now();
         let mut expected_seq: Option<u32> = None;
-        let mut buf = [0u8; 512];
+        let mut buf = [0u8; RX_CHUNK_MAX_BYTES];
         let mut frames = Vec::with_capacity(16);
         loop {
             self.update_cpu();
@@ -581,6 +645,9 @@ impl IoThread {
             match port.read(&mut buf) {
                 Ok(0) => return SessionEnd::Lost("zero-byte read (device hung up)".into()),
                 Ok(n) => {
+                    if let Some(tap) = &cfg.rx_tap {
+                        tap.offer_bytes(monotonic_ns(), &buf[..n]);
+                    }
                     frames.clear();
                     self.decoder.push_slice(&buf[..n], |r| frames.push(r));
                     let now = Instant::now();

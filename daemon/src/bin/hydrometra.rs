@@ -26,6 +26,11 @@ enum Command {
     /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
     #[command(subcommand)]
     Rig(hydrometra_daemon::cli::rig::RigCommand),
+    /// Procedure recordings: summarise one.
+    #[command(subcommand)]
+    Record(hydrometra_daemon::cli::record::RecordCommand),
+    /// Debrief a recorded procedure: fluid-handling metrics (metrics.json) and a report with plots.
+    Debrief(hydrometra_daemon::cli::record::DebriefArgs),
     /// Fluid solver: run case files, benchmark, soak.
     #[command(subcommand)]
     Fluid(hydrometra_daemon::cli::fluid::FluidCommand),
@@ -60,6 +65,8 @@ fn main() -> Result<()> {
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
         Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
         Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
+        Command::Record(cmd) => hydrometra_daemon::cli::record::run(cmd),
+        Command::Debrief(args) => hydrometra_daemon::cli::record::debrief(&args),
         Command::Fluid(cmd) => hydrometra_daemon::cli::fluid::run(cmd),
         Command::Anatomy(args) => hydrometra_daemon::cli::anatomy::run(&args),
         Command::Precompute(args) => hydrometra_daemon::cli::precompute::run(&args),

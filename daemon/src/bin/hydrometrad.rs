@@ -42,6 +42,19 @@ struct Args {
     /// Start a new procedure (deficit 0) instead of restoring the saved one.
     #[arg(long)]
     new_procedure: bool,
+    /// Play a recording's rig bytes as a live device (pseudo-terminal, the normal link) and
+    /// re-run the recorded procedure with the recorded configuration (docs/recording.md).
+    #[arg(long, value_name = "FILE")]
+    replay: Option<PathBuf>,
+    /// Speed of --replay, times real time (1 reproduces the recorded procedure).
+    #[arg(long, value_name = "X")]
+    replay_speed: Option<f64>,
+    /// Record procedures into DIR (overrides `[record] dir`; turns recording on).
+    #[arg(long, value_name = "DIR")]
+    record_dir: Option<PathBuf>,
+    /// Record nothing (overrides `[record] enabled`).
+    #[arg(long, conflicts_with = "record_dir")]
+    no_record: bool,
     /// Print the default configuration (commented TOML) and exit.
     #[arg(long)]
     print_default_config: bool,
@@ -75,6 +88,10 @@ fn main() -> anyhow::Result<()> {
         status_rate_hz: args.status_rate_hz,
         procedure_record: args.procedure_record,
         new_procedure: args.new_procedure,
+        replay: args.replay,
+        replay_speed: args.replay_speed,
+        record_dir: args.record_dir,
+        no_record: args.no_record,
     })?;
     let duration = match args.duration {
         Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),

@@ -3,6 +3,7 @@ pub mod fluid;
 pub mod hydraulics;
 pub mod monitor;
 pub mod procedure;
+pub mod record;
 pub mod rig;
 pub mod scene;
 

@@ -45,6 +45,13 @@ pub struct EmulateArgs {
     /// Stop after this many seconds (default: run until interrupted).
     #[arg(long, value_name = "S")]
     pub seconds: Option<f64>,
+    /// Play a recording's rig bytes instead of a scenario (docs/recording.md); stops when the
+    /// recording ends (or after --seconds).
+    #[arg(long, value_name = "FILE", conflicts_with = "scenario")]
+    pub replay: Option<PathBuf>,
+    /// Speed of --replay, times real time.
+    #[arg(long, value_name = "X", default_value_t = 1.0, requires = "replay")]
+    pub speed: f64,
 }
 
 /// Arguments of `hydrometra rig probe`.
@@ -108,11 +115,14 @@ fn positive_seconds(flag: &str, s: f64) -> Result<Duration> {
 }
 
 fn emulate(a: EmulateArgs) -> Result<()> {
-    let scenario = load_scenario(&a.scenario)?;
     let run_for = a
         .seconds
         .map(|s| positive_seconds("--seconds", s))
         .transpose()?;
+    if let Some(file) = &a.replay {
+        return replay(file, a.speed, a.link.clone(), run_for);
+    }
+    let scenario = load_scenario(&a.scenario)?;
     let options = EmulatorOptions {
         sample_rate_hz: a.rate,
         heartbeat_hz: a.heartbeat_hz,
@@ -153,6 +163,40 @@ fn emulate(a: EmulateArgs) -> Result<()> {
             );
         }
     }
+    rig.stop();
+    Ok(())
+}
+
+fn replay(
+    file: &std::path::Path,
+    speed: f64,
+    link: Option<PathBuf>,
+    run_for: Option<Duration>,
+) -> Result<()> {
+    let recording = crate::record::reader::Recording::load(file)?;
+    let script = recording.replay_script();
+    let length_s = script.duration_s() / speed;
+    let rig = EmulatedRig::start_replay(script, speed, link)
+        .with_context(|| format!("cannot replay {}", file.display()))?;
+    println!(
+        "replaying {} at {} (speed {speed}x, {length_s:.1} s from the host's hello)",
+        file.display(),
+        rig.device_path().display()
+    );
+    let started = Instant::now();
+    loop {
+        std::thread::sleep(Duration::from_millis(100));
+        if run_for.is_some_and(|d| started.elapsed() >= d) || rig.stats().replay_done {
+            break;
+        }
+    }
+    let s = rig.stats();
+    println!(
+        "replay {}: {} handshakes, {} runs written",
+        if s.replay_done { "finished" } else { "stopped" },
+        s.handshakes,
+        s.frames_sent
+    );
     rig.stop();
     Ok(())
 }

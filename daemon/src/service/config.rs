@@ -52,6 +52,82 @@ pub enum RigMode {
     Usb,
     /// An in-process emulated rig on a pseudo-terminal (`[rig.emulated]`).
     Emulated,
+    /// An in-process rig on a pseudo-terminal playing a recording (`[rig.replay]`).
+    Replay,
+}
+
+/// `[rig.replay]`: play a recording's rig bytes as a live device (docs/recording.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ReplayConfig {
+    /// The recording (MCAP).
+    pub file: Option<PathBuf>,
+    /// Playback speed, times real time (1 reproduces the recorded procedure).
+    pub speed: f64,
+}
+
+impl Default for ReplayConfig {
+    fn default() -> Self {
+        Self {
+            file: None,
+            speed: 1.0,
+        }
+    }
+}
+
+/// `[record]`: one MCAP recording per procedure (docs/recording.md).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecordConfig {
+    /// Record procedures.
+    pub enabled: bool,
+    /// Directory of the recordings; default `<paths.state_dir>/recordings`, else
+    /// `$STATE_DIRECTORY/recordings` (systemd); without any, nothing is recorded.
+    pub dir: Option<PathBuf>,
+    /// Statuses recorded per second (divides `loop.status_rate_hz`).
+    pub status_rate_hz: f64,
+    /// The open chunk is written to the file this often, ms: what a kill -9 may lose.
+    pub flush_interval_ms: u64,
+}
+
+impl Default for RecordConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            dir: None,
+            status_rate_hz: 100.0,
+            flush_interval_ms: 500,
+        }
+    }
+}
+
+impl RecordConfig {
+    /// The recordings directory, if recording is on and a directory is known.
+    pub fn resolved_dir(&self, paths: &PathsConfig) -> Option<PathBuf> {
+        if !self.enabled {
+            return None;
+        }
+        self.dir
+            .clone()
+            .or_else(|| paths.state_dir.as_ref().map(|d| d.join("recordings")))
+            .or_else(|| {
+                std::env::var_os("STATE_DIRECTORY")
+                    .filter(|v| !v.is_empty())
+                    // systemd may pass several directories separated by ':'; take the first.
+                    .and_then(|v| {
+                        v.to_str()
+                            .map(|s| s.split(':').next().unwrap_or(s).to_owned())
+                    })
+                    .map(|d| PathBuf::from(d).join("recordings"))
+            })
+    }
+
+    /// Published statuses per recorded one.
+    pub fn status_every(&self, loop_config: &LoopConfig) -> u64 {
+        (loop_config.status_rate_hz / self.status_rate_hz)
+            .round()
+            .max(1.0) as u64
+    }
 }
 
 /// `[rig.usb]`.
@@ -101,6 +177,8 @@ pub struct RigConfig {
     pub usb: Option<UsbConfig>,
     /// For [`RigMode::Emulated`].
     pub emulated: EmulatedConfig,
+    /// For [`RigMode::Replay`].
+    pub replay: ReplayConfig,
 }
 
 impl Default for RigConfig {
@@ -112,6 +190,7 @@ impl Default for RigConfig {
             safe_state_timeout_ms: 100,
             usb: None,
             emulated: EmulatedConfig::default(),
+            replay: ReplayConfig::default(),
         }
     }
 }
@@ -229,6 +308,8 @@ pub struct Config {
     pub paths: PathsConfig,
     /// `[hydraulics]`.
     pub hydraulics: HydraulicsConfig,
+    /// `[record]`.
+    pub record: RecordConfig,
 }
 
 /// Command-line overrides, applied after the file.
@@ -248,6 +329,14 @@ pub struct Overrides {
     pub procedure_record: Option<PathBuf>,
     /// `--new-procedure`.
     pub new_procedure: bool,
+    /// `--replay FILE`: mode = replay of this recording.
+    pub replay: Option<PathBuf>,
+    /// `--replay-speed X`.
+    pub replay_speed: Option<f64>,
+    /// `--record-dir DIR`: record into DIR (turns recording on).
+    pub record_dir: Option<PathBuf>,
+    /// `--no-record`: record nothing.
+    pub no_record: bool,
 }
 
 impl Config {
@@ -272,13 +361,28 @@ impl Config {
 
     /// Applies command-line overrides and validates the result, naming the flag on error.
     pub fn apply(&mut self, o: &Overrides) -> Result<(), ConfigError> {
-        if o.device.is_some() && o.emulated.is_some() {
+        let sources = [o.device.is_some(), o.emulated.is_some(), o.replay.is_some()];
+        if sources.iter().filter(|&&b| b).count() > 1 {
             return Err(invalid(
                 "command line",
-                "--device/--emulated",
-                "both given",
-                "at most one of --device PATH and --emulated SCENARIO",
+                "--device/--emulated/--replay",
+                "more than one given",
+                "at most one of --device PATH, --emulated SCENARIO and --replay FILE",
             ));
+        }
+        if let Some(file) = &o.replay {
+            self.rig.mode = RigMode::Replay;
+            self.rig.replay.file = Some(file.clone());
+        }
+        if let Some(speed) = o.replay_speed {
+            self.rig.replay.speed = speed;
+        }
+        if let Some(dir) = &o.record_dir {
+            self.record.enabled = true;
+            self.record.dir = Some(dir.clone());
+        }
+        if o.no_record {
+            self.record.enabled = false;
         }
         if let Some(device) = &o.device {
             self.rig.mode = RigMode::Device;
@@ -397,6 +501,40 @@ impl Config {
                 "rig.emulated.scenario",
                 "\"\"",
                 "a built-in scenario name such as \"default\" or a scenario file path",
+            ));
+        }
+        let r = &self.rig.replay;
+        if !(r.speed.is_finite() && r.speed > 0.0 && r.speed <= 1000.0) {
+            return Err(invalid(
+                origin,
+                "rig.replay.speed",
+                &r.speed.to_string(),
+                "a factor in (0, 1000] (1 = real time)",
+            ));
+        }
+        if self.rig.mode == RigMode::Replay && r.file.is_none() {
+            return Err(invalid(
+                origin,
+                "rig.mode",
+                "\"replay\"",
+                "rig.replay.file (or --replay FILE) when mode = \"replay\"",
+            ));
+        }
+        let rec = &self.record;
+        check_range(
+            origin,
+            "record.status_rate_hz",
+            rec.status_rate_hz,
+            0.1,
+            l.status_rate_hz,
+            "Hz (at most loop.status_rate_hz)",
+        )?;
+        if !(50..=1000).contains(&rec.flush_interval_ms) {
+            return Err(invalid(
+                origin,
+                "record.flush_interval_ms",
+                &rec.flush_interval_ms.to_string(),
+                "an interval in 50..=1000 ms (a kill -9 loses at most this much)",
             ));
         }
         if self.rig.mode == RigMode::Usb && self.rig.usb.is_none() {

@@ -19,6 +19,7 @@ use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 use anyhow::Context;
 use hydrometra_ipc::ServiceNames;
 
+use crate::record::recorder::{self, RecorderHandle};
 use config::Config;
 use latency::LatencySummary;
 use publisher::PublisherThread;
@@ -121,23 +122,97 @@ fn new_run_id() -> u64 {
 /// fluid and particle stages are added here as they land.
 pub fn build_stages(config: &Config) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
     let h = &config.hydraulics;
-    let (case, case_period_s) = if config.rig.mode == config::RigMode::Emulated {
-        let (scenario, case) = hydraulics::load_scenario(&config.rig.emulated.scenario)?;
+    // A replay reproduces the recorded procedure: the recorded configuration's scenario case and
+    // hydraulic parameters, a new procedure, no procedure record (docs/recording.md).
+    let replayed = replayed_config(config)?;
+    let source = replayed.as_ref().unwrap_or(config);
+    let (case, case_period_s) = if source.rig.mode == config::RigMode::Emulated {
+        let (scenario, case) = hydraulics::load_scenario(&source.rig.emulated.scenario)?;
         let period = scenario.looping.then(|| scenario.duration_s());
         (case, period)
     } else {
         Default::default()
     };
-    let params = case.params.clone().unwrap_or_else(|| h.params.clone());
+    let h_params = &source.hydraulics.params;
+    let params = case.params.clone().unwrap_or_else(|| h_params.clone());
     let stage = hydraulics::HydraulicsStage::start(hydraulics::HydraulicsSetup {
         params,
         case,
         case_period_s,
-        record: h.record_path(&config.paths),
+        record: if replayed.is_some() {
+            None
+        } else {
+            h.record_path(&config.paths)
+        },
         save_interval: Duration::from_millis(h.save_interval_ms),
-        new_procedure: h.new_procedure,
+        new_procedure: h.new_procedure || replayed.is_some(),
     })?;
     Ok(vec![Box::new(stage)])
+}
+
+/// In replay mode, the configuration the recording was made with (its `config_toml` metadata).
+fn replayed_config(config: &Config) -> anyhow::Result<Option<Config>> {
+    if config.rig.mode != config::RigMode::Replay {
+        return Ok(None);
+    }
+    let Some(file) = &config.rig.replay.file else {
+        return Ok(None);
+    };
+    let recording = crate::record::reader::Recording::load(file)
+        .with_context(|| format!("rig.replay.file = {}", file.display()))?;
+    match recording.metadata.get("config_toml") {
+        Some(text) => {
+            let origin = format!("{} (recorded configuration)", file.display());
+            Ok(Some(Config::from_toml_str(text, &origin)?))
+        }
+        None => {
+            tracing::warn!(file = %file.display(), "the recording carries no configuration; replaying with this one's hydraulics");
+            Ok(None)
+        }
+    }
+}
+
+/// Starts the recorder if `[record]` asks for it and a directory is known.
+fn start_recorder(
+    config: &Config,
+) -> anyhow::Result<Option<(RecorderHandle, recorder::RecorderTaps)>> {
+    let rec = &config.record;
+    if !rec.enabled {
+        return Ok(None);
+    }
+    let Some(dir) = rec.resolved_dir(&config.paths) else {
+        tracing::warn!(
+            "procedures are not recorded: set [record] dir or [paths] state_dir (or --record-dir)"
+        );
+        return Ok(None);
+    };
+    let mut metadata = std::collections::BTreeMap::new();
+    metadata.insert("daemon_version".into(), env!("CARGO_PKG_VERSION").into());
+    metadata.insert(
+        "rig_mode".into(),
+        format!("{:?}", config.rig.mode).to_lowercase(),
+    );
+    metadata.insert(
+        "record_status_rate_hz".into(),
+        rec.status_rate_hz.to_string(),
+    );
+    metadata.insert(
+        "tick_rate_hz".into(),
+        config.sim_loop.tick_rate_hz.to_string(),
+    );
+    if let Ok(text) = toml::to_string(config) {
+        metadata.insert("config_toml".into(), text);
+    }
+    let settings = recorder::RecorderSettings {
+        dir: dir.clone(),
+        start_recording: true,
+        flush_interval: Duration::from_millis(rec.flush_interval_ms),
+        metadata,
+    };
+    let (handle, taps) = RecorderHandle::spawn(settings, rec.status_every(&config.sim_loop))
+        .with_context(|| format!("cannot start the recorder in {}", dir.display()))?;
+    tracing::info!(dir = %dir.display(), "recording procedures");
+    Ok(Some((handle, taps)))
 }
 
 /// Runs the daemon until SIGINT/SIGTERM or `duration` elapses; returns the run's figures.
@@ -158,18 +233,32 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     // Real-time scheduling is set on the main thread before any other thread starts, so the rig
     // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
     let priority = config.sim_loop.realtime_priority;
+    // The recorder runs at normal priority: it starts before the real-time policy is applied.
+    let (recorder, taps) = match start_recorder(config)? {
+        Some((handle, taps)) => (Some(handle), Some(taps)),
+        None => (None, None),
+    };
     realtime::apply("main", priority);
-    let rig = rig_connection::RigConnection::start(&config.rig)?;
+    let (rx_tap, status_tap) = match taps {
+        Some(t) => (Some(t.rx), Some(t.status)),
+        None => (None, None),
+    };
+    let rig = rig_connection::RigConnection::start(&config.rig, rx_tap)?;
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let publisher =
-        match PublisherThread::spawn(names.clone(), frames_rx, telemetry.clone(), priority) {
-            Ok(p) => p,
-            Err(e) => {
-                rig.shutdown();
-                return Err(e);
-            }
-        };
+    let publisher = match PublisherThread::spawn(
+        names.clone(),
+        frames_rx,
+        telemetry.clone(),
+        priority,
+        status_tap,
+    ) {
+        Ok(p) => p,
+        Err(e) => {
+            rig.shutdown();
+            return Err(e);
+        }
+    };
 
     let settings = LoopSettings {
         tick: Duration::from_secs_f64(1.0 / config.sim_loop.tick_rate_hz),
@@ -277,6 +366,15 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     }
     publisher.join();
     rig.shutdown();
+    if let Some(recorder) = recorder {
+        let r = recorder.shutdown();
+        tracing::info!(
+            files = r.files_finished,
+            rx_dropped = r.rx_dropped,
+            status_dropped = r.status_dropped,
+            "recorder stopped"
+        );
+    }
     let s = summary(&telemetry, started.elapsed());
     log_summary("stopped", &s);
     Ok(s)

@@ -13,17 +13,10 @@ use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::prelude::{ipc, NodeName, SignalHandlingMode};
 
 use super::sim::{StatusFrame, Telemetry};
+use crate::record::recorder::StatusTap;
 
 /// Host `CLOCK_MONOTONIC`, ns (the clock `Instant` uses on Linux), comparable across processes.
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid, writable timespec; CLOCK_MONOTONIC is always supported on Linux.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    (ts.tv_sec as u64).saturating_mul(1_000_000_000) + ts.tv_nsec as u64
-}
+pub use hydrometra_drivers::transport::monotonic_ns;
 
 /// The running publisher thread.
 pub struct PublisherThread {
@@ -38,13 +31,14 @@ impl PublisherThread {
         frames: Receiver<StatusFrame>,
         telemetry: Arc<Telemetry>,
         realtime_priority: u8,
+        status_tap: Option<StatusTap>,
     ) -> anyhow::Result<Self> {
         let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
         let handle = std::thread::Builder::new()
             .name("hm-publisher".into())
             .spawn(move || {
                 super::realtime::apply("hm-publisher", realtime_priority);
-                run(names, frames, telemetry, ready_tx)
+                run(names, frames, telemetry, ready_tx, status_tap)
             })?;
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(Self { handle }),
@@ -72,6 +66,7 @@ fn run(
     frames: Receiver<StatusFrame>,
     telemetry: Arc<Telemetry>,
     ready: std::sync::mpsc::Sender<Result<(), String>>,
+    mut status_tap: Option<StatusTap>,
 ) {
     let prefix = names.prefix().to_string();
     let setup = || -> Result<_, String> {
@@ -157,6 +152,10 @@ fn run(
             .and_then(|sample| sample.send().map_err(|e| format!("{e:?}")));
         match sent {
             Ok(_) => {
+                // Non-blocking hand-over to the recorder (drops are counted, never waited for).
+                if let Some(tap) = status_tap.as_mut() {
+                    tap.offer(&status);
+                }
                 sequence += 1;
                 telemetry
                     .statuses_published

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use anyhow::Context;
 use hydrometra_drivers::calibration::Calibration;
 use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
-use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink};
+use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink, RxTap};
 
 use super::config::{RigConfig, RigMode};
 use super::rig_source::{RigSource, RigView};
@@ -48,8 +48,9 @@ pub fn load_scenario(name_or_path: &str) -> anyhow::Result<Scenario> {
 
 impl RigConnection {
     /// Starts the emulator (if configured) and the transport. A missing device is not an error:
-    /// the transport keeps retrying and status reports the link as disconnected.
-    pub fn start(config: &RigConfig) -> anyhow::Result<Self> {
+    /// the transport keeps retrying and status reports the link as disconnected. `rx_tap`, if
+    /// given, receives every read of the transport (the recorder's).
+    pub fn start(config: &RigConfig, rx_tap: Option<RxTap>) -> anyhow::Result<Self> {
         let calibration = match &config.calibration {
             Some(path) => Calibration::load(path)
                 .with_context(|| format!("rig.calibration = {}", path.display()))?,
@@ -89,9 +90,28 @@ impl RigConnection {
                     Some(rig),
                 )
             }
+            RigMode::Replay => {
+                let file = config
+                    .replay
+                    .file
+                    .as_ref()
+                    .context("rig.mode = \"replay\" needs rig.replay.file")?;
+                let recording = crate::record::reader::Recording::load(file)
+                    .with_context(|| format!("rig.replay.file = {}", file.display()))?;
+                let script = recording.replay_script();
+                let rig = EmulatedRig::start_replay(script, config.replay.speed, None)
+                    .with_context(|| format!("cannot replay {}", file.display()))?;
+                tracing::info!(pty = %rig.device_path().display(), file = %file.display(),
+                    speed = config.replay.speed, "replaying a recorded rig");
+                (
+                    DeviceTarget::Path(rig.device_path().to_path_buf()),
+                    Some(rig),
+                )
+            }
         };
-        let link = RigLink::spawn(LinkConfig::new(target, calibration))
-            .context("cannot start the rig transport")?;
+        let mut link_config = LinkConfig::new(target, calibration);
+        link_config.rx_tap = rx_tap;
+        let link = RigLink::spawn(link_config).context("cannot start the rig transport")?;
         Ok(Self {
             link: Arc::new(link),
             emulator,

@@ -20,16 +20,33 @@ use crate::wire::{
 };
 
 /// Longest time the loop blocks in a read; bounds fault and stop latency.
-const MAX_WAIT: Duration = Duration::from_millis(5);
+pub(super) const MAX_WAIT: Duration = Duration::from_millis(5);
 /// Write timeout: a host that does not read must not stall the firmware.
-const WRITE_TIMEOUT: Duration = Duration::from_millis(2);
+pub(super) const WRITE_TIMEOUT: Duration = Duration::from_millis(2);
 /// Protocol version announced by the `wrong_version` fault.
 const WRONG_VERSION: u8 = PROTOCOL_VERSION + 1;
 
-struct Plugged {
-    master: TTYPort,
+pub(super) struct Plugged {
+    pub(super) master: TTYPort,
     // Kept open so the master never sees a hang-up while no host has the slave open.
     _slave: TTYPort,
+}
+
+impl Plugged {
+    /// Opens a new pseudo-terminal pair and points the symlink `link_path` at its slave.
+    pub(super) fn open(link_path: &std::path::Path) -> Result<Self, EmulatorError> {
+        let (master, slave) = TTYPort::pair()?;
+        let slave_name = slave.name().ok_or_else(|| EmulatorError::Link {
+            path: link_path.display().to_string(),
+            message: "the pseudo-terminal has no name".into(),
+        })?;
+        replace_symlink(link_path, &slave_name)?;
+        debug!(link = %link_path.display(), pty = %slave_name, "emulated rig plugged in");
+        Ok(Plugged {
+            master,
+            _slave: slave,
+        })
+    }
 }
 
 pub(super) struct Device {
@@ -116,17 +133,7 @@ impl Device {
 
     /// Opens a new pseudo-terminal pair and points the symlink at its slave.
     pub(super) fn plug(&mut self) -> Result<(), EmulatorError> {
-        let (master, slave) = TTYPort::pair()?;
-        let slave_name = slave.name().ok_or_else(|| EmulatorError::Link {
-            path: self.link_path.display().to_string(),
-            message: "the pseudo-terminal has no name".into(),
-        })?;
-        replace_symlink(&self.link_path, &slave_name)?;
-        debug!(link = %self.link_path.display(), pty = %slave_name, "emulated rig plugged in");
-        self.port = Some(Plugged {
-            master,
-            _slave: slave,
-        });
+        self.port = Some(Plugged::open(&self.link_path)?);
         self.decoder.reset();
         self.session_last_host_frame = None;
         self.stats(|s| {
@@ -443,7 +450,7 @@ fn advance(tick: Instant, period: Duration, now: Instant) -> Instant {
     }
 }
 
-fn replace_symlink(link: &std::path::Path, target: &str) -> Result<(), EmulatorError> {
+pub(super) fn replace_symlink(link: &std::path::Path, target: &str) -> Result<(), EmulatorError> {
     let err = |message: String| EmulatorError::Link {
         path: link.display().to_string(),
         message,

@@ -17,6 +17,7 @@
 
 mod device;
 pub mod faults;
+pub mod replay;
 pub mod scenario;
 mod scenario_error;
 
@@ -31,6 +32,7 @@ use tracing::warn;
 
 use crate::calibration::Calibration;
 pub use faults::{Fault, FaultEvent, FaultPlan};
+pub use replay::{ReplayError, ReplayItem, ReplayScript};
 pub use scenario::{Keyframe, Scenario, ScenarioError, ScenarioSample};
 
 /// Emulator settings. `Default`: 250 Hz samples, 10 Hz heartbeats, default calibration, no faults.
@@ -100,6 +102,9 @@ pub enum EmulatorError {
     /// The emulator thread could not be spawned.
     #[error("cannot spawn the emulator thread: {0}")]
     Spawn(std::io::Error),
+    /// The recording cannot be replayed.
+    #[error("cannot replay: {0}")]
+    Replay(#[from] ReplayError),
 }
 
 /// What the emulator has done so far (lets tests compare the host's counters exactly).
@@ -131,6 +136,8 @@ pub struct EmulatorStats {
     pub session_active: bool,
     /// Whether the device is plugged in.
     pub plugged: bool,
+    /// A replay has written its last recorded byte (always false for a scenario).
+    pub replay_done: bool,
 }
 
 pub(crate) struct EmuShared {
@@ -176,17 +183,7 @@ impl EmulatedRig {
                 expected: "a time > 0 s",
             });
         }
-        let (device_path, owns_link_dir) = match &options.link_path {
-            Some(p) => (p.clone(), None),
-            None => {
-                let dir = private_link_dir()?;
-                (dir.join("rig"), Some(dir))
-            }
-        };
-        let shared = Arc::new(EmuShared {
-            stop: AtomicBool::new(false),
-            stats: Mutex::new(EmulatorStats::default()),
-        });
+        let (device_path, owns_link_dir, shared) = new_device_parts(options.link_path.clone())?;
         let (tx, rx) = mpsc::channel();
         let mut device = device::Device::new(
             scenario,
@@ -200,6 +197,33 @@ impl EmulatedRig {
         device.plug()?;
         let thread = std::thread::Builder::new()
             .name("rig-emulator".into())
+            .spawn(move || device.run())
+            .map_err(EmulatorError::Spawn)?;
+        Ok(EmulatedRig {
+            device_path,
+            origin,
+            owns_link_dir,
+            shared,
+            faults: tx,
+            thread: Some(thread),
+        })
+    }
+
+    /// Plays a recorded byte stream as a live device (see [`replay`]) on a pseudo-terminal at
+    /// `link_path` (a private temporary path if `None`), `speed` times real time.
+    pub fn start_replay(
+        script: ReplayScript,
+        speed: f64,
+        link_path: Option<PathBuf>,
+    ) -> Result<EmulatedRig, EmulatorError> {
+        let (device_path, owns_link_dir, shared) = new_device_parts(link_path)?;
+        let (tx, _rx) = mpsc::channel();
+        let mut device =
+            replay::ReplayDevice::new(script, speed, device_path.clone(), Arc::clone(&shared))?;
+        let origin = device.origin();
+        device.plug()?;
+        let thread = std::thread::Builder::new()
+            .name("rig-replay".into())
             .spawn(move || device.run())
             .map_err(EmulatorError::Spawn)?;
         Ok(EmulatedRig {
@@ -256,6 +280,25 @@ impl Drop for EmulatedRig {
     fn drop(&mut self) {
         self.stop_inner();
     }
+}
+
+/// The device path (and the private directory holding it, if we made one) and the shared state
+/// of a new emulated device.
+type DeviceParts = (PathBuf, Option<PathBuf>, Arc<EmuShared>);
+
+fn new_device_parts(link_path: Option<PathBuf>) -> Result<DeviceParts, EmulatorError> {
+    let (device_path, owns_link_dir) = match link_path {
+        Some(p) => (p, None),
+        None => {
+            let dir = private_link_dir()?;
+            (dir.join("rig"), Some(dir))
+        }
+    };
+    let shared = Arc::new(EmuShared {
+        stop: AtomicBool::new(false),
+        stats: Mutex::new(EmulatorStats::default()),
+    });
+    Ok((device_path, owns_link_dir, shared))
 }
 
 fn private_link_dir() -> Result<PathBuf, EmulatorError> {
