@@ -8,13 +8,9 @@ use std::process::Command;
 use std::time::Duration;
 
 use hydrometra_hil_tests::*;
+use hydrometra_ipc::hydraulic_flags::{ACTIVE, PERFORATED, PUMP_STOPPED, RESTORED};
 use hydrometra_ipc::{alarms, Status};
-
-const ACTIVE: u64 = 1 << 0;
-const PERFORATED: u64 = 1 << 1;
-const PUMP_STOPPED: u64 = 1 << 2;
-const RESTORED: u64 = 1 << 4;
-const PA_PER_MMHG: f64 = 133.322;
+use hydrometra_units::PA_PER_MMHG;
 
 fn mmhg(s: &Status) -> f64 {
     s.cavity_pressure_pa / PA_PER_MMHG
