@@ -50,7 +50,7 @@ pub use params::{
     HydraulicParams, InflowParams, LineParams, OutflowParams, ParamsError, PerforationParams,
     PumpParams,
 };
-pub use record::{crc32, ProcedureRecord, RecordError, RECORD_MAGIC, RECORD_VERSION};
+pub use record::{ProcedureRecord, RecordError, RECORD_MAGIC, RECORD_VERSION};
 pub use valve::{sanitize_opening, ValveCurve};
 
 #[cfg(test)]
