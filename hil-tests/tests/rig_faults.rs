@@ -170,20 +170,6 @@ fn a_rig_with_another_protocol_version_is_incompatible_and_accepted_once_it_spea
         .all(|s| s.safe_state == 1));
 }
 
-/// Runs `hydrometra ARGS...` and returns its stdout, panicking with stderr on failure.
-fn hydrometra(args: &[&str]) -> String {
-    let out = Command::new(binary("hydrometra"))
-        .args(args)
-        .output()
-        .expect("run hydrometra");
-    assert!(
-        out.status.success(),
-        "hydrometra {args:?} failed:\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8_lossy(&out.stdout).into_owned()
-}
-
 #[test]
 fn scenario_faults_fire_once_through_the_daemon_as_through_the_standalone_emulator() {
     // One fault report and one run of 10 dropped samples, both after the host has connected.

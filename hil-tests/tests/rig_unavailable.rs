@@ -1,7 +1,6 @@
 //! A rig the daemon cannot open: it runs in the safe state, logs why once per change of reason
 //! (not once per retry), and `hydrometra monitor` shows the reason.
 
-use std::process::Command;
 use std::time::Duration;
 
 use hydrometra_hil_tests::*;
@@ -13,17 +12,7 @@ fn a_missing_device_is_named_in_the_log_once_and_shown_by_the_monitor() {
     // The transport retries with backoff (50 ms doubling to 2 s): 4 s are about 7 attempts.
     std::thread::sleep(Duration::from_secs(4));
 
-    let out = Command::new(binary("hydrometra"))
-        .args(["monitor", "--service-prefix", &prefix, "--once", "--json"])
-        .args(["--timeout", "10"])
-        .output()
-        .expect("run hydrometra monitor");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("monitor JSON");
+    let j = monitor_once_json(&prefix);
     assert_eq!(j["link_state_name"], "disconnected", "{j}");
     assert_eq!(j["safe_state"], true, "{j}");
     assert_eq!(j["link"]["down_reason_name"], "device-not-found", "{j}");

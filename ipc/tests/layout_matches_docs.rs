@@ -257,6 +257,21 @@ fn cpp_type(t: &str, origin: &str) -> String {
     .to_string()
 }
 
+/// The integers that follow each occurrence of `before` in `code` (spaces skipped; occurrences
+/// not followed by a number are ignored).
+fn numbers_after(code: &str, before: &str) -> Vec<usize> {
+    code.match_indices(before)
+        .filter_map(|(i, m)| {
+            let digits: String = code[i + m.len()..]
+                .trim_start()
+                .chars()
+                .take_while(char::is_ascii_digit)
+                .collect();
+            digits.parse().ok()
+        })
+        .collect()
+}
+
 /// Every `struct NAME { ... };` in C++ code.
 fn cpp_declarations(code: &str, origin: &str) -> Vec<Declaration> {
     let mut out = Vec::new();
@@ -301,17 +316,7 @@ fn cpp_declarations(code: &str, origin: &str) -> Vec<Declaration> {
                 }
             }
         }
-        let asserted_sizes = code
-            .match_indices(&format!("sizeof({name}) =="))
-            .map(|(i, m)| {
-                let digits: String = code[i + m.len()..]
-                    .trim_start()
-                    .chars()
-                    .take_while(char::is_ascii_digit)
-                    .collect();
-                digits.parse().unwrap()
-            })
-            .collect();
+        let asserted_sizes = numbers_after(code, &format!("sizeof({name}) =="));
         out.push(Declaration {
             origin: origin.to_string(),
             language: "C++",
@@ -403,28 +408,10 @@ fn python_declarations(code: &str, origin: &str) -> Vec<Declaration> {
             .and_then(|i| body[i..].find("return ").map(|j| i + j))
             .and_then(|i| body[i..].split('"').nth(1))
             .map(str::to_string);
-        let mut asserted_sizes: Vec<usize> = code
-            .match_indices(&format!("ctypes.sizeof({name}) =="))
-            .map(|(i, m)| {
-                let digits: String = code[i + m.len()..]
-                    .trim_start()
-                    .chars()
-                    .take_while(char::is_ascii_digit)
-                    .collect();
-                digits.parse().unwrap()
-            })
-            .collect();
-        // A docstring that states the size ("NAME: 123 bytes") must be right too.
+        let mut asserted_sizes = numbers_after(code, &format!("ctypes.sizeof({name}) =="));
+        // A docstring that states the size ("hydrometra.v1.Status: 123 bytes") must be right too.
         let stated = format!("{}: ", type_name.as_deref().unwrap_or(&name));
-        if let Some(i) = body.find(&stated) {
-            let digits: String = body[i + stated.len()..]
-                .chars()
-                .take_while(char::is_ascii_digit)
-                .collect();
-            if let Ok(n) = digits.parse() {
-                asserted_sizes.push(n);
-            }
-        }
+        asserted_sizes.extend(numbers_after(body, &stated));
         out.push(Declaration {
             origin: origin.to_string(),
             language: "Python",
