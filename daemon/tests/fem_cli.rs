@@ -177,7 +177,7 @@ fn precompute_writes_a_loadable_atlas_csv_and_paraview_series() {
     );
     let atlas = Atlas::read(&dir.join("atlas.hma")).unwrap();
     assert_eq!(atlas.level_count(), 3);
-    assert!((atlas.pressure_pa[2] - 30.0 * 133.322).abs() < 1e-6);
+    assert!((atlas.pressure_pa[2] - 30.0 * hydrometra_units::PA_PER_MMHG).abs() < 1e-6);
     assert!(atlas.cavity_volume_m3.windows(2).all(|w| w[1] > w[0]));
     let csv = std::fs::read_to_string(dir.join("pv_curve.csv")).unwrap();
     assert_eq!(csv.lines().count(), 4);

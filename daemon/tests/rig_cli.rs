@@ -5,8 +5,9 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+use hydrometra_units::PA_PER_MMHG;
+
 const HYDROMETRA: &str = env!("CARGO_BIN_EXE_hydrometra");
-const PA_PER_MMHG: f64 = 133.322_387_415;
 
 fn scratch(name: &str) -> PathBuf {
     let dir =

@@ -13,8 +13,9 @@ use serde::{Deserialize, Serialize};
 use crate::state::{RigState, ScopePose};
 use crate::wire::{SensorSample, RAW_FULL_SCALE};
 
-/// One mmHg in pascals (clinical unit at the edge of the calibration file).
-pub const PA_PER_MMHG: f64 = 133.322_387_415;
+/// One mmHg in pascals (clinical unit at the edge of the calibration file); the workspace's one
+/// copy, from `hydrometra-units`.
+pub use hydrometra_units::PA_PER_MMHG;
 
 /// A bad calibration file or value.
 #[derive(Debug, thiserror::Error)]

@@ -72,3 +72,34 @@ pub struct LinkCounters {
     /// Device fault reports received.
     pub device_faults: u64,
 }
+
+/// Why the link is not connected: the last failure the transport saw (cleared by a successful
+/// handshake). Each carries what a user needs to act on it; the full message is in
+/// `LinkSnapshot::last_error`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum LinkDownReason {
+    /// The device path does not exist (wrong path, rig not plugged in, udev rule missing).
+    DeviceNotFound,
+    /// No USB serial device with the configured vendor/product id (and serial number).
+    UsbDeviceNotFound,
+    /// The device exists but this user may not open it.
+    PermissionDenied {
+        /// Group id owning the device node (the group to join), if it could be read.
+        gid: Option<u32>,
+    },
+    /// Another process holds the port (exclusive lock).
+    DeviceBusy,
+    /// Opening or configuring the port failed for another reason.
+    OpenFailed,
+    /// The port opened but the device never answered the handshake.
+    NoHandshake,
+    /// The device answered with another wire protocol version.
+    IncompatibleVersion {
+        /// The version the device speaks.
+        version: u8,
+    },
+    /// No valid frame within the link timeout (a hung firmware); the port was reopened.
+    Timeout,
+    /// The port failed or hung up during a session (cable pulled).
+    Lost,
+}

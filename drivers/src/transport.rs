@@ -17,7 +17,7 @@ use tracing::{debug, info, warn};
 
 use crate::calibration::Calibration;
 use crate::framing::FrameDecoder;
-use crate::state::{LinkCounters, LinkState, RigState};
+use crate::state::{LinkCounters, LinkDownReason, LinkState, RigState};
 use crate::tap::Tap;
 use crate::wire::{
     encode_frame, FrameError, Heartbeat, HostHello, Message, SensorSample, MAX_ENCODED_LEN,
@@ -212,6 +212,8 @@ pub struct LinkSnapshot {
     pub latest_raw: Option<SensorSample>,
     /// Why the last open or session failed (cleared by a successful handshake).
     pub last_error: Option<String>,
+    /// The kind of `last_error`.
+    pub down_reason: Option<LinkDownReason>,
 }
 
 /// The allocation-free part of a [`LinkSnapshot`]: what the simulation loop reads every tick.
@@ -225,6 +227,22 @@ pub struct LinkStatus {
     pub latest: Option<RigState>,
     /// Age of `latest`.
     pub last_sample_age: Option<Duration>,
+    /// Why the link is down (the last failure; `None` after a successful handshake or before the
+    /// first attempt). The message is in [`LinkSnapshot::last_error`].
+    pub down_reason: Option<LinkDownReason>,
+}
+
+impl LinkStatus {
+    /// A link that has never produced anything.
+    pub fn disconnected() -> Self {
+        Self {
+            link_state: LinkState::Disconnected,
+            counters: LinkCounters::default(),
+            latest: None,
+            last_sample_age: None,
+            down_reason: None,
+        }
+    }
 }
 
 /// The transport could not start.
@@ -252,6 +270,7 @@ struct Inner {
     latest: Option<RigState>,
     latest_raw: Option<SensorSample>,
     last_error: Option<String>,
+    down_reason: Option<LinkDownReason>,
     stopping: bool,
 }
 
@@ -312,6 +331,7 @@ impl RigLink {
                 latest: None,
                 latest_raw: None,
                 last_error: None,
+                down_reason: None,
                 stopping: false,
             }),
             sample_cv: Condvar::new(),
@@ -343,6 +363,7 @@ impl RigLink {
             last_sample_age: status.last_sample_age,
             latest_raw: inner.latest_raw,
             last_error: inner.last_error.clone(),
+            down_reason: inner.down_reason,
         }
     }
 
@@ -367,6 +388,7 @@ impl RigLink {
             counters: inner.counters,
             latest: inner.latest,
             last_sample_age: age,
+            down_reason: inner.down_reason,
         }
     }
 
@@ -453,7 +475,7 @@ fn thread_cpu_time_ns() -> u64 {
 
 enum SessionEnd {
     Shutdown,
-    Lost(String),
+    Lost(LinkDownReason, String),
     Incompatible(u8),
 }
 
@@ -495,6 +517,12 @@ impl IoThread {
             .store(thread_cpu_time_ns(), Ordering::Relaxed);
     }
 
+    fn set_down(&self, reason: LinkDownReason, message: String) {
+        let mut inner = self.shared.lock();
+        inner.down_reason = Some(reason);
+        inner.last_error = Some(message);
+    }
+
     fn set_state(&self, state: LinkState) {
         let mut inner = self.shared.lock();
         if inner.link_state != state {
@@ -523,9 +551,9 @@ impl IoThread {
             self.update_cpu();
             let port = match self.open() {
                 Ok(p) => p,
-                Err(e) => {
+                Err((reason, e)) => {
                     debug!(target_device = %self.config.target, error = %e, ?backoff, "rig not available");
-                    self.shared.lock().last_error = Some(e);
+                    self.set_down(reason, e);
                     if !self.sleep_backoff(backoff) {
                         break;
                     }
@@ -538,8 +566,8 @@ impl IoThread {
             let (end, established) = self.session(port);
             match end {
                 SessionEnd::Shutdown => break,
-                SessionEnd::Lost(reason) => {
-                    self.shared.lock().last_error = Some(reason.clone());
+                SessionEnd::Lost(kind, reason) => {
+                    self.set_down(kind, reason.clone());
                     if established {
                         warn!(target_device = %self.config.target, %reason, "rig link lost");
                         backoff = self.config.backoff_initial;
@@ -549,9 +577,14 @@ impl IoThread {
                     self.set_state(LinkState::Disconnected);
                 }
                 SessionEnd::Incompatible(version) => {
-                    self.shared.lock().last_error = Some(format!(
-                        "device speaks protocol version {version}, this host speaks {PROTOCOL_VERSION}"
-                    ));
+                    self.set_down(
+                        LinkDownReason::IncompatibleVersion { version },
+                        format!(
+                            "{}: the device speaks wire protocol version {version}, this host \
+                             speaks {PROTOCOL_VERSION}: update the rig firmware or hydrometrad",
+                            self.config.target
+                        ),
+                    );
                     warn!(target_device = %self.config.target, version, ours = PROTOCOL_VERSION,
                         "rig speaks an incompatible protocol version");
                     self.set_state(LinkState::Incompatible);
@@ -565,20 +598,21 @@ impl IoThread {
         self.set_state(LinkState::Disconnected);
     }
 
-    fn open(&self) -> Result<serialport::TTYPort, String> {
+    fn open(&self) -> Result<serialport::TTYPort, (LinkDownReason, String)> {
         let path = match &self.config.target {
             DeviceTarget::Path(p) => p.to_string_lossy().into_owned(),
             DeviceTarget::Usb {
                 vid,
                 pid,
                 serial_number,
-            } => find_usb_port(*vid, *pid, serial_number.as_deref())?,
+            } => find_usb_port(*vid, *pid, serial_number.as_deref())
+                .map_err(|e| (LinkDownReason::UsbDeviceNotFound, e))?,
         };
         serialport::new(&path, self.config.baud_rate)
             .timeout(self.config.read_timeout)
             .exclusive(self.config.exclusive)
             .open_native()
-            .map_err(|e| format!("{path}: {e}"))
+            .map_err(|e| open_failure(&path, &e))
     }
 
     fn send(&mut self, port: &mut serialport::TTYPort, message: &Message) -> Result<(), String> {
@@ -628,7 +662,7 @@ impl IoThread {
             nonce: self.nonce,
         });
         if let Err(e) = self.send(port, &hello) {
-            return SessionEnd::Lost(e);
+            return SessionEnd::Lost(LinkDownReason::Lost, e);
         }
         let mut hello_sent_at = Instant::now();
         let mut attempts = 1;
@@ -643,7 +677,12 @@ impl IoThread {
                 return SessionEnd::Shutdown;
             }
             match port.read(&mut buf) {
-                Ok(0) => return SessionEnd::Lost("zero-byte read (device hung up)".into()),
+                Ok(0) => {
+                    return SessionEnd::Lost(
+                        LinkDownReason::Lost,
+                        "zero-byte read (device hung up)".into(),
+                    )
+                }
                 Ok(n) => {
                     if let Some(tap) = &cfg.rx_tap {
                         tap.offer_bytes(monotonic_ns(), &buf[..n]);
@@ -675,18 +714,24 @@ impl IoThread {
                 }
                 Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
                 }
-                Err(e) => return SessionEnd::Lost(format!("read failed: {e}")),
+                Err(e) => {
+                    return SessionEnd::Lost(LinkDownReason::Lost, format!("read failed: {e}"))
+                }
             }
             let now = Instant::now();
             if !*established {
                 if now - hello_sent_at > cfg.handshake_timeout {
                     if attempts >= cfg.handshake_attempts {
-                        return SessionEnd::Lost(format!(
-                            "no device hello after {attempts} host hellos"
-                        ));
+                        return SessionEnd::Lost(
+                            LinkDownReason::NoHandshake,
+                            format!(
+                                "{}: no device hello after {attempts} host hellos (is it the rig?)",
+                                self.config.target
+                            ),
+                        );
                     }
                     if let Err(e) = self.send(port, &hello) {
-                        return SessionEnd::Lost(e);
+                        return SessionEnd::Lost(LinkDownReason::Lost, e);
                     }
                     attempts += 1;
                     hello_sent_at = now;
@@ -694,16 +739,16 @@ impl IoThread {
                 continue;
             }
             if now - last_frame_at > cfg.link_timeout {
-                return SessionEnd::Lost(format!(
-                    "no valid frame for {} ms",
-                    cfg.link_timeout.as_millis()
-                ));
+                return SessionEnd::Lost(
+                    LinkDownReason::Timeout,
+                    format!("no valid frame for {} ms", cfg.link_timeout.as_millis()),
+                );
             }
             if now - last_heartbeat_at >= cfg.heartbeat_period {
                 last_heartbeat_at = now;
                 let uptime_ms = self.started.elapsed().as_millis() as u32; // wraps by design
                 if let Err(e) = self.send(port, &Message::Heartbeat(Heartbeat { uptime_ms })) {
-                    return SessionEnd::Lost(e);
+                    return SessionEnd::Lost(LinkDownReason::Lost, e);
                 }
             }
             let mut inner = self.shared.lock();
@@ -780,6 +825,7 @@ impl IoThread {
                     inner.device = Some(info);
                     inner.link_state = LinkState::Connected;
                     inner.last_error = None;
+                    inner.down_reason = None;
                 }
                 *expected_seq = Some(frame.sequence.wrapping_add(1));
                 None
@@ -833,6 +879,66 @@ impl IoThread {
     }
 }
 
+/// Classifies a failed open and says what to do about it.
+fn open_failure(path: &str, e: &serialport::Error) -> (LinkDownReason, String) {
+    use serialport::ErrorKind as K;
+    match e.kind() {
+        K::Io(ErrorKind::NotFound) => (
+            LinkDownReason::DeviceNotFound,
+            format!(
+                "{path}: no such device ({e}): check the path, the cable and the udev rule \
+                 (docs/rig-protocol.md)"
+            ),
+        ),
+        K::Io(ErrorKind::PermissionDenied) => {
+            let gid = device_gid(path);
+            let group = gid.map(|g| group_name(g).unwrap_or_else(|| format!("gid {g}")));
+            let advice = match &group {
+                Some(group) => format!(
+                    "the device belongs to group `{group}`: add the user that runs this program \
+                     to it (`sudo usermod -aG {group} $USER`, then log in again or restart the \
+                     service)"
+                ),
+                None => "give the user that runs this program read-write access to it".into(),
+            };
+            (
+                LinkDownReason::PermissionDenied { gid },
+                format!("{path}: permission denied ({e}); {advice}"),
+            )
+        }
+        K::NoDevice => (
+            LinkDownReason::DeviceBusy,
+            format!("{path}: busy ({e}): another program has the rig open"),
+        ),
+        _ => (
+            LinkDownReason::OpenFailed,
+            format!("{path}: cannot open: {e}"),
+        ),
+    }
+}
+
+/// Group id of a device node (following symlinks).
+fn device_gid(path: &str) -> Option<u32> {
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata(path).ok().map(|m| m.gid())
+}
+
+/// The name of a group id, from the system's group database.
+pub fn group_name(gid: u32) -> Option<String> {
+    let mut group: libc::group = unsafe { std::mem::zeroed() };
+    let mut buf = vec![0 as libc::c_char; 4096];
+    let mut result: *mut libc::group = std::ptr::null_mut();
+    // SAFETY: every pointer refers to storage we own for the duration of the call; on success
+    // `result` points to `group`, whose `gr_name` points into `buf` (a NUL-terminated string).
+    let rc = unsafe { libc::getgrgid_r(gid, &mut group, buf.as_mut_ptr(), buf.len(), &mut result) };
+    if rc != 0 || result.is_null() || group.gr_name.is_null() {
+        return None;
+    }
+    // SAFETY: see above.
+    let name = unsafe { std::ffi::CStr::from_ptr(group.gr_name) };
+    Some(name.to_string_lossy().into_owned())
+}
+
 fn find_usb_port(vid: u16, pid: u16, serial: Option<&str>) -> Result<String, String> {
     let ports = serialport::available_ports().map_err(|e| format!("cannot list ports: {e}"))?;
     ports
@@ -854,4 +960,57 @@ fn find_usb_port(vid: u16, pid: u16, serial: Option<&str>) -> Result<String, Str
                     .unwrap_or_default()
             )
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_missing_device_is_reported_as_not_found_with_its_path() {
+        let path = "/dev/hydrometra-test-does-not-exist";
+        let link = RigLink::spawn(LinkConfig::new(
+            DeviceTarget::Path(path.into()),
+            Calibration::default(),
+        ))
+        .unwrap();
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while link.status().down_reason.is_none() {
+            assert!(Instant::now() < deadline, "no reason after 5 s");
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        let snap = link.snapshot();
+        link.shutdown();
+        assert_eq!(snap.link_state, LinkState::Disconnected);
+        assert_eq!(snap.down_reason, Some(LinkDownReason::DeviceNotFound));
+        let e = snap.last_error.unwrap_or_default();
+        assert!(
+            e.contains(path) && e.contains("No such file or directory"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn permission_denied_names_the_group_that_owns_the_device() {
+        use std::os::unix::fs::MetadataExt;
+        // As root nothing is denied, so the classification is fed the error open(2) gives.
+        let path = std::env::temp_dir().join(format!("hm-perm-{}", std::process::id()));
+        std::fs::write(&path, b"").unwrap();
+        let gid = std::fs::metadata(&path).unwrap().gid();
+        let denied = serialport::Error::new(
+            serialport::ErrorKind::Io(ErrorKind::PermissionDenied),
+            "Permission denied",
+        );
+        let (reason, message) = open_failure(path.to_str().unwrap(), &denied);
+        std::fs::remove_file(&path).unwrap();
+        assert_eq!(reason, LinkDownReason::PermissionDenied { gid: Some(gid) });
+        let group = group_name(gid).expect("the file's group has a name");
+        assert!(
+            message.contains(&format!("group `{group}`"))
+                && message.contains(&format!("usermod -aG {group}"))
+                && message.contains("Permission denied"),
+            "{message}"
+        );
+        assert_eq!(group_name(0).as_deref(), Some("root"));
+    }
 }

@@ -71,6 +71,35 @@ pub fn scenario_file(dir: &Path, extra_toml: &str) -> PathBuf {
     path
 }
 
+/// Runs `hydrometra ARGS...` to completion and returns its stdout; panics with its stderr if it
+/// fails.
+pub fn hydrometra(args: &[&str]) -> String {
+    let out = Command::new(binary("hydrometra"))
+        .args(args)
+        .output()
+        .expect("run hydrometra");
+    assert!(
+        out.status.success(),
+        "hydrometra {args:?} failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout).into_owned()
+}
+
+/// One status as `hydrometra monitor --once --json` prints it (waiting up to 10 s for one).
+pub fn monitor_once_json(prefix: &str) -> serde_json::Value {
+    let out = hydrometra(&[
+        "monitor",
+        "--once",
+        "--json",
+        "--timeout",
+        "10",
+        "--service-prefix",
+        prefix,
+    ]);
+    serde_json::from_str(&out).unwrap_or_else(|e| panic!("monitor printed no JSON ({e}): {out}"))
+}
+
 /// A running `hydrometrad` child process; killed (SIGKILL) on drop if still running.
 pub struct Daemon {
     child: Child,

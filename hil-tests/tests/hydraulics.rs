@@ -4,17 +4,12 @@
 //! (~130 s into the scenario), the deficit survives kill -9 and a restart, and a reset request
 //! starts a new procedure.
 
-use std::process::Command;
 use std::time::Duration;
 
 use hydrometra_hil_tests::*;
+use hydrometra_ipc::hydraulic_flags::{ACTIVE, PERFORATED, PUMP_STOPPED, RESTORED};
 use hydrometra_ipc::{alarms, Status};
-
-const ACTIVE: u64 = 1 << 0;
-const PERFORATED: u64 = 1 << 1;
-const PUMP_STOPPED: u64 = 1 << 2;
-const RESTORED: u64 = 1 << 4;
-const PA_PER_MMHG: f64 = 133.322;
+use hydrometra_units::PA_PER_MMHG;
 
 fn mmhg(s: &Status) -> f64 {
     s.cavity_pressure_pa / PA_PER_MMHG
@@ -149,15 +144,7 @@ fn default_scenario_distends_perforates_terminates_survives_a_crash_and_resets()
     assert!(restored.fluid_in_m3 >= saved.fluid_in_m3 - 1e-9);
 
     // Reset: `hydrometra procedure reset` starts a new procedure within the save interval.
-    let out = Command::new(binary("hydrometra"))
-        .args(["procedure", "reset", "--record", &record_arg])
-        .output()
-        .expect("run hydrometra procedure reset");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    hydrometra(&["procedure", "reset", "--record", &record_arg]);
     let fresh = last(
         reader.until("a new procedure", Duration::from_secs(5), |s| {
             s.procedure_id != saved.procedure_id

@@ -121,6 +121,8 @@ fn compare(j: &Value, s: &Status) {
         ("procedure_time_s", s.procedure_time_s),
         ("deficit_warning_stage", u(s.deficit_warning_stage)),
         ("hydraulic_flags", u(s.hydraulic_flags)),
+        ("link_down_reason", u(s.link_down_reason.into())),
+        ("link_down_detail", u(s.link_down_detail.into())),
     ] {
         same(j, field, value);
     }

@@ -1,7 +1,8 @@
 //! Rig faults seen through the daemon: the status reports a lost link within the safe-state
 //! timeout, the simulation keeps running on the safe inputs, and recovers by itself.
 
-use std::time::Duration;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use hydrometra_drivers::emulator::Scenario;
 use hydrometra_hil_tests::*;
@@ -167,4 +168,68 @@ fn a_rig_with_another_protocol_version_is_incompatible_and_accepted_once_it_spea
         .iter()
         .filter(|s| s.link_state == link_state::INCOMPATIBLE)
         .all(|s| s.safe_state == 1));
+}
+
+#[test]
+fn scenario_faults_fire_once_through_the_daemon_as_through_the_standalone_emulator() {
+    // One fault report and one run of 10 dropped samples, both after the host has connected.
+    let dir = temp_dir("once");
+    let path = scenario_file(
+        &dir,
+        "[faults]\n\
+         [[faults.event]]\nat_s = 1.5\nkind = \"fault_report\"\ncode = 7\n\
+         [[faults.event]]\nat_s = 2.0\nkind = \"drop_frames\"\ncount = 10\n",
+    );
+    let path = path.to_str().unwrap();
+
+    // The standalone emulator (`hydrometra rig emulate`) read by `hydrometra rig probe`.
+    let link = dir.join("rig");
+    let link_arg = link.to_str().unwrap();
+    let mut emulator = Command::new(binary("hydrometra"))
+        .args(["rig", "emulate", "--scenario", path, "--link", link_arg])
+        .args(["--seconds", "8"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn hydrometra rig emulate");
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while !link.exists() {
+        assert!(
+            Instant::now() < deadline,
+            "the emulator never created {link_arg}"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let probe = hydrometra(&[
+        "rig",
+        "probe",
+        "--device",
+        link_arg,
+        "--seconds",
+        "4",
+        "--json",
+    ]);
+    let _ = emulator.kill();
+    let _ = emulator.wait();
+    let probe: serde_json::Value = serde_json::from_str(&probe).expect("probe JSON");
+    let counters = &probe["counters"];
+    let standalone = (
+        counters["device_faults"].as_u64().expect("device_faults"),
+        counters["sequence_gaps"].as_u64().expect("sequence_gaps"),
+    );
+    assert_eq!(standalone, (1, 10), "standalone emulator: {probe}");
+
+    // The daemon's in-process emulated rig playing the same file.
+    let prefix = unique_prefix("once");
+    let _daemon = Daemon::start(&prefix, &["--emulated", path]);
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    let all = reader.until("4 s of simulation", Duration::from_secs(20), |s| {
+        s.sim_time_s > 4.0
+    });
+    let last = all.last().unwrap();
+    assert_eq!(
+        (last.link_device_faults, last.link_sequence_gaps),
+        standalone,
+        "daemon counters differ from the standalone emulator's: {last:?}"
+    );
 }

@@ -92,24 +92,7 @@ fn monitor_once_json_prints_the_live_status() {
     reader.until("a connected rig", Duration::from_secs(10), |s| {
         s.safe_state == 0
     });
-    let out = std::process::Command::new(binary("hydrometra"))
-        .args([
-            "monitor",
-            "--once",
-            "--json",
-            "--timeout",
-            "10",
-            "--service-prefix",
-            &prefix,
-        ])
-        .output()
-        .expect("run hydrometra monitor");
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let j: serde_json::Value = serde_json::from_slice(&out.stdout).expect("one JSON object");
+    let j = monitor_once_json(&prefix);
     assert_eq!(j["schema_version"], 1);
     assert_eq!(j["link_state_name"], "connected");
     assert_eq!(j["safe_state"], false);

@@ -27,6 +27,7 @@
 pub mod alarms;
 pub mod events;
 pub mod field;
+pub mod hydraulic_flags;
 pub mod mesh;
 pub mod names;
 pub mod particles;

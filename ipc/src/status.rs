@@ -135,8 +135,60 @@ pub struct Status {
     pub procedure_time_s: f64,
     /// Hydraulics: number of configured warning fractions the deficit has reached.
     pub deficit_warning_stage: u64,
-    /// Hydraulics: bit 0 stage active (hydraulic fields valid), 1 perforated, 2 pump stopped (terminated), 3 pump at its flow limit, 4 procedure restored from the record at start.
+    /// Hydraulics: bits in [`crate::hydraulic_flags`]: 0 stage active (hydraulic fields valid), 1 perforated, 2 pump stopped (terminated), 3 pump at its flow limit, 4 procedure restored from the record at start.
     pub hydraulic_flags: u64,
+    /// Rig link: why the link is down, a [`link_down_reason`] value (0 while connected and before
+    /// the first failure).
+    pub link_down_reason: u32,
+    /// Rig link: detail of `link_down_reason`: the device's group id for `permission-denied`
+    /// ([`link_down_reason::DETAIL_UNKNOWN`] if unreadable), the device's protocol version for
+    /// `incompatible-version`, otherwise 0.
+    pub link_down_detail: u32,
+}
+
+/// Why the rig link is down, as carried in [`Status::link_down_reason`]. The daemon logs the full
+/// message (with the device path) once per change of reason.
+pub mod link_down_reason {
+    /// The link is connected, or no attempt has failed yet.
+    pub const NONE: u32 = 0;
+    /// The device path does not exist (wrong path, rig not plugged in, udev rule missing).
+    pub const DEVICE_NOT_FOUND: u32 = 1;
+    /// The device exists but the daemon's user may not open it: join the group in
+    /// `link_down_detail` (its id).
+    pub const PERMISSION_DENIED: u32 = 2;
+    /// Another program holds the port.
+    pub const DEVICE_BUSY: u32 = 3;
+    /// Opening or configuring the port failed for another reason (see the daemon's log).
+    pub const OPEN_FAILED: u32 = 4;
+    /// The port opened but the device never answered the handshake.
+    pub const NO_HANDSHAKE: u32 = 5;
+    /// The device speaks another wire protocol version (in `link_down_detail`).
+    pub const INCOMPATIBLE_VERSION: u32 = 6;
+    /// No valid frame within the link timeout (a hung firmware).
+    pub const TIMEOUT: u32 = 7;
+    /// The port failed or hung up during a session (cable pulled).
+    pub const LOST: u32 = 8;
+    /// No USB serial device with the configured ids.
+    pub const USB_DEVICE_NOT_FOUND: u32 = 9;
+    /// `link_down_detail` when the detail could not be read.
+    pub const DETAIL_UNKNOWN: u32 = u32::MAX;
+
+    /// Human-readable name of a reason value.
+    pub fn name(value: u32) -> &'static str {
+        match value {
+            NONE => "none",
+            DEVICE_NOT_FOUND => "device-not-found",
+            PERMISSION_DENIED => "permission-denied",
+            DEVICE_BUSY => "device-busy",
+            OPEN_FAILED => "open-failed",
+            NO_HANDSHAKE => "no-handshake",
+            INCOMPATIBLE_VERSION => "incompatible-version",
+            TIMEOUT => "timeout",
+            LOST => "lost",
+            USB_DEVICE_NOT_FOUND => "usb-device-not-found",
+            _ => "unknown",
+        }
+    }
 }
 
 /// Rig link states as carried in [`Status::link_state`].
@@ -227,6 +279,8 @@ impl Default for Status {
             procedure_time_s: 0.0,
             deficit_warning_stage: 0,
             hydraulic_flags: 0,
+            link_down_reason: link_down_reason::NONE,
+            link_down_detail: 0,
         }
     }
 }
@@ -278,8 +332,8 @@ mod tests {
     fn status_has_no_implicit_padding() {
         // The sum of the field sizes equals the struct size: nothing hidden between fields.
         // 30 scalar 8-byte fields, 10 f64 in arrays, 8 u32 (2 at the start, 6 at the end), then
-        // the 18 appended 8-byte hydraulic fields.
-        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18;
+        // the 18 appended 8-byte hydraulic fields, then the 2 appended u32 link-down fields.
+        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2;
         assert_eq!(core::mem::size_of::<Status>(), fields);
         assert_eq!(core::mem::size_of::<Status>() % 8, 0);
         assert_eq!(core::mem::align_of::<Status>(), 8);

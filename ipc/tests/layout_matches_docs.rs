@@ -98,6 +98,8 @@ fn layouts() -> Vec<(String, usize, Vec<Row>)> {
             procedure_time_s: "f64",
             deficit_warning_stage: "u64",
             hydraulic_flags: "u64",
+            link_down_reason: "u32",
+            link_down_detail: "u32",
         }),
         layout!(MeshTopologyHeader {
             schema_version: "u32",
@@ -187,5 +189,344 @@ fn docs_layout_tables_match_the_structs() {
         let (doc_size, doc_rows) = doc_layout(&doc, &type_name);
         assert_eq!(doc_size, size, "{type_name}: size in docs/ipc.md");
         assert_eq!(doc_rows, rows, "{type_name}: layout table in docs/ipc.md");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The other languages: every C++ and Python declaration of a contract type in the docs and the
+// examples must have the Rust struct's fields, types, offsets and size, so a field appended under
+// the v1 rule cannot leave an example behind. C++ is checked by parsing (the iceoryx2 C++
+// bindings are not packaged on crates.io, PyPI or Debian, so CI cannot build the example); the
+// layout is computed with the C rules (each field at the next multiple of its alignment, the size
+// rounded up to the largest alignment).
+
+/// A declaration found in a source: (where, language, struct name, fields as (name, type),
+/// declared type name, sizes the code asserts).
+struct Declaration {
+    origin: String,
+    language: &'static str,
+    name: String,
+    fields: Vec<(String, String)>,
+    type_name: Option<String>,
+    asserted_sizes: Vec<usize>,
+}
+
+/// (size, alignment) of a scalar type in the docs' notation.
+fn scalar(ty: &str) -> (usize, usize) {
+    match ty {
+        "u8" | "i8" => (1, 1),
+        "u16" | "i16" => (2, 2),
+        "u32" | "i32" | "f32" => (4, 4),
+        "u64" | "i64" | "f64" => (8, 8),
+        other => panic!("unknown scalar type {other}"),
+    }
+}
+
+/// Offsets and size of fields laid out with the C rules; types like `f64[3]`.
+fn c_layout(fields: &[(String, String)]) -> (usize, Vec<Row>) {
+    let (mut end, mut max_align) = (0usize, 1usize);
+    let mut rows = Vec::new();
+    for (name, ty) in fields {
+        let (elem, count) = match ty.split_once('[') {
+            Some((e, n)) => (e, n.trim_end_matches(']').parse::<usize>().unwrap()),
+            None => (ty.as_str(), 1),
+        };
+        let (size, align) = scalar(elem);
+        let offset = end.div_ceil(align) * align;
+        rows.push((name.clone(), offset, size * count, ty.clone()));
+        end = offset + size * count;
+        max_align = max_align.max(align);
+    }
+    (end.div_ceil(max_align) * max_align, rows)
+}
+
+fn cpp_type(t: &str, origin: &str) -> String {
+    match t {
+        "uint8_t" => "u8",
+        "int8_t" => "i8",
+        "uint16_t" => "u16",
+        "int16_t" => "i16",
+        "uint32_t" => "u32",
+        "int32_t" => "i32",
+        "uint64_t" => "u64",
+        "int64_t" => "i64",
+        "float" => "f32",
+        "double" => "f64",
+        other => panic!("{origin}: C++ type {other} has no fixed layout; use <cstdint> types"),
+    }
+    .to_string()
+}
+
+/// The integers that follow each occurrence of `before` in `code` (spaces skipped; occurrences
+/// not followed by a number are ignored).
+fn numbers_after(code: &str, before: &str) -> Vec<usize> {
+    code.match_indices(before)
+        .filter_map(|(i, m)| {
+            let digits: String = code[i + m.len()..]
+                .trim_start()
+                .chars()
+                .take_while(char::is_ascii_digit)
+                .collect();
+            digits.parse().ok()
+        })
+        .collect()
+}
+
+/// Every `struct NAME { ... };` in C++ code.
+fn cpp_declarations(code: &str, origin: &str) -> Vec<Declaration> {
+    let mut out = Vec::new();
+    let mut rest = code;
+    while let Some(start) = rest.find("struct ") {
+        let after = &rest[start + "struct ".len()..];
+        let name: String = after
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        let Some(open) = after.find('{') else { break };
+        let Some(close) = after.find("};") else { break };
+        if after[..open].trim() != name || close < open {
+            rest = after;
+            continue;
+        }
+        let body = &after[open + 1..close];
+        let (mut fields, mut type_name) = (Vec::new(), None);
+        let body: String = body
+            .lines()
+            .map(|l| l.split("//").next().unwrap_or(""))
+            .collect::<Vec<_>>()
+            .join("\n");
+        for stmt in body.split(';').map(str::trim).filter(|s| !s.is_empty()) {
+            if stmt.starts_with("static") {
+                // Static members take no space; the type name lives here.
+                if stmt.contains("IOX2_TYPE_NAME") {
+                    type_name = stmt.split('"').nth(1).map(str::to_string);
+                }
+                continue;
+            }
+            let (ty, names) = stmt
+                .split_once(char::is_whitespace)
+                .unwrap_or_else(|| panic!("{origin}: cannot read `{stmt}` in struct {name}"));
+            let ty = cpp_type(ty.trim(), origin);
+            for n in names.split(',').map(str::trim) {
+                match n.split_once('[') {
+                    Some((n, count)) => {
+                        fields.push((n.trim().to_string(), format!("{ty}[{}", count.trim())))
+                    }
+                    None => fields.push((n.to_string(), ty.clone())),
+                }
+            }
+        }
+        let asserted_sizes = numbers_after(code, &format!("sizeof({name}) =="));
+        out.push(Declaration {
+            origin: origin.to_string(),
+            language: "C++",
+            name,
+            fields,
+            type_name,
+            asserted_sizes,
+        });
+        rest = &after[close..];
+    }
+    out
+}
+
+fn ctypes_type(t: &str, origin: &str) -> String {
+    let (base, count) = match t.split_once('*') {
+        Some((b, n)) => (b.trim(), Some(n.trim())),
+        None => (t.trim(), None),
+    };
+    let base = match base.trim_start_matches("ctypes.") {
+        "c_uint8" | "c_ubyte" => "u8",
+        "c_int8" | "c_byte" => "i8",
+        "c_uint16" => "u16",
+        "c_int16" => "i16",
+        "c_uint32" => "u32",
+        "c_int32" => "i32",
+        "c_uint64" => "u64",
+        "c_int64" => "i64",
+        "c_float" => "f32",
+        "c_double" => "f64",
+        other => panic!("{origin}: ctypes type {other} has no fixed layout"),
+    };
+    match count {
+        Some(n) => format!("{base}[{n}]"),
+        None => base.to_string(),
+    }
+}
+
+/// Every `class NAME(ctypes.Structure)` with its `_fields_` in Python code.
+fn python_declarations(code: &str, origin: &str) -> Vec<Declaration> {
+    let mut out = Vec::new();
+    for (start, _) in code.match_indices("class ") {
+        let line = code[start..].lines().next().unwrap();
+        if !line.contains("ctypes.Structure") {
+            continue;
+        }
+        let name: String = line["class ".len()..]
+            .chars()
+            .take_while(|c| c.is_alphanumeric() || *c == '_')
+            .collect();
+        // The class body: up to the next line that is not indented (or the end).
+        let body_start = start + line.len();
+        let mut body_len = 0;
+        for (i, l) in code[body_start..].split_inclusive('\n').enumerate() {
+            if i > 0 && !l.trim().is_empty() && !l.starts_with(char::is_whitespace) {
+                break;
+            }
+            body_len += l.len();
+        }
+        let body = &code[body_start..body_start + body_len];
+        let fields_at = body
+            .find("_fields_")
+            .unwrap_or_else(|| panic!("{origin}: class {name} has no _fields_"));
+        let list = &body[fields_at..];
+        let list = &list[list.find('[').unwrap() + 1..];
+        let list = &list[..list
+            .find("\n    ]")
+            .unwrap_or_else(|| list.rfind(']').unwrap())];
+        let fields = list
+            .split("),")
+            .map(|e| {
+                e.trim()
+                    .trim_start_matches('(')
+                    .trim_end_matches(')')
+                    .trim()
+            })
+            .filter(|e| !e.is_empty())
+            .map(|e| {
+                let (n, t) = e
+                    .split_once(',')
+                    .unwrap_or_else(|| panic!("{origin}: cannot read field `{e}` of {name}"));
+                (
+                    n.trim().trim_matches('"').trim_matches('\'').to_string(),
+                    ctypes_type(t, origin),
+                )
+            })
+            .collect();
+        let type_name = body
+            .find("def type_name")
+            .and_then(|i| body[i..].find("return ").map(|j| i + j))
+            .and_then(|i| body[i..].split('"').nth(1))
+            .map(str::to_string);
+        let mut asserted_sizes = numbers_after(code, &format!("ctypes.sizeof({name}) =="));
+        // A docstring that states the size ("hydrometra.v1.Status: 123 bytes") must be right too.
+        let stated = format!("{}: ", type_name.as_deref().unwrap_or(&name));
+        asserted_sizes.extend(numbers_after(body, &stated));
+        out.push(Declaration {
+            origin: origin.to_string(),
+            language: "Python",
+            name,
+            fields,
+            type_name,
+            asserted_sizes,
+        });
+    }
+    out
+}
+
+/// Fenced code blocks (language, code) of a Markdown file.
+fn fenced_blocks(doc: &str) -> Vec<(String, String)> {
+    let mut out = Vec::new();
+    let mut lines = doc.lines();
+    while let Some(line) = lines.next() {
+        if let Some(lang) = line.trim_start().strip_prefix("```") {
+            let lang = lang.trim().to_lowercase();
+            let code: Vec<&str> = lines
+                .by_ref()
+                .take_while(|l| !l.trim_start().starts_with("```"))
+                .collect();
+            out.push((lang, code.join("\n")));
+        }
+    }
+    out
+}
+
+/// Every C++ and Python declaration in the docs (docs/*.md, README.md) and the examples
+/// (ipc/examples/**).
+fn foreign_declarations() -> Vec<Declaration> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut out = Vec::new();
+    let mut markdown = vec![root.join("README.md")];
+    for entry in std::fs::read_dir(root.join("docs")).expect("docs/") {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "md") {
+            markdown.push(path);
+        }
+    }
+    for path in markdown {
+        let doc = std::fs::read_to_string(&path).unwrap();
+        for (i, (lang, code)) in fenced_blocks(&doc).into_iter().enumerate() {
+            let origin = format!("{} (code block {})", path.display(), i + 1);
+            match lang.as_str() {
+                "cpp" | "c++" | "c" | "h" | "hpp" => out.extend(cpp_declarations(&code, &origin)),
+                "python" | "py" => out.extend(python_declarations(&code, &origin)),
+                _ => {}
+            }
+        }
+    }
+    let mut dirs = vec![root.join("ipc/examples")];
+    while let Some(dir) = dirs.pop() {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                dirs.push(path);
+                continue;
+            }
+            let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+            let origin = path.display().to_string();
+            match ext {
+                "cpp" | "cc" | "cxx" | "hpp" | "h" => out.extend(cpp_declarations(
+                    &std::fs::read_to_string(&path).unwrap(),
+                    &origin,
+                )),
+                "py" => out.extend(python_declarations(
+                    &std::fs::read_to_string(&path).unwrap(),
+                    &origin,
+                )),
+                _ => {}
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn cpp_and_python_declarations_in_docs_and_examples_match_the_structs() {
+    let layouts = layouts();
+    let declarations = foreign_declarations();
+    let mut checked = Vec::new();
+    for d in &declarations {
+        let Some((type_name, size, rows)) = layouts
+            .iter()
+            .find(|(t, _, _)| t.rsplit('.').next() == Some(d.name.as_str()))
+        else {
+            continue; // Not a contract type (a helper struct of the example).
+        };
+        let what = format!("{} {} `{}` in {}", d.language, type_name, d.name, d.origin);
+        let (c_size, c_rows) = c_layout(&d.fields);
+        let names = |r: &[Row]| r.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
+        assert_eq!(names(&c_rows), names(rows), "{what}: field names and order");
+        assert_eq!(&c_rows, rows, "{what}: field types and offsets");
+        assert_eq!(c_size, *size, "{what}: size");
+        for asserted in &d.asserted_sizes {
+            assert_eq!(
+                asserted, size,
+                "{what}: the size the code asserts or states"
+            );
+        }
+        if let Some(t) = &d.type_name {
+            assert_eq!(t, type_name, "{what}: type name");
+        }
+        checked.push((d.language, d.name.clone(), d.origin.clone()));
+    }
+    // The test must not pass by finding nothing: the docs' C++ subscriber and the Python
+    // example both declare Status.
+    for language in ["C++", "Python"] {
+        assert!(
+            checked
+                .iter()
+                .any(|(l, n, _)| *l == language && n == "Status"),
+            "no {language} declaration of Status found in docs/ or ipc/examples/; found {checked:?}"
+        );
     }
 }

@@ -641,13 +641,8 @@ print(len(m.points), len(tets), int(lab.sum()), int(reg.sum()), int(tets.sum()),
 #[test]
 fn random_parameter_sets_mesh_validly_or_are_refused_by_name() {
     use hydrometra_sim::anatomy::AnatomyError;
-    let mut seed: u64 = 12345;
-    let mut rnd = |lo: f64, hi: f64| {
-        seed = seed
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        lo + (hi - lo) * ((seed >> 11) as f64 / (1u64 << 53) as f64)
-    };
+    let mut rng = fastrand::Rng::with_seed(12345);
+    let mut rnd = |lo: f64, hi: f64| lo + (hi - lo) * rng.f64();
     let mut meshed = 0;
     for i in 0..40 {
         let mut p = AnatomyParams {

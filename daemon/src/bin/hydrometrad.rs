@@ -61,12 +61,16 @@ struct Args {
 }
 
 fn main() -> anyhow::Result<()> {
+    // The real-time threads (rig I/O, simulation loop, publisher) log too: they only queue the
+    // line; a worker thread writes it to stderr, so a slow journal or terminal never stalls a
+    // tick. The queue drops lines when full rather than block. The guard flushes it on return.
+    let (log_writer, _log_flush) = tracing_appender::non_blocking(std::io::stderr());
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
-        .with_writer(std::io::stderr)
+        .with_writer(log_writer)
         .init();
     // iceoryx2 logs through tracing; its start-up notes ("no config file loaded") are noise for
     // an operator. IOX2_LOG_LEVEL raises it for debugging.

@@ -6,8 +6,8 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use hydrometra_ipc::status::{self, link_state};
-use hydrometra_ipc::{alarms, ServiceNames, Status};
+use hydrometra_ipc::status::{self, link_down_reason, link_state};
+use hydrometra_ipc::{alarms, hydraulic_flags, ServiceNames, Status};
 use hydrometra_sim::units::pa_to_mmhg;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
@@ -32,6 +32,43 @@ pub struct MonitorArgs {
     pub refresh_ms: u64,
 }
 
+/// Why the link is down, in words a technician can act on; `None` while there is no reason.
+pub fn link_down_text(s: &Status) -> Option<String> {
+    use link_down_reason as r;
+    let d = s.link_down_detail;
+    Some(match s.link_down_reason {
+        r::NONE => return None,
+        r::DEVICE_NOT_FOUND => {
+            "device not found: check the device path, the cable and the udev rule \
+             (the daemon's log names the path)"
+                .into()
+        }
+        r::USB_DEVICE_NOT_FOUND => "no USB serial device with the configured ids".into(),
+        r::PERMISSION_DENIED => {
+            let group = (d != r::DETAIL_UNKNOWN).then(|| {
+                hydrometra_drivers::transport::group_name(d).unwrap_or_else(|| format!("gid {d}"))
+            });
+            match group {
+                Some(g) => format!(
+                    "permission denied: add the daemon's user to group `{g}` \
+                     (sudo usermod -aG {g} USER), then restart it"
+                ),
+                None => "permission denied on the rig device".into(),
+            }
+        }
+        r::DEVICE_BUSY => "device busy: another program has the rig open".into(),
+        r::OPEN_FAILED => "cannot open the rig device (see the daemon's log)".into(),
+        r::NO_HANDSHAKE => "the device does not answer the handshake (is it the rig?)".into(),
+        r::INCOMPATIBLE_VERSION => format!(
+            "the rig speaks wire protocol v{d}, this host v{}: update the firmware or the daemon",
+            hydrometra_drivers::wire::PROTOCOL_VERSION
+        ),
+        r::TIMEOUT => "no valid frame for 1 s (hung firmware); reopening".into(),
+        r::LOST => "the port failed or hung up (cable pulled?)".into(),
+        other => format!("unknown reason {other}"),
+    })
+}
+
 /// A status as a JSON object: every field, plus readable derived values (`*_mmhg`, names).
 pub fn status_json(s: &Status) -> serde_json::Value {
     serde_json::json!({
@@ -52,6 +89,10 @@ pub fn status_json(s: &Status) -> serde_json::Value {
             "reconnects": s.link_reconnects,
             "clamped_values": s.link_clamped_values,
             "device_faults": s.link_device_faults,
+            "down_reason": s.link_down_reason,
+            "down_reason_name": link_down_reason::name(s.link_down_reason),
+            "down_detail": s.link_down_detail,
+            "down_text": link_down_text(s),
         },
         "last_sample_age_s": finite(s.last_sample_age_s),
         "rig_device_time_us": s.rig_device_time_us,
@@ -86,10 +127,10 @@ pub fn status_json(s: &Status) -> serde_json::Value {
 
 fn hydraulics_json(s: &Status) -> serde_json::Value {
     serde_json::json!({
-            "active": s.hydraulic_flags & 1 != 0,
+            "active": s.hydraulic_flags & hydraulic_flags::ACTIVE != 0,
             "flags": s.hydraulic_flags,
-            "perforated": s.hydraulic_flags & (1 << 1) != 0,
-            "pump_stopped": s.hydraulic_flags & (1 << 2) != 0,
+            "perforated": s.hydraulic_flags & hydraulic_flags::PERFORATED != 0,
+            "pump_stopped": s.hydraulic_flags & hydraulic_flags::PUMP_STOPPED != 0,
             "cavity_pressure_pa": s.cavity_pressure_pa,
             "cavity_pressure_mmhg": pa_to_mmhg(s.cavity_pressure_pa),
             "cavity_volume_ml": s.cavity_volume_m3 * 1e6,
@@ -160,6 +201,13 @@ pub fn render(s: &Status, rate_hz: f64, note: &str) -> String {
         s.rig_sequence,
         s.rig_device_time_us as f64 * 1e-6
     );
+    if let Some(text) = link_down_text(s) {
+        let _ = writeln!(
+            w,
+            "  down: {} - {text}",
+            link_down_reason::name(s.link_down_reason)
+        );
+    }
     let _ = writeln!(w, "  frames {}  crc errors {}  malformed {}  seq gaps {}  resyncs {}  reconnects {}  clamped {}  device faults {}",
         s.link_frames, s.link_crc_errors, s.link_malformed, s.link_sequence_gaps, s.link_resyncs, s.link_reconnects, s.link_clamped_values, s.link_device_faults);
     let _ = writeln!(w);
@@ -209,9 +257,9 @@ pub fn render(s: &Status, rate_hz: f64, note: &str) -> String {
     );
     let _ = writeln!(w, "  buttons          {:#06x}", s.buttons);
     let _ = writeln!(w);
-    if s.hydraulic_flags & 1 != 0 {
-        let flag = |bit: u32, text: &'static str| {
-            if s.hydraulic_flags & (1 << bit) != 0 {
+    if s.hydraulic_flags & hydraulic_flags::ACTIVE != 0 {
+        let flag = |bit: u64, text: &'static str| {
+            if s.hydraulic_flags & bit != 0 {
                 text
             } else {
                 ""
@@ -224,9 +272,9 @@ pub fn render(s: &Status, rate_hz: f64, note: &str) -> String {
             s.cavity_volume_m3 * 1e6,
             s.procedure_id,
             s.procedure_time_s,
-            flag(1, "  PERFORATED"),
-            flag(2, "  PUMP STOPPED"),
-            flag(4, "  (restored)")
+            flag(hydraulic_flags::PERFORATED, "  PERFORATED"),
+            flag(hydraulic_flags::PUMP_STOPPED, "  PUMP STOPPED"),
+            flag(hydraulic_flags::RESTORED, "  (restored)")
         );
         let _ = writeln!(
             w,
@@ -424,10 +472,33 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_reason_a_link_is_down_is_shown_with_what_to_do() {
+        let s = Status {
+            link_down_reason: link_down_reason::PERMISSION_DENIED,
+            link_down_detail: 0, // gid 0 is `root` on every Linux system
+            ..Status::default()
+        };
+        let view = render(&s, 0.0, "");
+        assert!(
+            view.contains("permission-denied") && view.contains("group `root`"),
+            "{view}"
+        );
+        let j = status_json(&s);
+        assert_eq!(j["link"]["down_reason_name"], "permission-denied");
+        let s = Status {
+            link_down_reason: link_down_reason::INCOMPATIBLE_VERSION,
+            link_down_detail: 2,
+            ..Status::default()
+        };
+        assert!(render(&s, 0.0, "").contains("wire protocol v2"));
+        assert!(!render(&Status::default(), 0.0, "").contains("down:"));
+    }
+
+    #[test]
     fn json_and_view_show_clinical_units_and_names() {
         let s = Status {
-            pump_set_pressure_pa: 100.0 * 133.322,
-            rig_pump_set_pressure_pa: 100.0 * 133.322,
+            pump_set_pressure_pa: 100.0 * hydrometra_units::PA_PER_MMHG,
+            rig_pump_set_pressure_pa: 100.0 * hydrometra_units::PA_PER_MMHG,
             link_state: link_state::STALE,
             alarm_bits: alarms::RIG_LINK_LOST | alarms::RIG_SAFE_STATE,
             ..Status::default()

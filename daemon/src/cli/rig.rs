@@ -94,19 +94,6 @@ fn load_calibration(path: &Option<PathBuf>) -> Result<Calibration> {
     }
 }
 
-fn load_scenario(spec: &str) -> Result<Scenario> {
-    let path = PathBuf::from(spec);
-    if path.exists() {
-        return Ok(Scenario::load(&path)?);
-    }
-    Scenario::builtin(spec).ok_or_else(|| {
-        anyhow!(
-            "--scenario {spec}: no such file, and not a built-in scenario (built-in: {})",
-            Scenario::builtin_names().join(", ")
-        )
-    })
-}
-
 fn positive_seconds(flag: &str, s: f64) -> Result<Duration> {
     if !(s.is_finite() && s > 0.0 && s <= 1.0e6) {
         bail!("{flag} {s}: expected a number of seconds in (0, 1e6]");
@@ -122,7 +109,7 @@ fn emulate(a: EmulateArgs) -> Result<()> {
     if let Some(file) = &a.replay {
         return replay(file, a.speed, a.link.clone(), run_for);
     }
-    let scenario = load_scenario(&a.scenario)?;
+    let scenario = Scenario::resolve(&a.scenario)?;
     let options = EmulatorOptions {
         sample_rate_hz: a.rate,
         heartbeat_hz: a.heartbeat_hz,
@@ -403,17 +390,5 @@ mod tests {
         assert!(e.contains("vendor id") && e.contains("12g9"), "{e}");
         let e = parse_usb("1209:10000").unwrap_err().to_string();
         assert!(e.contains("product id"), "{e}");
-    }
-
-    #[test]
-    fn scenario_argument_accepts_builtins_and_names_unknown_ones() {
-        assert_eq!(load_scenario("default").unwrap().name, "default");
-        let e = load_scenario("no-such-scenario.toml")
-            .unwrap_err()
-            .to_string();
-        assert!(
-            e.contains("no-such-scenario.toml") && e.contains("default, flaky"),
-            "{e}"
-        );
     }
 }

@@ -9,47 +9,29 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use anyhow::{bail, Context};
+use anyhow::Context;
 use hydrometra_drivers::emulator::Scenario;
-use hydrometra_ipc::{alarms, Status};
+use hydrometra_ipc::{alarms, hydraulic_flags, Status};
 use hydrometra_sim::hydraulics::{
     CaseScript, HydraulicInputs, HydraulicModel, HydraulicParams, ProcedureInfo, ProcedureRecord,
 };
 
 use super::sim::{SimInputs, Stage};
 
-/// `hydraulic_flags` bit: the stage is active (hydraulic fields are valid).
-pub const FLAG_ACTIVE: u64 = 1 << 0;
-/// `hydraulic_flags` bit: the cavity is perforated.
-pub const FLAG_PERFORATED: u64 = 1 << 1;
-/// `hydraulic_flags` bit: the pump is stopped because the procedure is terminated.
-pub const FLAG_PUMP_STOPPED: u64 = 1 << 2;
-/// `hydraulic_flags` bit: the pump delivers its maximum flow.
-pub const FLAG_PUMP_FLOW_LIMITED: u64 = 1 << 3;
-/// `hydraulic_flags` bit: the procedure was restored from the record when the daemon started.
-pub const FLAG_RESTORED: u64 = 1 << 4;
-
-/// A scenario with its hydraulic case script, from a built-in name or a file.
-pub fn load_scenario(name_or_path: &str) -> anyhow::Result<(Scenario, CaseScript)> {
-    let path = Path::new(name_or_path);
-    if path.exists() {
-        let scenario = Scenario::load(path)?;
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("reading scenario {}", path.display()))?;
-        let case = CaseScript::from_scenario_toml(&text, &path.display().to_string())?;
-        return Ok((scenario, case));
-    }
-    let Some(scenario) = Scenario::builtin(name_or_path) else {
-        bail!(
-            "scenario `{name_or_path}` is neither a file nor a built-in scenario (built-ins: {})",
-            Scenario::builtin_names().join(", ")
-        );
-    };
-    let case = match &scenario.hydraulics {
-        Some(table) => CaseScript::from_table(table, &format!("builtin:{name_or_path}"))?,
-        None => CaseScript::default(),
-    };
+/// A scenario (resolved by [`Scenario::resolve`]: a built-in name, else a file) with the hydraulic
+/// case script of its `[hydraulics]` table (empty without one).
+pub fn load_scenario(spec: &str) -> anyhow::Result<(Scenario, CaseScript)> {
+    let scenario = Scenario::resolve(spec)?;
+    let case = case_script(&scenario)?;
     Ok((scenario, case))
+}
+
+/// The hydraulic case script of a scenario's `[hydraulics]` table (empty without one).
+pub fn case_script(scenario: &Scenario) -> anyhow::Result<CaseScript> {
+    Ok(match &scenario.hydraulics {
+        Some(table) => CaseScript::from_table(table, &scenario.origin)?,
+        None => CaseScript::default(),
+    })
 }
 
 /// The file whose presence asks the daemon to start a new procedure: `<record>.reset`.
@@ -163,7 +145,7 @@ impl HydraulicsStage {
     pub fn start(setup: HydraulicsSetup) -> anyhow::Result<Self> {
         let mut model =
             HydraulicModel::new(setup.params).context("invalid hydraulic parameters")?;
-        let mut flags = FLAG_ACTIVE;
+        let mut flags = hydraulic_flags::ACTIVE;
         let reset = Arc::new(AtomicBool::new(false));
         let mut persister = None;
         match &setup.record {
@@ -187,7 +169,7 @@ impl HydraulicsStage {
                     match ProcedureRecord::load(path) {
                         Ok(Some(record)) => {
                             model.restore(&record);
-                            flags |= FLAG_RESTORED;
+                            flags |= hydraulic_flags::RESTORED;
                             tracing::info!(
                                 record = %path.display(),
                                 procedure = record.procedure.id,
@@ -273,7 +255,7 @@ impl Stage for HydraulicsStage {
     fn step(&mut self, inputs: &SimInputs, dt_s: f64) {
         if self.reset.swap(false, Ordering::Relaxed) {
             self.model.start_new_procedure(new_procedure());
-            self.flags &= !FLAG_RESTORED;
+            self.flags &= !hydraulic_flags::RESTORED;
             tracing::info!(
                 procedure = self.model.procedure().id,
                 "new procedure started"
@@ -332,13 +314,13 @@ impl Stage for HydraulicsStage {
         status.deficit_warning_stage = u64::from(d.warning_stage);
         let mut flags = self.flags;
         if s.perforated {
-            flags |= FLAG_PERFORATED;
+            flags |= hydraulic_flags::PERFORATED;
         }
         if s.pump_stopped {
-            flags |= FLAG_PUMP_STOPPED;
+            flags |= hydraulic_flags::PUMP_STOPPED;
         }
         if s.pump_flow_limited {
-            flags |= FLAG_PUMP_FLOW_LIMITED;
+            flags |= hydraulic_flags::PUMP_FLOW_LIMITED;
         }
         status.hydraulic_flags = flags;
         let fraction = d.fraction_of_limit();

@@ -17,6 +17,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::Context;
+use hydrometra_drivers::emulator::Scenario;
+use hydrometra_drivers::state::LinkDownReason;
+use hydrometra_drivers::transport::RigLink;
 use hydrometra_ipc::ServiceNames;
 
 use crate::record::recorder::{self, RecorderHandle};
@@ -108,6 +111,28 @@ pub fn log_summary(what: &str, s: &RunSummary) {
     );
 }
 
+/// Logs why the rig link is down, once per change of reason (not on every retry).
+#[derive(Default)]
+struct LinkReasonLog {
+    last: Option<LinkDownReason>,
+}
+
+impl LinkReasonLog {
+    fn update(&mut self, link: &RigLink) {
+        let reason = link.status().down_reason;
+        if reason == self.last {
+            return;
+        }
+        self.last = reason;
+        // Off the real-time threads: the snapshot allocates for the message.
+        match (reason, link.snapshot().last_error) {
+            (Some(r), Some(message)) => tracing::warn!(reason = ?r, "rig link down: {message}"),
+            (Some(r), None) => tracing::warn!(reason = ?r, "rig link down"),
+            (None, _) => tracing::info!("rig link up: the last failure is cleared"),
+        }
+    }
+}
+
 /// A run id that differs between daemon starts.
 fn new_run_id() -> u64 {
     let nanos = SystemTime::now()
@@ -117,21 +142,45 @@ fn new_run_id() -> u64 {
     nanos ^ (u64::from(std::process::id()) << 32)
 }
 
+/// The emulated rig's scenario (`rig.emulated.scenario`), resolved once for the emulator and the
+/// hydraulics stage; `None` for a real rig.
+pub fn emulated_scenario(config: &Config) -> anyhow::Result<Option<Scenario>> {
+    if config.rig.mode != config::RigMode::Emulated {
+        return Ok(None);
+    }
+    let spec = &config.rig.emulated.scenario;
+    Scenario::resolve(spec)
+        .map(Some)
+        .with_context(|| format!("rig.emulated.scenario = {spec:?}"))
+}
+
 /// The simulation stages the loop steps every tick, in order. Each stage reads the inputs (the
 /// rig's or the safe ones) and writes its fields into the status: hydraulics now; deformation,
-/// fluid and particle stages are added here as they land.
-pub fn build_stages(config: &Config) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
+/// fluid and particle stages are added here as they land. `scenario` is the emulated rig's.
+pub fn build_stages(
+    config: &Config,
+    scenario: Option<&Scenario>,
+) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
     let h = &config.hydraulics;
     // A replay reproduces the recorded procedure: the recorded configuration's scenario case and
     // hydraulic parameters, a new procedure, no procedure record (docs/recording.md).
     let replayed = replayed_config(config)?;
     let source = replayed.as_ref().unwrap_or(config);
-    let (case, case_period_s) = if source.rig.mode == config::RigMode::Emulated {
-        let (scenario, case) = hydraulics::load_scenario(&source.rig.emulated.scenario)?;
-        let period = scenario.looping.then(|| scenario.duration_s());
-        (case, period)
+    let replayed_scenario = match &replayed {
+        Some(r) => emulated_scenario(r)?,
+        None => None,
+    };
+    let scenario = if replayed.is_some() {
+        replayed_scenario.as_ref()
     } else {
-        Default::default()
+        scenario
+    };
+    let (case, case_period_s) = match scenario {
+        Some(scenario) => (
+            hydraulics::case_script(scenario)?,
+            scenario.looping.then(|| scenario.duration_s()),
+        ),
+        None => Default::default(),
     };
     let h_params = &source.hydraulics.params;
     let params = case.params.clone().unwrap_or_else(|| h_params.clone());
@@ -229,7 +278,8 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let systemd = notify::Systemd::from_env();
     let started = Instant::now();
 
-    let stages = build_stages(config)?;
+    let scenario = emulated_scenario(config)?;
+    let stages = build_stages(config, scenario.as_ref())?;
     // Real-time scheduling is set on the main thread before any other thread starts, so the rig
     // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
     let priority = config.sim_loop.realtime_priority;
@@ -243,7 +293,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         Some(t) => (Some(t.rx), Some(t.status)),
         None => (None, None),
     };
-    let rig = rig_connection::RigConnection::start(&config.rig, rx_tap)?;
+    let rig = rig_connection::RigConnection::start(&config.rig, scenario, rx_tap)?;
     let telemetry = Arc::new(Telemetry::default());
     let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
     let publisher = match PublisherThread::spawn(
@@ -298,8 +348,10 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let mut next_log = Instant::now() + log_interval;
     let mut last_watchdog = Instant::now();
     let mut watchdog_marks = (0u64, 0u64);
+    let mut link_reason = LinkReasonLog::default();
     while !stop.load(Ordering::Relaxed) {
         std::thread::sleep(SUPERVISOR_PERIOD);
+        link_reason.update(&rig.source());
         if duration.is_some_and(|d| started.elapsed() >= d) {
             break;
         }

@@ -1,7 +1,6 @@
 //! The rig input of the daemon: the transport (`RigLink`) on a real device, or on the pty of an
 //! in-process emulated rig so the whole path (bytes, framing, calibration) runs.
 
-use std::path::Path;
 use std::sync::Arc;
 
 use anyhow::Context;
@@ -10,19 +9,6 @@ use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
 use hydrometra_drivers::transport::{DeviceTarget, LinkConfig, RigLink, RxTap};
 
 use super::config::{RigConfig, RigMode};
-use super::rig_source::{RigSource, RigView};
-
-impl RigSource for RigLink {
-    fn view(&self) -> RigView {
-        let s = self.status();
-        RigView {
-            link_state: s.link_state,
-            counters: s.counters,
-            latest: s.latest,
-            last_sample_age: s.last_sample_age,
-        }
-    }
-}
 
 /// The running rig input.
 pub struct RigConnection {
@@ -30,27 +16,16 @@ pub struct RigConnection {
     emulator: Option<EmulatedRig>,
 }
 
-/// Resolves `rig.emulated.scenario`: a built-in name, else a file path.
-pub fn load_scenario(name_or_path: &str) -> anyhow::Result<Scenario> {
-    if let Some(s) = Scenario::builtin(name_or_path) {
-        return Ok(s);
-    }
-    let path = Path::new(name_or_path);
-    if !path.exists() {
-        anyhow::bail!(
-            "rig.emulated.scenario = {name_or_path:?}: expected a built-in scenario ({}) or an \
-             existing scenario file",
-            Scenario::builtin_names().join(", ")
-        );
-    }
-    Scenario::load(path).with_context(|| format!("rig.emulated.scenario = {name_or_path:?}"))
-}
-
 impl RigConnection {
-    /// Starts the emulator (if configured) and the transport. A missing device is not an error:
-    /// the transport keeps retrying and status reports the link as disconnected. `rx_tap`, if
-    /// given, receives every read of the transport (the recorder's).
-    pub fn start(config: &RigConfig, rx_tap: Option<RxTap>) -> anyhow::Result<Self> {
+    /// Starts the emulator (if configured, playing `scenario`, which `rig.emulated.scenario`
+    /// names) and the transport. A missing device is not an error: the transport keeps retrying
+    /// and status reports the link as disconnected, and why. `rx_tap`, if given, receives every
+    /// read of the transport (the recorder's).
+    pub fn start(
+        config: &RigConfig,
+        scenario: Option<Scenario>,
+        rx_tap: Option<RxTap>,
+    ) -> anyhow::Result<Self> {
         let calibration = match &config.calibration {
             Some(path) => Calibration::load(path)
                 .with_context(|| format!("rig.calibration = {}", path.display()))?,
@@ -73,10 +48,16 @@ impl RigConnection {
                 )
             }
             RigMode::Emulated => {
-                let scenario = load_scenario(&config.emulated.scenario)?;
+                let scenario = match scenario {
+                    Some(s) => s,
+                    None => Scenario::resolve(&config.emulated.scenario).with_context(|| {
+                        format!("rig.emulated.scenario = {:?}", config.emulated.scenario)
+                    })?,
+                };
                 let options = EmulatorOptions {
                     sample_rate_hz: config.emulated.sample_rate_hz,
-                    faults: scenario.faults.clone(),
+                    // The scenario's own `[faults]` are played by the emulator from the scenario;
+                    // passing them here as well would inject every fault twice.
                     // The emulated rig converts the scenario's SI values to raw counts with the
                     // same calibration the transport uses to convert them back.
                     calibration: calibration.clone(),

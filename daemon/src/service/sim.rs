@@ -6,7 +6,8 @@ use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
-use hydrometra_drivers::state::{LinkState, ScopePose};
+use hydrometra_drivers::state::{LinkDownReason, LinkState, ScopePose};
+use hydrometra_ipc::status::link_down_reason as reason;
 use hydrometra_ipc::{alarms, Status};
 
 use super::latency::LatencyHistogram;
@@ -61,6 +62,27 @@ pub fn inputs_from(view: &RigView, timeout: Duration) -> SimInputs {
             },
             safe_state: true,
         },
+    }
+}
+
+/// `Status::link_down_reason` and `link_down_detail` for the transport's reason.
+pub fn link_down_fields(down: Option<LinkDownReason>) -> (u32, u32) {
+    match down {
+        None => (reason::NONE, 0),
+        Some(LinkDownReason::DeviceNotFound) => (reason::DEVICE_NOT_FOUND, 0),
+        Some(LinkDownReason::UsbDeviceNotFound) => (reason::USB_DEVICE_NOT_FOUND, 0),
+        Some(LinkDownReason::PermissionDenied { gid }) => (
+            reason::PERMISSION_DENIED,
+            gid.unwrap_or(reason::DETAIL_UNKNOWN),
+        ),
+        Some(LinkDownReason::DeviceBusy) => (reason::DEVICE_BUSY, 0),
+        Some(LinkDownReason::OpenFailed) => (reason::OPEN_FAILED, 0),
+        Some(LinkDownReason::NoHandshake) => (reason::NO_HANDSHAKE, 0),
+        Some(LinkDownReason::IncompatibleVersion { version }) => {
+            (reason::INCOMPATIBLE_VERSION, u32::from(version))
+        }
+        Some(LinkDownReason::Timeout) => (reason::TIMEOUT, 0),
+        Some(LinkDownReason::Lost) => (reason::LOST, 0),
     }
 }
 
@@ -263,6 +285,7 @@ impl SimLoop {
             link_state: view.link_state as u32,
             ..Status::default()
         };
+        (s.link_down_reason, s.link_down_detail) = link_down_fields(view.down_reason);
         if let Some(latest) = view.latest {
             s.rig_device_time_us = latest.device_time_us;
             s.rig_sequence = latest.sequence;
@@ -322,6 +345,7 @@ mod tests {
             counters: LinkCounters::default(),
             latest: s.map(|x| x.0),
             last_sample_age: s.map(|x| x.1),
+            down_reason: None,
         }
     }
 

@@ -59,7 +59,7 @@ pub(super) struct Device {
     next_event: usize,
     port: Option<Plugged>,
     decoder: FrameDecoder,
-    rng: u64,
+    rng: fastrand::Rng,
     started: Instant,
     sequence: u32,
     session_last_host_frame: Option<Instant>,
@@ -90,7 +90,7 @@ impl Device {
             .max(scenario.faults.chunk_max_bytes);
         let now = Instant::now();
         Self {
-            rng: options.seed | 1,
+            rng: fastrand::Rng::with_seed(options.seed),
             scenario,
             options,
             link_path,
@@ -121,14 +121,6 @@ impl Device {
     fn stats(&self, f: impl FnOnce(&mut EmulatorStats)) {
         let mut s = self.shared.stats.lock().unwrap_or_else(|e| e.into_inner());
         f(&mut s);
-    }
-
-    fn random(&mut self) -> u64 {
-        // xorshift64*: fault positions only need to be varied and reproducible.
-        self.rng ^= self.rng >> 12;
-        self.rng ^= self.rng << 25;
-        self.rng ^= self.rng >> 27;
-        self.rng.wrapping_mul(0x2545_F491_4F6C_DD1D)
     }
 
     /// Opens a new pseudo-terminal pair and points the symlink at its slave.
@@ -162,7 +154,7 @@ impl Device {
         info!(?fault, "emulated rig: injecting fault");
         match fault {
             Fault::GarbageBurst { bytes } => {
-                let garbage: Vec<u8> = (0..bytes).map(|_| self.random() as u8).collect();
+                let garbage: Vec<u8> = (0..bytes).map(|_| self.rng.u8(..)).collect();
                 if self.write_bytes(&garbage) {
                     self.stats(|s| s.garbage_bytes += bytes as u64);
                 }
@@ -391,7 +383,7 @@ impl Device {
         };
         self.sequence = self.sequence.wrapping_add(1);
         if flip_bit {
-            let bit = (self.random() % (n as u64 * 8)) as usize;
+            let bit = self.rng.usize(..n * 8);
             raw[bit / 8] ^= 1 << (bit % 8);
         }
         let mut wire = [0u8; MAX_ENCODED_LEN];
@@ -411,7 +403,7 @@ impl Device {
         if chunk_max > 0 {
             let mut left = bytes.len();
             while left > 0 {
-                let c = (1 + (self.random() % chunk_max as u64) as usize).min(left);
+                let c = self.rng.usize(1..=chunk_max).min(left);
                 chunks.push(c);
                 left -= c;
             }

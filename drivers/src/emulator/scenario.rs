@@ -81,6 +81,8 @@ pub struct Scenario {
     pub faults: FaultPlan,
     /// The `[hydraulics]` table, verbatim, for other consumers.
     pub hydraulics: Option<toml::Table>,
+    /// Where the scenario came from (`builtin:NAME` or the file path), for error messages.
+    pub origin: String,
 }
 
 #[derive(Deserialize)]
@@ -216,6 +218,7 @@ impl Scenario {
             keyframes,
             faults,
             hydraulics: file.hydraulics,
+            origin: origin.to_string(),
         })
     }
 
@@ -236,6 +239,31 @@ impl Scenario {
             "default" => Self::from_toml_str(DEFAULT_SCENARIO, "builtin:default").ok(),
             "flaky" => Self::from_toml_str(FLAKY_SCENARIO, "builtin:flaky").ok(),
             _ => None,
+        }
+    }
+
+    /// Resolves a scenario argument (`hydrometra rig emulate --scenario`, `hydrometrad --emulated`,
+    /// `rig.emulated.scenario`, `hydrometra hydraulics run --scenario`) with one rule: a built-in
+    /// name ([`Scenario::builtin_names`]) always means the built-in scenario, whatever files exist
+    /// in the working directory; anything else is the path of a scenario file. A file named like a
+    /// built-in is loaded by writing it as a path, e.g. `./default`.
+    pub fn resolve(spec: &str) -> Result<Scenario, ScenarioError> {
+        if let Some(s) = Self::builtin(spec) {
+            return Ok(s);
+        }
+        match std::fs::read_to_string(spec) {
+            Ok(text) => Self::from_toml_str(&text, spec),
+            Err(source) if source.kind() == std::io::ErrorKind::NotFound => {
+                Err(ScenarioError::NotFound {
+                    spec: spec.to_string(),
+                    builtins: Self::builtin_names().join(", "),
+                    source,
+                })
+            }
+            Err(source) => Err(ScenarioError::Io {
+                path: spec.to_string(),
+                source,
+            }),
         }
     }
 
@@ -437,6 +465,43 @@ view_dir = [1.0, 0.0, 0.0]
             assert!(Scenario::builtin(name).is_some(), "{name}");
         }
         assert!(Scenario::builtin("nope").is_none());
+    }
+
+    #[test]
+    fn resolve_prefers_the_builtin_name_and_takes_anything_else_as_a_path() {
+        let dir = std::env::temp_dir().join(format!("hm-resolve-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // A file whose path is not a bare built-in name is loaded, even if its stem is one.
+        let file = dir.join("default");
+        std::fs::write(&file, TWO).unwrap();
+        let s = Scenario::resolve(file.to_str().unwrap()).unwrap();
+        assert_eq!(
+            (s.name.as_str(), s.origin.as_str()),
+            ("two", file.to_str().unwrap())
+        );
+        // The bare name is the built-in, whatever the working directory holds.
+        let b = Scenario::resolve("default").unwrap();
+        assert_eq!(
+            (b.name.as_str(), b.origin.as_str()),
+            ("default", "builtin:default")
+        );
+        assert_eq!(b, Scenario::builtin("default").unwrap());
+        // Neither: the message names the argument, the built-ins and the rule.
+        let missing = dir.join("nope.toml");
+        let e = Scenario::resolve(missing.to_str().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("nope.toml") && e.contains("default, flaky") && e.contains("No such file"),
+            "{e}"
+        );
+        // A file that exists but is bad is reported as a bad file, not as "not found".
+        std::fs::write(&missing, "name = 3").unwrap();
+        let e = Scenario::resolve(missing.to_str().unwrap())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("nope.toml") && !e.contains("built-in"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

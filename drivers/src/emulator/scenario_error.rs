@@ -12,6 +12,19 @@ pub enum ScenarioError {
         /// The OS error.
         source: std::io::Error,
     },
+    /// Neither a built-in name nor a readable file (see `Scenario::resolve`).
+    #[error(
+        "scenario `{spec}`: not a built-in scenario ({builtins}) and no such file ({source}); \
+         a built-in name always means the built-in, anything else is a file path"
+    )]
+    NotFound {
+        /// The argument as given.
+        spec: String,
+        /// The built-in names, comma-separated.
+        builtins: String,
+        /// The OS error of opening `spec` as a file.
+        source: std::io::Error,
+    },
     /// TOML syntax, unknown key or wrong type (the parser's message has line and column).
     #[error("scenario {origin}: {message}")]
     Parse {

@@ -19,14 +19,14 @@ import time
 
 import iceoryx2 as iox2
 
-PA_PER_MMHG = 133.322
+PA_PER_MMHG = 133.322387415  # hydrometra_units::PA_PER_MMHG
 LINK_STATES = ["disconnected", "handshaking", "connected", "stale", "incompatible"]
 EVENT_STATUS = 1  # event id: a new status was published
 EVENT_SHUTDOWN = 15  # event id: the daemon is stopping
 
 
 class Status(ctypes.Structure):
-    """hydrometra.v1.Status: 352 bytes, 8-byte aligned, native (little-endian) byte order."""
+    """hydrometra.v1.Status: 504 bytes, 8-byte aligned, native (little-endian) byte order."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -88,6 +88,8 @@ class Status(ctypes.Structure):
         ("procedure_time_s", ctypes.c_double),
         ("deficit_warning_stage", ctypes.c_uint64),
         ("hydraulic_flags", ctypes.c_uint64),
+        ("link_down_reason", ctypes.c_uint32),
+        ("link_down_detail", ctypes.c_uint32),
     ]
 
     @staticmethod
@@ -96,7 +98,7 @@ class Status(ctypes.Structure):
         return "hydrometra.v1.Status"
 
 
-assert ctypes.sizeof(Status) == 496, ctypes.sizeof(Status)
+assert ctypes.sizeof(Status) == 504, ctypes.sizeof(Status)
 
 
 def as_dict(s: Status) -> dict:

@@ -49,7 +49,7 @@ pub use params::{
     PumpParams,
 };
 pub use procedure::{CumulativeVolumes, ProcedureInfo};
-pub use record::{crc32, ProcedureRecord, RecordError, RECORD_MAGIC, RECORD_VERSION};
+pub use record::{ProcedureRecord, RecordError, RECORD_MAGIC, RECORD_VERSION};
 pub use valve::{sanitize_opening, ValveCurve};
 
 #[cfg(test)]

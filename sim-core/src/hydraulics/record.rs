@@ -72,19 +72,6 @@ pub struct ProcedureRecord {
     pub deficit: DeficitStatus,
 }
 
-/// CRC-32 (IEEE), bitwise; records are a few hundred bytes.
-pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = 0xFFFF_FFFFu32;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            let mask = (crc & 1).wrapping_neg();
-            crc = (crc >> 1) ^ (0xEDB8_8320 & mask);
-        }
-    }
-    !crc
-}
-
 impl ProcedureRecord {
     /// The file content.
     pub fn to_text(&self) -> String {
@@ -93,7 +80,7 @@ impl ProcedureRecord {
         let json = serde_json::to_string(self).unwrap_or_default();
         format!(
             "{RECORD_MAGIC} {RECORD_VERSION} crc32={:08x}\n{json}\n",
-            crc32(json.as_bytes())
+            crc32fast::hash(json.as_bytes())
         )
     }
 
@@ -129,7 +116,7 @@ impl ProcedureRecord {
                     fields[2]
                 ))
             })?;
-        let actual = crc32(json.as_bytes());
+        let actual = crc32fast::hash(json.as_bytes());
         if actual != stored {
             return Err(corrupt(format!(
                 "line 2: checksum mismatch (header says {stored:08x}, content has {actual:08x})"
@@ -261,8 +248,8 @@ mod tests {
 
     #[test]
     fn crc32_matches_the_standard_test_vector() {
-        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
-        assert_eq!(crc32(b""), 0);
+        assert_eq!(crc32fast::hash(b"123456789"), 0xCBF4_3926);
+        assert_eq!(crc32fast::hash(b""), 0);
     }
 
     #[test]
