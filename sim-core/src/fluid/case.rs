@@ -81,7 +81,7 @@ pub struct TimeSpec {
 #[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SolverSpec {
-    /// `semi_lagrangian` (default) or `maccormack`.
+    /// An [`AdvectionScheme::name`] (default: the solver's default scheme).
     pub advection: Option<String>,
     /// `multigrid_pcg` (default), `jacobi_pcg` or `gauss_seidel`.
     pub projection: Option<String>,
@@ -317,17 +317,16 @@ impl Case {
             max_cfl: s.max_cfl,
             ..Default::default()
         };
-        p.advection = match s.advection.as_deref() {
-            None | Some("semi_lagrangian") => AdvectionScheme::SemiLagrangian,
-            Some("maccormack") => AdvectionScheme::MacCormack,
-            Some(o) => {
-                return Err(invalid(
+        if let Some(name) = s.advection.as_deref() {
+            p.advection = AdvectionScheme::from_name(name).ok_or_else(|| {
+                let names: Vec<&str> = AdvectionScheme::ALL.iter().map(|a| a.name()).collect();
+                invalid(
                     "solver.advection",
-                    o,
-                    "expected semi_lagrangian or maccormack",
-                ))
-            }
-        };
+                    name,
+                    &format!("expected one of {}", names.join(", ")),
+                )
+            })?;
+        }
         p.projection = match s.projection.as_deref() {
             None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
             Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
