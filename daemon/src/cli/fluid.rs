@@ -392,8 +392,7 @@ fn bench(a: BenchArgs) -> Result<()> {
 
 fn validate(a: ValidateArgs) -> Result<()> {
     use hydrometra_sim::fluid::validation::{
-        abc_flow, ethier_steinman_with, lid_cavity_re1000, square_duct, taylor_green,
-        CavityExtrema,
+        abc_flow, ethier_steinman_with, lid_cavity_re1000, square_duct, taylor_green, CavityExtrema,
     };
     let schemes: Vec<AdvectionScheme> = if a.advection.is_empty() {
         AdvectionScheme::ALL.to_vec()

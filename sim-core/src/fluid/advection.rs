@@ -20,7 +20,6 @@ use super::sample::Layout;
 #[serde(rename_all = "snake_case")]
 pub enum AdvectionScheme {
     /// Semi-Lagrangian with an RK2 (midpoint) backtrace: unconditionally stable, dissipative.
-    #[default]
     SemiLagrangian,
     /// MacCormack on top of the RK2 semi-Lagrangian step, clamped: less dissipative, two traces.
     #[serde(rename = "maccormack")]
@@ -40,6 +39,8 @@ pub enum AdvectionScheme {
     /// advection-reflection's reflection with the intermediate projection's gradient replaced by
     /// the lagged one (the lagged pressure gradient of the predictor of Bell, Colella and Glaz
     /// 1989). Two traces and one projection, as MacCormack.
+    /// The default: the least dissipative scheme within the real-time budget (BENCHMARKS.md).
+    #[default]
     #[serde(rename = "maccormack_lagged_reflection")]
     MacCormackLaggedReflection,
 }

@@ -52,7 +52,7 @@ impl Default for FluidParams {
             density_kg_m3: 1000.0,
             viscosity_m2_s: 1.0e-6,
             body_force_m_s2: [0.0; 3],
-            advection: AdvectionScheme::SemiLagrangian,
+            advection: AdvectionScheme::default(),
             projection: ProjectionMethod::MultigridPcg,
             tolerance: 1.0e-6,
             max_iterations: 500,

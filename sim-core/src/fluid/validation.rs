@@ -373,7 +373,12 @@ pub fn lid_cavity_re1000(
     let t0 = Instant::now();
     let case = super::case::Case::parse(&lid_cavity_re1000_case(n, scheme))?;
     let report = case.run()?;
-    let line = |p: usize, c: usize| report.probes[p].samples.iter().map(move |s| s.velocity_m_s[c]);
+    let line = |p: usize, c: usize| {
+        report.probes[p]
+            .samples
+            .iter()
+            .map(move |s| s.velocity_m_s[c])
+    };
     let ext = CavityExtrema {
         u_min: line(0, 0).fold(f64::INFINITY, f64::min),
         v_max: line(1, 1).fold(f64::NEG_INFINITY, f64::max),
