@@ -1,6 +1,9 @@
-//! Semi-Lagrangian advection of the face velocities: RK2 (midpoint) backtrace, and MacCormack
+//! Semi-Lagrangian advection of the face velocities: RK2 (midpoint) backtrace, MacCormack
 //! (a backward and a forward semi-Lagrangian step, error-corrected, clamped to the values the first
-//! step interpolated from so it cannot create new extrema).
+//! step interpolated from so it cannot create new extrema), BFECC (a third, backward step from the
+//! error-compensated field, clamped alike) and monotone tricubic sampling. The reflection schemes
+//! ([`AdvectionScheme::MacCormackReflection`], [`AdvectionScheme::MacCormackLaggedReflection`])
+//! combine these passes with the projection in `solver.rs`.
 //!
 //! Layout for speed: the active faces of the three components are walked as runs of consecutive
 //! faces along x (so a face's coordinates come from the loop, not from divisions), the results go to
@@ -847,7 +850,14 @@ pub(crate) fn gather(plan: &Plan, u: [&[f32]; 3], compact: &mut [f32]) {
 }
 
 /// The trace eight faces at a time with AVX2 + FMA (runtime dispatch: the shipped binary targets
-/// generic x86-64). The faces of a run are consecutive along x, so a vector is eight faces of one
+/// generic x86-64).
+///
+/// The one SIMD style of the fluid stages in this module, `viscosity.rs` and `solver.rs`: portable
+/// loops written so LLVM vectorises them, compiled a second time inside a
+/// `#[target_feature(enable = "avx2,fma")]` wrapper that runs when [`avx2::available`] says so;
+/// raw intrinsics only where the compiler cannot vectorise (this trace: gathers, lane transposes).
+/// Not pulp (the multigrid's): explicit pulp kernels were 2-10x slower than the auto-vectorised
+/// loops (BENCHMARKS.md, "Tried and dropped"), and the wrappers compile to the same code as before. The faces of a run are consecutive along x, so a vector is eight faces of one
 /// run; the centred velocity is gathered lane-wise from the `V4` array (`4 cell + component`).
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {

@@ -471,7 +471,7 @@ impl FluidSolver {
         }
         // Compiled for AVX2 when the CPU has it: SSE2 has no i32 max, and LLVM keeps it scalar.
         #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2")]
+        #[target_feature(enable = "avx2,fma")]
         fn runs_max_avx2(u: &[f32], runs: &[[u32; 3]], m: i32, bits: impl Fn(f32) -> i32) -> i32 {
             runs_max(u, runs, m, bits)
         }
@@ -480,8 +480,8 @@ impl FluidSolver {
             let set = &self.faces[c];
             let u = &self.u[c];
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU has AVX2 (checked just above).
+            if advection::avx2::available() {
+                // SAFETY: the CPU has AVX2 and FMA (checked just above).
                 m = unsafe { runs_max_avx2(u, &set.runs, m, bits) };
             } else {
                 m = runs_max(u, &set.runs, m, bits);
