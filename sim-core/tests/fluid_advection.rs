@@ -112,11 +112,16 @@ fn cavity_at_re_1000_with_64_cells_meets_ghia_extrema_within_0_02_with_the_defau
             (f[0].to_string(), f[2].trim().parse().unwrap())
         })
         .collect();
-    let line = |name: &str| rows.iter().filter(move |r| r.0 == name).map(|r| r.1);
+    let line =
+        |name: &str| -> Vec<f64> { rows.iter().filter(|r| r.0 == name).map(|r| r.1).collect() };
     let ghia = CavityExtrema {
-        u_min: line("u_vertical").fold(f64::INFINITY, f64::min),
-        v_max: line("v_horizontal").fold(f64::NEG_INFINITY, f64::max),
-        v_min: line("v_horizontal").fold(f64::INFINITY, f64::min),
+        u_min: line("u_vertical").into_iter().fold(f64::INFINITY, f64::min),
+        v_max: line("v_horizontal")
+            .into_iter()
+            .fold(f64::NEG_INFINITY, f64::max),
+        v_min: line("v_horizontal")
+            .into_iter()
+            .fold(f64::INFINITY, f64::min),
     };
     assert_eq!(ghia.max_diff(&CavityExtrema::GHIA), 0.0);
     let (r, e) = lid_cavity_re1000(64, AdvectionScheme::default()).unwrap();

@@ -719,6 +719,15 @@ impl FluidSolver {
             *l = 0.5 * *p;
             *p = *l;
         }
+        self.pressure_to_dq(to_q);
+        if self.grid.periodic().iter().any(|&p| p) {
+            self.pressure.mg.levels[0].halo(&mut self.pressure.dq);
+        }
+        self.subtract_gradient();
+    }
+
+    /// The solver's scaled pressure `dq = to_q pressure_pa` on the fluid spans of level 0.
+    fn pressure_to_dq(&mut self, to_q: f64) {
         let pressure_pa = &self.pressure_pa;
         let ps = &mut self.pressure;
         for_spans(&ps.mg.levels[0], &mut ps.dq, |spans, dq, off| {
@@ -730,10 +739,6 @@ impl FluidSolver {
             }
             0.0
         });
-        if self.grid.periodic().iter().any(|&p| p) {
-            self.pressure.mg.levels[0].halo(&mut self.pressure.dq);
-        }
-        self.subtract_gradient();
     }
 
     /// The advection stage of a substep of `dt` s. Advection-reflection runs its first half step,
@@ -897,17 +902,7 @@ impl FluidSolver {
         stats.closed_region_mismatch_m_s = stats.closed_region_mismatch_m_s.max(mismatch);
         let to_q = dt / (rho * h);
         let periodic = self.grid.periodic().iter().any(|&p| p);
-        let pressure_pa = &self.pressure_pa;
-        let ps = &mut self.pressure;
-        for_spans(&ps.mg.levels[0], &mut ps.dq, |spans, dq, off| {
-            for &[s, e] in spans {
-                let (s, e) = (s as usize, e as usize);
-                for (q, &p) in dq[s - off..e - off].iter_mut().zip(&pressure_pa[s..e]) {
-                    *q = p * to_q;
-                }
-            }
-            0.0
-        });
+        self.pressure_to_dq(to_q);
         let method = self.params.projection;
         let tol_abs = self.params.tolerance * u_ref;
         let mut iterations_left = self.params.max_iterations;
