@@ -41,7 +41,8 @@ pub enum AdvectionScheme {
     /// Clamped MacCormack of `u - dt/2 grad p / rho`, `p` being the last projection's pressure:
     /// advection-reflection's reflection with the intermediate projection's gradient replaced by
     /// the lagged one (the lagged pressure gradient of the predictor of Bell, Colella and Glaz
-    /// 1989). Two traces and one projection, as MacCormack.
+    /// 1989). Two traces and one projection, as MacCormack. Only in substeps up to CFL
+    /// [`LAGGED_REFLECTION_MAX_CFL`](super::LAGGED_REFLECTION_MAX_CFL); above, plain MacCormack.
     /// The default: the least dissipative scheme within the real-time budget (BENCHMARKS.md).
     #[default]
     #[serde(rename = "maccormack_lagged_reflection")]

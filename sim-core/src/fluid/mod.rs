@@ -44,7 +44,7 @@ pub use advection::AdvectionScheme;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;
 pub use pressure::ProjectionMethod;
-pub use solver::{FluidParams, FluidSolver, StepStats};
+pub use solver::{FluidParams, FluidSolver, StepStats, LAGGED_REFLECTION_MAX_CFL};
 pub use viscosity::{ViscosityMode, EXPLICIT_LIMIT};
 
 /// Errors of the fluid solver.
