@@ -88,11 +88,10 @@ max_m = [0.006, 0.005, 0.004]
         assert!(r.statistics.max_speed_m_s.is_finite());
     }
     let text = format!("{base}[solver]\nadvection = \"weno\"\n");
-    let e = Case::parse(&text)
-        .unwrap()
-        .params()
-        .unwrap_err()
-        .to_string();
+    let e = match Case::parse(&text) {
+        Err(e) => e.to_string(),
+        Ok(c) => c.params().unwrap_err().to_string(),
+    };
     assert!(e.contains("solver.advection") && e.contains("weno"), "{e}");
     for scheme in AdvectionScheme::ALL {
         assert!(e.contains(scheme.name()), "{e}");
