@@ -35,6 +35,15 @@ fn steady_steps_do_not_allocate() {
         (AdvectionScheme::MacCormack, 1e-3, usize::MAX),
         (AdvectionScheme::SemiLagrangian, 1e-6, 12),
         (AdvectionScheme::MacCormack, 1e-3, 12),
+        (
+            AdvectionScheme::MacCormackLaggedReflection,
+            1e-3,
+            usize::MAX,
+        ),
+        (AdvectionScheme::MacCormackLaggedReflection, 1e-6, 12),
+        (AdvectionScheme::Bfecc, 1e-6, 12),
+        (AdvectionScheme::MonotoneCubic, 1e-6, 12),
+        (AdvectionScheme::MacCormackReflection, 1e-3, 12),
     ] {
         let grid = ellipsoid_cavity(0.0018, 1.0).unwrap();
         let params = FluidParams {

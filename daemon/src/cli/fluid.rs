@@ -40,6 +40,12 @@ pub struct ValidateArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Advection schemes of the Taylor-Green, ABC and cavity rows (comma separated); default: all.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub advection: Vec<AdvectionArg>,
+    /// Only the advection rows (Taylor-Green, ABC, cavity), not the duct and Ethier-Steinman.
+    #[arg(long)]
+    pub advection_only: bool,
 }
 
 /// Arguments of `fluid run`.
@@ -71,9 +77,9 @@ pub struct BenchArgs {
     /// Step rate (Hz) instead of --dt-s: dt = 1 / HZ.
     #[arg(long)]
     pub hz: Option<f64>,
-    /// Advection scheme of our solver (and of the baseline).
-    #[arg(long, value_enum, default_value_t = AdvectionArg::SemiLagrangian)]
-    pub advection: AdvectionArg,
+    /// Advection scheme of our solver (and of the baseline); default: the solver's default.
+    #[arg(long, value_enum)]
+    pub advection: Option<AdvectionArg>,
     /// Skip the Gauss-Seidel baselines (only our solver's rows).
     #[arg(long)]
     pub no_baseline: bool,
@@ -138,13 +144,21 @@ pub enum CavityArg {
     Ellipsoid,
 }
 
-/// Advection scheme on the command line.
+/// Advection scheme on the command line (docs/fluid-cases.md, `[solver] advection`).
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum AdvectionArg {
     /// RK2 semi-Lagrangian.
     SemiLagrangian,
     /// MacCormack (clamped) on top of it.
     Maccormack,
+    /// BFECC (clamped).
+    Bfecc,
+    /// Semi-Lagrangian with monotone (clamped) tricubic interpolation.
+    MonotoneCubic,
+    /// Advection-reflection with clamped MacCormack half steps.
+    MaccormackReflection,
+    /// Clamped MacCormack with the lagged-pressure reflection.
+    MaccormackLaggedReflection,
 }
 
 impl From<AdvectionArg> for AdvectionScheme {
@@ -152,8 +166,17 @@ impl From<AdvectionArg> for AdvectionScheme {
         match a {
             AdvectionArg::SemiLagrangian => AdvectionScheme::SemiLagrangian,
             AdvectionArg::Maccormack => AdvectionScheme::MacCormack,
+            AdvectionArg::Bfecc => AdvectionScheme::Bfecc,
+            AdvectionArg::MonotoneCubic => AdvectionScheme::MonotoneCubic,
+            AdvectionArg::MaccormackReflection => AdvectionScheme::MacCormackReflection,
+            AdvectionArg::MaccormackLaggedReflection => AdvectionScheme::MacCormackLaggedReflection,
         }
     }
+}
+
+/// The scheme of `--advection`, or the solver's default.
+fn scheme_or_default(a: Option<AdvectionArg>) -> AdvectionScheme {
+    a.map_or_else(|| FluidParams::default().advection, AdvectionScheme::from)
 }
 
 /// Arguments of `fluid soak`.
@@ -165,9 +188,12 @@ pub struct SoakArgs {
     /// Random seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
-    /// Use MacCormack advection instead of semi-Lagrangian.
-    #[arg(long)]
+    /// Use MacCormack advection instead of semi-Lagrangian (same as `--advection maccormack`).
+    #[arg(long, conflicts_with = "advection")]
     pub maccormack: bool,
+    /// Advection scheme; default: the solver's default.
+    #[arg(long, value_enum)]
+    pub advection: Option<AdvectionArg>,
 }
 
 /// Runs a `fluid` subcommand.
@@ -290,7 +316,7 @@ fn bench(a: BenchArgs) -> Result<()> {
             "--voxels-mm: {mm} is not a voxel size > 0 (mm)"
         );
     }
-    let advection = AdvectionScheme::from(a.advection);
+    let advection = scheme_or_default(a.advection);
     let cavity = match a.cavity {
         CavityArg::Uterine => Cavity::Uterine,
         CavityArg::Ellipsoid => Cavity::Ellipsoid,
@@ -467,25 +493,62 @@ fn merge(runs: &[BenchRow]) -> BenchRow {
 }
 
 fn validate(a: ValidateArgs) -> Result<()> {
-    use hydrometra_sim::harness::validation::{ethier_steinman, square_duct, taylor_green};
+    use hydrometra_sim::harness::validation::{
+        abc_flow, ethier_steinman_with, lid_cavity_re1000, square_duct, taylor_green, CavityExtrema,
+    };
+    let schemes: Vec<AdvectionScheme> = if a.advection.is_empty() {
+        AdvectionScheme::ALL.to_vec()
+    } else {
+        a.advection.iter().map(|&s| s.into()).collect()
+    };
     let mut rows = Vec::new();
     let duct_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
-    for &n in duct_n {
-        rows.push(square_duct(n, 2.0)?.0);
+    if !a.advection_only {
+        for &n in duct_n {
+            rows.push(square_duct(n, 2.0)?.0);
+        }
     }
     let tg_n: &[usize] = if a.fine {
         &[16, 32, 64, 128]
     } else {
         &[16, 32, 64]
     };
-    for scheme in [AdvectionScheme::SemiLagrangian, AdvectionScheme::MacCormack] {
+    let abc_n: &[usize] = if a.fine { &[16, 32, 64] } else { &[16, 32] };
+    let cavity_n: &[usize] = if a.fine { &[32, 64, 128] } else { &[32, 64] };
+    let es_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
+    let mut extrema = Vec::new();
+    for &scheme in &schemes {
         for &n in tg_n {
             rows.push(taylor_green(n, scheme)?);
         }
+        for &n in abc_n {
+            rows.push(abc_flow(n, scheme)?);
+        }
+        for &n in cavity_n {
+            let (r, e) = lid_cavity_re1000(n, scheme)?;
+            extrema.push((r.case.clone(), n, e));
+            rows.push(r);
+        }
+        if !a.advection_only {
+            for &n in es_n {
+                rows.push(ethier_steinman_with(n, scheme)?);
+            }
+        }
     }
-    let es_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
-    for &n in es_n {
-        rows.push(ethier_steinman(n)?);
+    if !a.json && !extrema.is_empty() {
+        println!("| cavity Re 1000 | cells | u_min | v_max | v_min | max diff Ghia | max diff Botella-Peyret |");
+        println!("|---|---|---|---|---|---|---|");
+        for (case, n, e) in &extrema {
+            println!(
+                "| {case} | {n} | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+                e.u_min,
+                e.v_max,
+                e.v_min,
+                e.max_diff(&CavityExtrema::GHIA),
+                e.max_diff(&CavityExtrema::BOTELLA_PEYRET)
+            );
+        }
+        println!();
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
@@ -512,7 +575,7 @@ fn soak(a: SoakArgs) -> Result<()> {
     let scheme = if a.maccormack {
         AdvectionScheme::MacCormack
     } else {
-        AdvectionScheme::SemiLagrangian
+        scheme_or_default(a.advection)
     };
     let r = run_soak(a.steps, a.seed, scheme)?;
     println!("{}", serde_json::to_string_pretty(&r)?);

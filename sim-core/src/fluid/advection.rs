@@ -1,6 +1,9 @@
-//! Semi-Lagrangian advection of the face velocities: RK2 (midpoint) backtrace, and MacCormack
+//! Semi-Lagrangian advection of the face velocities: RK2 (midpoint) backtrace, MacCormack
 //! (a backward and a forward semi-Lagrangian step, error-corrected, clamped to the values the first
-//! step interpolated from so it cannot create new extrema).
+//! step interpolated from so it cannot create new extrema), BFECC (a third, backward step from the
+//! error-compensated field, clamped alike) and monotone tricubic sampling. The reflection schemes
+//! ([`AdvectionScheme::MacCormackReflection`], [`AdvectionScheme::MacCormackLaggedReflection`])
+//! combine these passes with the projection in `solver.rs`.
 //!
 //! Layout for speed: the active faces of the three components are walked as runs of consecutive
 //! faces along x (so a face's coordinates come from the loop, not from divisions), the results go to
@@ -12,14 +15,67 @@ use serde::{Deserialize, Serialize};
 use super::sample::Layout;
 
 /// Advection scheme.
+///
+/// Every scheme traces the RK2 (midpoint) characteristic through the cell-centred velocity, and
+/// every scheme above first order clamps its result to the extrema of the eight samples the
+/// trilinear step read (so it creates no new extrema and stays unconditionally stable).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "snake_case")]
 pub enum AdvectionScheme {
     /// Semi-Lagrangian with an RK2 (midpoint) backtrace: unconditionally stable, dissipative.
-    #[default]
     SemiLagrangian,
-    /// MacCormack on top of the RK2 semi-Lagrangian step, clamped: less dissipative, about 2x cost.
+    /// MacCormack on top of the RK2 semi-Lagrangian step, clamped: less dissipative, two traces.
+    #[serde(rename = "maccormack")]
     MacCormack,
+    /// Back and forth error compensation and correction (Kim, Liu, Llamas, Rossignac 2005), clamped:
+    /// three traces (backward, forward, backward from the corrected field).
+    Bfecc,
+    /// Semi-Lagrangian with tricubic (Catmull-Rom) interpolation at the foot point, clamped to the
+    /// trilinear stencil's extrema (monotone): one trace, 64 samples per face.
+    MonotoneCubic,
+    /// Advection-reflection (Zehnder, Narain, Thomaszewski 2018) with clamped MacCormack half steps:
+    /// advect dt/2, project, reflect (`2 P u - u`), advect dt/2 through the projected velocity,
+    /// project. Four traces and a second projection per step.
+    #[serde(rename = "maccormack_reflection")]
+    MacCormackReflection,
+    /// Clamped MacCormack of `u - dt/2 grad p / rho`, `p` being the last projection's pressure:
+    /// advection-reflection's reflection with the intermediate projection's gradient replaced by
+    /// the lagged one (the lagged pressure gradient of the predictor of Bell, Colella and Glaz
+    /// 1989). Two traces and one projection, as MacCormack. Only in substeps up to CFL
+    /// [`LAGGED_REFLECTION_MAX_CFL`](super::LAGGED_REFLECTION_MAX_CFL); above, plain MacCormack.
+    /// The default: the least dissipative scheme within the real-time budget (BENCHMARKS.md).
+    #[default]
+    #[serde(rename = "maccormack_lagged_reflection")]
+    MacCormackLaggedReflection,
+}
+
+impl AdvectionScheme {
+    /// Every scheme, in order of cost.
+    pub const ALL: [AdvectionScheme; 6] = [
+        Self::SemiLagrangian,
+        Self::MacCormack,
+        Self::MacCormackLaggedReflection,
+        Self::Bfecc,
+        Self::MonotoneCubic,
+        Self::MacCormackReflection,
+    ];
+
+    /// The name used in case files and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::SemiLagrangian => "semi_lagrangian",
+            Self::MacCormack => "maccormack",
+            Self::Bfecc => "bfecc",
+            Self::MonotoneCubic => "monotone_cubic",
+            Self::MacCormackReflection => "maccormack_reflection",
+            Self::MacCormackLaggedReflection => "maccormack_lagged_reflection",
+        }
+    }
+
+    /// The scheme called `name` ([`AdvectionScheme::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|s| s.name() == name)
+    }
 }
 
 /// Faces per chunk of the trace's split loops.
@@ -169,6 +225,45 @@ impl Axis {
             let o0 = i0.wrapping_mul(self.stride);
             (o0, o0.wrapping_add(self.step), s - i0 as f32)
         }
+    }
+}
+
+impl Axis {
+    /// Offsets of the four samples around `p` (the two of [`Axis::locate`] and one more on each
+    /// side, wrapped on a periodic axis, repeated at the ends of a clamped one) and their
+    /// Catmull-Rom weights.
+    #[inline(always)]
+    fn locate_cubic(&self, p: f32) -> ([u32; 4], [f32; 4]) {
+        let s = p - self.shift;
+        let n = self.n;
+        let (i0, t) = if self.periodic {
+            let fl = s.floor();
+            // `as` saturates (NaN -> 0), and rem_euclid keeps the index in [0, n).
+            ((fl as i32).rem_euclid(n), s - fl)
+        } else {
+            let s = s.max(0.0).min(self.last);
+            let i0 = (s as u32).min(self.top) as i32;
+            (i0, s - i0 as f32)
+        };
+        let idx = |d: i32| -> u32 {
+            let i = i0 + d;
+            let i = if self.periodic {
+                i.rem_euclid(n)
+            } else {
+                i.clamp(0, n - 1)
+            };
+            (i as u32).wrapping_mul(self.stride)
+        };
+        let (t2, t3) = (t * t, t * t * t);
+        (
+            [idx(-1), idx(0), idx(1), idx(2)],
+            [
+                0.5 * (-t3 + 2.0 * t2 - t),
+                0.5 * (3.0 * t3 - 5.0 * t2 + 2.0),
+                0.5 * (-3.0 * t3 + 4.0 * t2 + t),
+                0.5 * (t3 - t2),
+            ],
+        )
     }
 }
 
@@ -359,6 +454,40 @@ impl Geometry {
         (c0 + tz * (c1 - c0), lo, hi)
     }
 
+    /// Component `c` of `field` at `p` by tricubic (Catmull-Rom) interpolation, clamped to the min
+    /// and max of the eight samples around `p` (the trilinear stencil), which are also returned.
+    /// Near a clamped boundary the outer samples repeat the outermost one; NaN positions land on
+    /// sample 0 as in [`Axis::locate`].
+    #[inline(always)]
+    fn sample_cubic(&self, c: usize, field: &[f32], p: V4) -> (f32, f32, f32) {
+        let p = v4::lanes(p);
+        let g = &self.faces[c];
+        let mut off = [[0u32; 4]; 3];
+        let mut w = [[0f32; 4]; 3];
+        for a in 0..3 {
+            (off[a], w[a]) = g.ax[a].locate_cubic(p[a]);
+        }
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        let mut acc_z = 0.0;
+        for (kz, &oz) in off[2].iter().enumerate() {
+            let mut acc_y = 0.0;
+            for (ky, &oy) in off[1].iter().enumerate() {
+                let r = oz.wrapping_add(oy);
+                let s: [f32; 4] =
+                    std::array::from_fn(|kx| field[r.wrapping_add(off[0][kx]) as usize]);
+                if (1..3).contains(&kz) && (1..3).contains(&ky) {
+                    lo = lo.min(s[1]).min(s[2]);
+                    hi = hi.max(s[1]).max(s[2]);
+                }
+                let wx = &w[0];
+                acc_y += w[1][ky] * (wx[0] * s[0] + wx[1] * s[1] + wx[2] * s[2] + wx[3] * s[3]);
+            }
+            acc_z += w[2][kz] * acc_y;
+        }
+        // max/min (not clamp): a NaN lands on `lo`.
+        (acc_z.max(lo).min(hi), lo, hi)
+    }
+
     /// Centred-grid indices of the two cells beside face `f` of component `c` (clamped at a
     /// non-periodic boundary, wrapped at a periodic one).
     #[inline(always)]
@@ -417,9 +546,17 @@ impl Pass<'_> {
 
     /// [`Pass::block`] one face at a time (the fallback, and the reference of the AVX2 kernel).
     #[inline(always)]
-    fn block_scalar<const BOUNDS: bool>(
+    fn block_scalar<const BOUNDS: bool>(&self, b: usize, each: impl FnMut(usize, (f32, f32, f32))) {
+        let geo = self.geo;
+        self.block_scalar_with(b, |c, src, p| geo.sample::<BOUNDS>(c, src, p), each)
+    }
+
+    /// [`Pass::block_scalar`] with the foot-point sampler `sample(component, field, point)`.
+    #[inline(always)]
+    fn block_scalar_with(
         &self,
         b: usize,
+        sample: impl Fn(usize, &[f32], V4) -> (f32, f32, f32),
         mut each: impl FnMut(usize, (f32, f32, f32)),
     ) {
         let plan = self.plan;
@@ -460,7 +597,7 @@ impl Pass<'_> {
                         x = v4::add(x, step);
                     }
                     for (i, p) in pts[..n].iter().enumerate() {
-                        each(o + start + i, geo.sample::<BOUNDS>(c, src, *p));
+                        each(o + start + i, sample(c, src, *p));
                     }
                     x0 = x;
                     start += n;
@@ -581,6 +718,71 @@ impl Pass<'_> {
     }
 }
 
+/// Runs `task(block, out block, input blocks)` over the blocks of the concatenated compact array
+/// `out` (with the matching blocks of `ins`), in two halves on two threads if `parallel`.
+fn for_blocks<const N: usize>(
+    out: &mut [f32],
+    ins: [&[f32]; N],
+    parallel: bool,
+    task: impl Fn(usize, &mut [f32], [&[f32]; N]) + Sync,
+) {
+    let run = |first: usize, out: &mut [f32], ins: [&[f32]; N]| {
+        for (b, os) in out.chunks_mut(BLOCK).enumerate() {
+            let s = b * BLOCK;
+            task(first + b, os, ins.map(|i| &i[s..s + os.len()]));
+        }
+    };
+    match split_block(out.len(), parallel) {
+        Some(mid) => {
+            let at = mid * BLOCK;
+            let (a, b) = out.split_at_mut(at);
+            let (ia, ib) = (ins.map(|i| &i[..at]), ins.map(|i| &i[at..]));
+            crate::fork_join::join(|| run(0, a, ia), || run(mid, b, ib));
+        }
+        None => run(0, out, ins),
+    }
+}
+
+impl Pass<'_> {
+    /// BFECC's error estimate (this pass traces forward and samples the backward-step field in
+    /// `src`): `w` holds the field before the step on entry and `w + (w - forward) / 2` on return
+    /// (unchanged where that is not finite).
+    pub fn bfecc_source(&self, w: &mut [f32], parallel: bool) {
+        for_blocks(w, [], parallel, |b, ws, []| {
+            self.block::<false>(b, |n, (fwd, _, _)| {
+                let v = ws[n] + 0.5 * (ws[n] - fwd);
+                if v.is_finite() {
+                    ws[n] = v;
+                }
+            })
+        });
+    }
+
+    /// Semi-Lagrangian values clamped to `[lo, hi]` into `out` (unchanged where not finite).
+    pub fn clamped(&self, out: &mut [f32], lo: &[f32], hi: &[f32], parallel: bool) {
+        for_blocks(out, [lo, hi], parallel, |b, os, [ls, hs]| {
+            self.block::<false>(b, |n, (v, _, _)| {
+                if v.is_finite() {
+                    // max/min (not clamp): no panic on inverted or NaN bounds.
+                    os[n] = v.max(ls[n]).min(hs[n]);
+                }
+            })
+        });
+    }
+
+    /// Monotone tricubic semi-Lagrangian values ([`Geometry::sample_cubic`]) into `out`.
+    pub fn cubic(&self, out: &mut [f32], parallel: bool) {
+        let geo = self.geo;
+        for_blocks(out, [], parallel, |b, os, []| {
+            self.block_scalar_with(
+                b,
+                |c, src, p| geo.sample_cubic(c, src, p),
+                |n, (v, _, _)| os[n] = v,
+            )
+        });
+    }
+}
+
 /// Averages the face velocities to the (padded) cell centres, row by row (z-slabs in parallel if
 /// `parallel`).
 pub(crate) fn update_centred(
@@ -652,7 +854,14 @@ pub(crate) fn gather(plan: &Plan, u: [&[f32]; 3], compact: &mut [f32]) {
 }
 
 /// The trace eight faces at a time with AVX2 + FMA (runtime dispatch: the shipped binary targets
-/// generic x86-64). The faces of a run are consecutive along x, so a vector is eight faces of one
+/// generic x86-64).
+///
+/// The one SIMD style of the fluid stages in this module, `viscosity.rs` and `solver.rs`: portable
+/// loops written so LLVM vectorises them, compiled a second time inside a
+/// `#[target_feature(enable = "avx2,fma")]` wrapper that runs when [`avx2::available`] says so;
+/// raw intrinsics only where the compiler cannot vectorise (this trace: gathers, lane transposes).
+/// Not pulp (the multigrid's): explicit pulp kernels were 2-10x slower than the auto-vectorised
+/// loops (BENCHMARKS.md, "Tried and dropped"), and the wrappers compile to the same code as before. The faces of a run are consecutive along x, so a vector is eight faces of one
 /// run; the centred velocity is gathered lane-wise from the `V4` array (`4 cell + component`).
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod avx2 {

@@ -81,7 +81,7 @@ pub struct TimeSpec {
 #[derive(Clone, Debug, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct SolverSpec {
-    /// `semi_lagrangian` (default) or `maccormack`.
+    /// An [`AdvectionScheme::name`] (default: the solver's default scheme).
     pub advection: Option<String>,
     /// `multigrid_pcg` (default), `jacobi_pcg`, `gauss_seidel` (cold, lexicographic, one thread) or
     /// `red_black_gauss_seidel` (warm-started, on the multigrid's dense kernels).
@@ -318,33 +318,33 @@ impl Case {
             max_cfl: s.max_cfl,
             ..Default::default()
         };
-        p.advection = match s.advection.as_deref() {
-            None | Some("semi_lagrangian") => AdvectionScheme::SemiLagrangian,
-            Some("maccormack") => AdvectionScheme::MacCormack,
+        if let Some(name) = s.advection.as_deref() {
+            p.advection = AdvectionScheme::from_name(name).ok_or_else(|| {
+                let names: Vec<&str> = AdvectionScheme::ALL.iter().map(|a| a.name()).collect();
+                invalid(
+                    "solver.advection",
+                    name,
+                    &format!("expected one of {}", names.join(", ")),
+                )
+            })?;
+        }
+        p.projection = match s.projection.as_deref() {
+            None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
+            Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
+            Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
+                sweeps: s.sweeps.unwrap_or(20),
+            },
+            Some("red_black_gauss_seidel") => ProjectionMethod::RedBlackGaussSeidel {
+                sweeps: s.sweeps.unwrap_or(20),
+            },
             Some(o) => {
                 return Err(invalid(
-                    "solver.advection",
-                    o,
-                    "expected semi_lagrangian or maccormack",
-                ))
-            }
-        };
-        p.projection =
-            match s.projection.as_deref() {
-                None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
-                Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
-                Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
-                    sweeps: s.sweeps.unwrap_or(20),
-                },
-                Some("red_black_gauss_seidel") => ProjectionMethod::RedBlackGaussSeidel {
-                    sweeps: s.sweeps.unwrap_or(20),
-                },
-                Some(o) => return Err(invalid(
                     "solver.projection",
                     o,
                     "expected multigrid_pcg, jacobi_pcg, gauss_seidel or red_black_gauss_seidel",
-                )),
-            };
+                ))
+            }
+        };
         if s.sweeps.is_some() && !p.projection.is_fixed_sweeps() {
             return Err(invalid(
                 "solver.sweeps",

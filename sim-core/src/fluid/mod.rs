@@ -1,6 +1,7 @@
 //! The fluid solver: incompressible Navier-Stokes on a MAC (staggered) grid, stable-fluids style.
 //!
-//! Each step: semi-Lagrangian advection (RK2 backtrace, or clamped MacCormack), body forces,
+//! Each step: advection (RK2 backtrace; by default clamped MacCormack with the lagged-pressure
+//! reflection, see [`AdvectionScheme`] and docs/fluid-cases.md for the others), body forces,
 //! viscosity (explicit where stable, implicit otherwise), and a pressure projection by
 //! multigrid-preconditioned CG to a divergence tolerance, warm-started from the last pressure. Cells are
 //! labelled fluid, solid (no-slip wall), velocity (a moving solid: inflow/outflow port or moving wall)
@@ -40,7 +41,7 @@ pub use advection::AdvectionScheme;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;
 pub use pressure::ProjectionMethod;
-pub use solver::{FluidParams, FluidSolver, StepStats};
+pub use solver::{FluidParams, FluidSolver, StepStats, LAGGED_REFLECTION_MAX_CFL};
 pub use viscosity::{ViscosityMode, EXPLICIT_LIMIT};
 
 /// Errors of the fluid solver.

@@ -120,8 +120,7 @@ pub(crate) fn explicit(
     };
     let run = |r: &[[u32; 3]], base: usize, out: &mut [f32]| {
         #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
-        {
+        if super::advection::avx2::available() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             unsafe { runs_avx2(st, r, base, out) };
             return;

@@ -127,7 +127,7 @@ pub fn taylor_green(n: usize, scheme: AdvectionScheme) -> Result<ValidationResul
     }
     let nu_eff = -(s.kinetic_energy_j() / e0).ln() / (4.0 * k * k * s.time_s());
     Ok(ValidationResult {
-        case: format!("Taylor-Green 2D ({scheme:?})"),
+        case: format!("Taylor-Green 2D ({})", scheme.name()),
         cells_across: n,
         error: nu_eff / nu,
         metric: "nu_eff / nu".into(),
@@ -153,6 +153,14 @@ pub fn ethier_steinman_velocity(x: [f64; 3], t: f64, nu: f64) -> [f64; 3] {
 /// velocity prescribed on every face (a layer of `Velocity` cells). Error: the largest face-velocity
 /// error over the interior relative to the largest exact speed.
 pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
+    ethier_steinman_with(n, FluidParams::default().advection)
+}
+
+/// [`ethier_steinman`] with the advection `scheme`.
+pub fn ethier_steinman_with(
+    n: usize,
+    scheme: AdvectionScheme,
+) -> Result<ValidationResult, FluidError> {
     let t0 = Instant::now();
     let nu = 1.0;
     let h = 2.0 / n as f64;
@@ -172,6 +180,7 @@ pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
         density_kg_m3: 1.0,
         viscosity_m2_s: nu,
         tolerance: 1e-7,
+        advection: scheme,
         ..Default::default()
     };
     let mut s = FluidSolver::new(grid, params)?;
@@ -216,7 +225,7 @@ pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
         }
     }
     Ok(ValidationResult {
-        case: "Ethier-Steinman 3D".into(),
+        case: format!("Ethier-Steinman 3D ({})", scheme.name()),
         cells_across: n,
         error: err / umax,
         metric: "max |u - u_exact| / max |u_exact|".into(),
@@ -224,4 +233,168 @@ pub fn ethier_steinman(n: usize) -> Result<ValidationResult, FluidError> {
         wall_s: t0.elapsed().as_secs_f64(),
         all_converged: ok,
     })
+}
+
+/// ABC (Arnold-Beltrami-Childress) flow, A = B = C = 1, on an `n^3` periodic unit box (k = 2 pi,
+/// nu = 0.01: Re = 100 on the box and the coefficient) to t = 0.5 at CFL 0.5. A Beltrami field
+/// (`curl u = k u`): the advection term is a pure gradient, so the exact solution decays as
+/// `exp(-nu k^2 t)` and the kinetic energy as `exp(-2 nu k^2 t)`; the error figure is `nu_eff / nu`
+/// from the energy decay (1 is exact). Unlike Taylor-Green, every component varies along every
+/// axis: a 3D test of the trace and the interpolation.
+pub fn abc_flow(n: usize, scheme: AdvectionScheme) -> Result<ValidationResult, FluidError> {
+    let t0 = Instant::now();
+    let (l, nu) = (1.0, 0.01);
+    let h = l / n as f64;
+    let k = 2.0 * PI / l;
+    let grid = FluidGrid::new([n; 3], h, [0.0; 3], [true; 3])?;
+    let params = FluidParams {
+        density_kg_m3: 1.0,
+        viscosity_m2_s: nu,
+        advection: scheme,
+        ..Default::default()
+    };
+    let mut s = FluidSolver::new(grid, params)?;
+    s.set_velocity_field(|c, x| {
+        let [x, y, z] = x.map(|v| k * v);
+        match c {
+            0 => z.sin() + y.cos(),
+            1 => x.sin() + z.cos(),
+            _ => y.sin() + x.cos(),
+        }
+    });
+    // The staggered samples of the Beltrami field are not exactly discretely divergence-free.
+    let mut ok = s.project_now(1.0).projection_converged;
+    let e0 = s.kinetic_energy_j();
+    let u_max = s.max_speed_m_s();
+    let steps = (0.5 / (0.5 * h / u_max)).ceil() as usize;
+    let dt = 0.5 / steps as f64;
+    for _ in 0..steps {
+        let st = s.step(dt)?;
+        ok &= st.projection_converged && st.max_div_rel <= 1e-5;
+    }
+    let nu_eff = -(s.kinetic_energy_j() / e0).ln() / (2.0 * k * k * s.time_s());
+    Ok(ValidationResult {
+        case: format!("ABC flow 3D ({})", scheme.name()),
+        cells_across: n,
+        error: nu_eff / nu,
+        metric: "nu_eff / nu".into(),
+        steps,
+        wall_s: t0.elapsed().as_secs_f64(),
+        all_converged: ok,
+    })
+}
+
+/// Centreline extrema of the lid-driven cavity at Re = 1000 (lid speed 1): the smallest u on the
+/// vertical centreline, the largest and smallest v on the horizontal one.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct CavityExtrema {
+    /// min u on x = 1/2.
+    pub u_min: f64,
+    /// max v on y = 1/2.
+    pub v_max: f64,
+    /// min v on y = 1/2.
+    pub v_min: f64,
+}
+
+impl CavityExtrema {
+    /// Ghia, Ghia & Shin (1982), Re = 1000, the extrema of their tables I and II (129 x 129
+    /// multigrid; sim-core/tests/data/cavity_re1000_reference.csv).
+    pub const GHIA: CavityExtrema = CavityExtrema {
+        u_min: -0.38289,
+        v_max: 0.37095,
+        v_min: -0.51550,
+    };
+    /// Botella & Peyret (1998), Re = 1000, Chebyshev collocation N = 160 (the finer reference).
+    pub const BOTELLA_PEYRET: CavityExtrema = CavityExtrema {
+        u_min: -0.3885698,
+        v_max: 0.3769447,
+        v_min: -0.5270771,
+    };
+
+    /// The largest difference of the three extrema.
+    pub fn max_diff(&self, other: &CavityExtrema) -> f64 {
+        (self.u_min - other.u_min)
+            .abs()
+            .max((self.v_max - other.v_max).abs())
+            .max((self.v_min - other.v_min).abs())
+    }
+}
+
+/// The case file of the 2D lid-driven cavity at Re = 1000 with `n` cells across (unit square, lid
+/// at 1 m/s as a row of velocity cells above y = 1, one cell thick and periodic in z; CFL 1 to a
+/// steady state or t = 100 s; centreline probes of 8 n + 1 points).
+pub fn lid_cavity_re1000_case(n: usize, scheme: AdvectionScheme) -> String {
+    let h = 1.0 / n as f64;
+    let pts = 8 * n + 1;
+    let zc = 0.5 * h;
+    format!(
+        r#"[grid]
+cells = [{n}, {ny}, 1]
+spacing_m = {h}
+periodic = [false, false, true]
+[fluid]
+density_kg_m3 = 1.0
+viscosity_m2_s = 0.001
+[time]
+cfl = 1.0
+end_s = 100.0
+steady_tolerance = 1e-4
+[solver]
+advection = "{name}"
+[[region]]
+label = "velocity"
+min_m = [0.0, 1.0, 0.0]
+max_m = [1.0, {top}, {h}]
+velocity_m_s = [1.0, 0.0, 0.0]
+[[probe]]
+name = "vertical_centreline"
+from_m = [0.5, 0.0, {zc}]
+to_m = [0.5, 1.0, {zc}]
+points = {pts}
+[[probe]]
+name = "horizontal_centreline"
+from_m = [0.0, 0.5, {zc}]
+to_m = [1.0, 0.5, {zc}]
+points = {pts}
+"#,
+        ny = n + 1,
+        name = scheme.name(),
+        top = 1.0 + h,
+    )
+}
+
+/// Runs [`lid_cavity_re1000_case`]: the centreline extrema, and a result whose error is their
+/// largest difference from Ghia et al. (`all_converged`: every projection converged and the
+/// steady state was reached).
+pub fn lid_cavity_re1000(
+    n: usize,
+    scheme: AdvectionScheme,
+) -> Result<(ValidationResult, CavityExtrema), crate::fluid::case::CaseError> {
+    let t0 = Instant::now();
+    let case = crate::fluid::case::Case::parse(&lid_cavity_re1000_case(n, scheme))?;
+    let report = case.run()?;
+    let line = |p: usize, c: usize| {
+        report.probes[p]
+            .samples
+            .iter()
+            .map(move |s| s.velocity_m_s[c])
+    };
+    let ext = CavityExtrema {
+        u_min: line(0, 0).fold(f64::INFINITY, f64::min),
+        v_max: line(1, 1).fold(f64::NEG_INFINITY, f64::max),
+        v_min: line(1, 1).fold(f64::INFINITY, f64::min),
+    };
+    let st = &report.statistics;
+    Ok((
+        ValidationResult {
+            case: format!("cavity Re 1000 ({})", scheme.name()),
+            cells_across: n,
+            error: ext.max_diff(&CavityExtrema::GHIA),
+            metric: "max centreline-extremum difference from Ghia (lid speed 1)".into(),
+            steps: st.steps,
+            wall_s: t0.elapsed().as_secs_f64(),
+            all_converged: st.unconverged_projections == 0 && st.steady_reached,
+        },
+        ext,
+    ))
 }
