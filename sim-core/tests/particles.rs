@@ -3,8 +3,8 @@
 use hydrometra_sim::fluid::{CellLabel, FluidGrid, FluidParams, FluidSolver};
 use hydrometra_sim::scene::clarity::{ClarityTracker, ViewSpec};
 use hydrometra_sim::scene::particles::{
-    kinds_from_labels, terminal_slip, time_to_traverse, ParticleClass, ParticleKind,
-    ParticleSpec, ParticleSystem, GRAVITY_M_S2,
+    kinds_from_labels, terminal_slip, time_to_traverse, ParticleClass, ParticleKind, ParticleSpec,
+    ParticleSystem, GRAVITY_M_S2,
 };
 use hydrometra_sim::scene::vortices::{Vortex, VortexField, VortexSpec, CUTOFF_CORES};
 use hydrometra_sim::scene::{SceneDesc, VoxelKind};
@@ -59,14 +59,19 @@ fn rankine_profile_inside_and_outside_the_core_matches_the_closed_form() {
         } else {
             gamma / (2.0 * PI * r)
         };
-        assert!((v.tangential_speed_m_s(r) - exact).abs() <= 1e-12 * exact, "r = {r}");
+        assert!(
+            (v.tangential_speed_m_s(r) - exact).abs() <= 1e-12 * exact,
+            "r = {r}"
+        );
         // In the centre plane and off it inside the flat part of the axial window.
         for s in [0.0, 0.9 * r_core, -r_core] {
-            let p: [f64; 3] =
-                std::array::from_fn(|a| v.centre_m[a] + r * e1[a] + s * v.axis[a]);
+            let p: [f64; 3] = std::array::from_fn(|a| v.centre_m[a] + r * e1[a] + s * v.axis[a]);
             let u = v.velocity_m_s(p);
             for a in 0..3 {
-                assert!((u[a] - exact * et[a]).abs() <= 1e-12 * exact + 1e-15, "r {r} s {s}");
+                assert!(
+                    (u[a] - exact * et[a]).abs() <= 1e-12 * exact + 1e-15,
+                    "r {r} s {s}"
+                );
             }
         }
     }
@@ -74,7 +79,8 @@ fn rankine_profile_inside_and_outside_the_core_matches_the_closed_form() {
     let k = gamma / (2.0 * PI * r_core);
     assert!((v.tangential_speed_m_s(r_core * (1.0 - 1e-9)) - k).abs() < 1e-6 * k);
     assert_eq!(v.tangential_speed_m_s(CUTOFF_CORES * r_core * 1.0001), 0.0);
-    let far: [f64; 3] = std::array::from_fn(|a| v.centre_m[a] + r_core * e1[a] + 2.01 * r_core * v.axis[a]);
+    let far: [f64; 3] =
+        std::array::from_fn(|a| v.centre_m[a] + r_core * e1[a] + 2.01 * r_core * v.axis[a]);
     assert_eq!(v.velocity_m_s(far), [0.0; 3]);
     // The potential's radial derivative is minus the tangential speed (checked by differences).
     for r in [0.5, 1.2, 1.8, 2.2].map(|x| x * r_core) {
@@ -119,8 +125,12 @@ fn vortex_field_on_the_grid_is_discretely_divergence_free_and_converges() {
         let dims = [n, n, n];
         let mut s = solver(dims, h);
         let blk = 0.024 * 0.75;
-        s.grid_mut()
-            .fill_box([blk, blk, blk], [0.024, 0.024, 0.024], CellLabel::Solid, [0.0; 3]);
+        s.grid_mut().fill_box(
+            [blk, blk, blk],
+            [0.024, 0.024, 0.024],
+            CellLabel::Solid,
+            [0.0; 3],
+        );
         let spec = VortexSpec {
             core_radius_mm: 2.0,
             min_core_voxels: 0.1,
@@ -169,7 +179,11 @@ fn vortex_field_on_the_grid_is_discretely_divergence_free_and_converges() {
             for k in 0..fd[2] {
                 for j in 0..fd[1] {
                     for i in 0..fd[0] {
-                        let mut p = [(i as f64 + 0.5) * h, (j as f64 + 0.5) * h, (k as f64 + 0.5) * h];
+                        let mut p = [
+                            (i as f64 + 0.5) * h,
+                            (j as f64 + 0.5) * h,
+                            (k as f64 + 0.5) * h,
+                        ];
                         p[c] -= 0.5 * h;
                         if p.iter().any(|&x| x > 0.0145 || x < 0.003) {
                             continue;
@@ -230,10 +244,18 @@ fn vortex_count_follows_the_flow_rate_and_vortices_stay_in_the_fluid() {
     let n = 16;
     let h = 1e-3;
     let mut s = solver([n, n, n], h);
-    s.grid_mut()
-        .fill_box([0.0, 0.006, 0.006], [0.001, 0.010, 0.010], CellLabel::Velocity, [0.3, 0.0, 0.0]);
-    s.grid_mut()
-        .fill_box([0.015, 0.0, 0.0], [0.016, 0.016, 0.016], CellLabel::Outflow, [0.0; 3]);
+    s.grid_mut().fill_box(
+        [0.0, 0.006, 0.006],
+        [0.001, 0.010, 0.010],
+        CellLabel::Velocity,
+        [0.3, 0.0, 0.0],
+    );
+    s.grid_mut().fill_box(
+        [0.015, 0.0, 0.0],
+        [0.016, 0.016, 0.016],
+        CellLabel::Outflow,
+        [0.0; 3],
+    );
     let mut f = VortexField::new(spec, &s).unwrap();
     let mut respawned = 0;
     for step in 0..60 {
@@ -266,7 +288,11 @@ fn rotation_error(steps: usize, omega: f64, t_end: f64) -> f64 {
     let kinds = vec![VoxelKind::Fluid; n * n * n];
     let mut sys = ParticleSystem::new(s.grid(), 16, 1, [0.0, -1.0, 0.0]);
     let cls = tracer(&mut sys);
-    let starts = [[c + 0.005, c, 0.01], [c, c - 0.004, 0.012], [c - 0.003, c + 0.003, 0.008]];
+    let starts = [
+        [c + 0.005, c, 0.01],
+        [c, c - 0.004, 0.012],
+        [c - 0.003, c + 0.003, 0.008],
+    ];
     for p in starts {
         assert!(sys.emit(&kinds, cls, p));
     }
@@ -278,9 +304,18 @@ fn rotation_error(steps: usize, omega: f64, t_end: f64) -> f64 {
     let mut err = 0.0f64;
     for (i, p0) in starts.iter().enumerate() {
         let (x, y) = (p0[0] - c, p0[1] - c);
-        let exact = [c + x * th.cos() - y * th.sin(), c + x * th.sin() + y * th.cos(), p0[2]];
+        let exact = [
+            c + x * th.cos() - y * th.sin(),
+            c + x * th.sin() + y * th.cos(),
+            p0[2],
+        ];
         let got = sys.position_m(i);
-        err = err.max((0..3).map(|a| (got[a] - exact[a]).powi(2)).sum::<f64>().sqrt());
+        err = err.max(
+            (0..3)
+                .map(|a| (got[a] - exact[a]).powi(2))
+                .sum::<f64>()
+                .sqrt(),
+        );
     }
     err
 }
@@ -314,7 +349,10 @@ fn advection_matches_exact_trajectories_uniform_and_solid_body_rotation() {
     let o1 = (e1 / e2).log2();
     let o2 = (e2 / e3).log2();
     assert!(e1 < 2e-4, "error {e1}");
-    assert!((1.8..2.3).contains(&o1) && (1.8..2.3).contains(&o2), "orders {o1}, {o2} ({e1:e} {e2:e} {e3:e})");
+    assert!(
+        (1.8..2.3).contains(&o1) && (1.8..2.3).contains(&o2),
+        "orders {o1}, {o2} ({e1:e} {e2:e} {e3:e})"
+    );
 }
 
 #[test]
@@ -334,7 +372,11 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
         // of up to 3 cells per step.
         if round % 5 == 0 {
             for k in kinds.iter_mut() {
-                *k = if rng.unit() < 0.25 { VoxelKind::Wall } else { VoxelKind::Fluid };
+                *k = if rng.unit() < 0.25 {
+                    VoxelKind::Wall
+                } else {
+                    VoxelKind::Fluid
+                };
             }
             for i in 0..sys.len() {
                 let p = sys.position_m(i).map(|x| (x / h).floor() as usize);
@@ -354,7 +396,11 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
             steps += sys.len();
             for i in 0..sys.len() {
                 let p = sys.position_m(i).map(|x| (x / h).floor() as usize);
-                assert_eq!(kinds[p[0] + n * (p[1] + n * p[2])], VoxelKind::Fluid, "particle {i}");
+                assert_eq!(
+                    kinds[p[0] + n * (p[1] + n * p[2])],
+                    VoxelKind::Fluid,
+                    "particle {i}"
+                );
             }
         }
     }
@@ -367,7 +413,12 @@ fn channel(n: [usize; 3], h: f64, u_in: f32) -> (FluidSolver, Vec<VoxelKind>) {
     let mut s = solver(n, h);
     let l = [n[0] as f64 * h, n[1] as f64 * h, n[2] as f64 * h];
     let g = s.grid_mut();
-    g.fill_box([0.0; 3], [h, l[1], l[2]], CellLabel::Velocity, [u_in, 0.0, 0.0]);
+    g.fill_box(
+        [0.0; 3],
+        [h, l[1], l[2]],
+        CellLabel::Velocity,
+        [u_in, 0.0, 0.0],
+    );
     g.fill_box([l[0] - h, 0.0, 0.0], l, CellLabel::Outflow, [0.0; 3]);
     let kinds = kinds_from_labels(s.grid());
     (s, kinds)
@@ -386,7 +437,8 @@ fn blood_particles_are_conserved_except_through_the_outlets() {
                 }
             }
             let l = [n[0] as f64 * h, n[1] as f64 * h, n[2] as f64 * h];
-            s.grid_mut().fill_box([l[0] - h, 0.0, 0.0], l, CellLabel::Solid, [0.0; 3]);
+            s.grid_mut()
+                .fill_box([l[0] - h, 0.0, 0.0], l, CellLabel::Solid, [0.0; 3]);
             // A swirl with no way out.
             s.set_velocity_field(|c, p| match c {
                 0 => -(p[1] - 0.005),
@@ -402,14 +454,22 @@ fn blood_particles_are_conserved_except_through_the_outlets() {
                 s.step(1.0 / 60.0).unwrap();
             }
             for _ in 0..40 {
-                let p = [0.004 + 0.002 * rng.unit(), 0.002 + 0.006 * rng.unit(), 0.002 + 0.006 * rng.unit()];
+                let p = [
+                    0.004 + 0.002 * rng.unit(),
+                    0.002 + 0.006 * rng.unit(),
+                    0.002 + 0.006 * rng.unit(),
+                ];
                 sys.emit(&kinds, cls, p);
             }
             sys.step(&s, &kinds, None, 1.0 / 60.0, None);
         }
         let c = sys.counts();
         assert_eq!(c.lost[0], 0, "{c:?}");
-        assert_eq!(c.emitted[0], (c.alive as u64) + c.outflow[0] + c.open[0], "{c:?}");
+        assert_eq!(
+            c.emitted[0],
+            (c.alive as u64) + c.outflow[0] + c.open[0],
+            "{c:?}"
+        );
         if open {
             assert!(c.open[0] > 1000, "most left through the open end: {c:?}");
         } else {
@@ -426,7 +486,10 @@ fn a_bubble_rises_at_its_terminal_velocity() {
     let (w, _) = terminal_slip(d, 1.2, rho_f, mu);
     let stokes = (rho_f - 1.2) * GRAVITY_M_S2 * d * d / (18.0 * mu);
     assert!(w < 0.0, "bubbles rise");
-    assert!((w.abs() - stokes).abs() < 0.01 * stokes, "{w} vs Stokes {stokes}");
+    assert!(
+        (w.abs() - stokes).abs() < 0.01 * stokes,
+        "{w} vs Stokes {stokes}"
+    );
     // A 1 mm bubble (Re ~ 100): the force balance with the Schiller-Naumann drag, solved here
     // independently by a secant iteration.
     let d: f64 = 1e-3;
@@ -474,7 +537,10 @@ fn a_bubble_rises_at_its_terminal_velocity() {
     let exact = 0.005 + w_ref * (t - tau * (1.0 - (-t / tau).exp()));
     assert!((z[9] - exact).abs() < 2e-3 * exact, "{} vs {exact}", z[9]);
     let rise = (z[239] - z[119]) / (120.0 * dt);
-    assert!((rise - w_ref).abs() < 1e-3 * w_ref, "rise {rise} vs terminal {w_ref}");
+    assert!(
+        (rise - w_ref).abs() < 1e-3 * w_ref,
+        "rise {rise} vs terminal {w_ref}"
+    );
 }
 
 /// Time for the view to clear after a one-second bleed near the inflow of a channel with the
@@ -502,7 +568,11 @@ fn time_to_clear(u_in: f32) -> Option<f64> {
         s.step(dt).unwrap();
         if t < 1.0 {
             for _ in 0..60 {
-                let p = [0.008 + 0.002 * rng.unit(), 0.004 + 0.004 * rng.unit(), 0.004 + 0.004 * rng.unit()];
+                let p = [
+                    0.008 + 0.002 * rng.unit(),
+                    0.004 + 0.004 * rng.unit(),
+                    0.004 + 0.004 * rng.unit(),
+                ];
                 sys.emit(&kinds, cls, p);
             }
         }
@@ -512,7 +582,10 @@ fn time_to_clear(u_in: f32) -> Option<f64> {
             break;
         }
     }
-    assert!(tracker.min_clarity.unwrap() < 0.5, "the bleed obscured the view");
+    assert!(
+        tracker.min_clarity.unwrap() < 0.5,
+        "the bleed obscured the view"
+    );
     tracker.time_to_clear_s
 }
 
@@ -535,8 +608,18 @@ fn time_to_traverse_of_a_plug_flow_is_the_length_over_the_speed() {
     let h = 1e-3;
     let mut s = solver(n, h);
     let g = s.grid_mut();
-    g.fill_box([0.0; 3], [h, 0.008, 0.008], CellLabel::Velocity, [0.1, 0.0, 0.0]);
-    g.fill_box([0.029, 0.0, 0.0], [0.030, 0.008, 0.008], CellLabel::Velocity, [0.1, 0.0, 0.0]);
+    g.fill_box(
+        [0.0; 3],
+        [h, 0.008, 0.008],
+        CellLabel::Velocity,
+        [0.1, 0.0, 0.0],
+    );
+    g.fill_box(
+        [0.029, 0.0, 0.0],
+        [0.030, 0.008, 0.008],
+        CellLabel::Velocity,
+        [0.1, 0.0, 0.0],
+    );
     s.set_velocity_field(|c, _| if c == 0 { 0.1 } else { 0.0 });
     let mut kinds = kinds_from_labels(s.grid());
     for (n, k) in kinds.iter_mut().enumerate() {
@@ -548,7 +631,10 @@ fn time_to_traverse_of_a_plug_flow_is_the_length_over_the_speed() {
     let t = time_to_traverse(&s, &kinds, &[[0.0015, 0.004, 0.004]], 1e-3, 2.0);
     let exact = (0.029 - 0.0015) / 0.1;
     assert_eq!(t.reached, 1);
-    assert!((t.first_s.unwrap() - exact).abs() <= 1.5e-3, "{t:?} vs {exact}");
+    assert!(
+        (t.first_s.unwrap() - exact).abs() <= 1.5e-3,
+        "{t:?} vs {exact}"
+    );
 }
 
 #[test]
@@ -577,13 +663,27 @@ per_ml = 2.0
     assert!((g[2] - 15f64.to_radians().sin()).abs() < 1e-12 && g[1] < 0.0);
     for (bad, key) in [
         ("[particles]\nbudget = 0", "particles.budget"),
-        ("[particles.blood]\nparticle_volume_ul = -1.0", "particles.blood.particle_volume_ul"),
-        ("[vortices]\nfull_flow_ml_min = 10.0", "vortices.full_flow_ml_min"),
-        ("[particles.view]\nhalf_angle_deg = 95.0", "particles.view.half_angle_deg"),
-        ("[[particles.blood.sources]]\nrate_ml_min = -2.0", "particles.blood.sources[0].rate_ml_min"),
+        (
+            "[particles.blood]\nparticle_volume_ul = -1.0",
+            "particles.blood.particle_volume_ul",
+        ),
+        (
+            "[vortices]\nfull_flow_ml_min = 10.0",
+            "vortices.full_flow_ml_min",
+        ),
+        (
+            "[particles.view]\nhalf_angle_deg = 95.0",
+            "particles.view.half_angle_deg",
+        ),
+        (
+            "[[particles.blood.sources]]\nrate_ml_min = -2.0",
+            "particles.blood.sources[0].rate_ml_min",
+        ),
         ("[particles]\nbogus = 1", "bogus"),
     ] {
-        let e = SceneDesc::parse(bad, "bad.toml", None).unwrap_err().to_string();
+        let e = SceneDesc::parse(bad, "bad.toml", None)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(key), "{bad}: {e}");
     }
     assert!(ParticleSpec::default().validate().is_ok());

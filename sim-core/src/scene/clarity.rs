@@ -47,7 +47,9 @@ impl ViewSpec {
         }
         for (k, v) in [("depth_mm", self.depth_mm), ("near_mm", self.near_mm)] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("`particles.view.{k}` = {v}: expected a finite length > 0"));
+                return Err(format!(
+                    "`particles.view.{k}` = {v}: expected a finite length > 0"
+                ));
             }
         }
         if !(self.clear_threshold > 0.0 && self.clear_threshold < 1.0) {

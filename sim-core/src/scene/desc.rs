@@ -496,8 +496,12 @@ impl SceneDesc {
                 ),
             ));
         }
-        self.vortices.validate().map_err(|m| invalid_message(o, m))?;
-        self.particles.validate().map_err(|m| invalid_message(o, m))?;
+        self.vortices
+            .validate()
+            .map_err(|m| invalid_message(o, m))?;
+        self.particles
+            .validate()
+            .map_err(|m| invalid_message(o, m))?;
         if (self.stages.vortices || self.stages.particles) && !self.stages.fluid {
             return Err(invalid(
                 o,

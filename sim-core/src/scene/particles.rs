@@ -67,7 +67,10 @@ impl GravitySpec {
         let g = match self.direction {
             Some(d) => d,
             None => {
-                let (t, l) = (self.table_tilt_deg.to_radians(), self.lateral_tilt_deg.to_radians());
+                let (t, l) = (
+                    self.table_tilt_deg.to_radians(),
+                    self.lateral_tilt_deg.to_radians(),
+                );
                 [l.sin() * t.cos(), -l.cos() * t.cos(), t.sin()]
             }
         };
@@ -290,26 +293,73 @@ impl ParticleSpec {
             ));
         }
         let checks = [
-            ("fluid_density_kg_m3", self.fluid_density_kg_m3, pos(self.fluid_density_kg_m3)),
-            ("fluid_viscosity_pa_s", self.fluid_viscosity_pa_s, pos(self.fluid_viscosity_pa_s)),
-            ("blood.particle_volume_ul", self.blood.particle_volume_ul, pos(self.blood.particle_volume_ul)),
-            ("blood.attenuation_per_mm", self.blood.attenuation_per_mm, nonneg(self.blood.attenuation_per_mm)),
-            ("blood.density_kg_m3", self.blood.density_kg_m3, pos(self.blood.density_kg_m3)),
-            ("blood.droplet_diameter_mm", self.blood.droplet_diameter_mm, pos(self.blood.droplet_diameter_mm)),
-            ("bubbles.per_ml", self.bubbles.per_ml, nonneg(self.bubbles.per_ml)),
-            ("bubbles.min_diameter_mm", self.bubbles.min_diameter_mm, pos(self.bubbles.min_diameter_mm)),
-            ("bubbles.max_diameter_mm", self.bubbles.max_diameter_mm, pos(self.bubbles.max_diameter_mm) && self.bubbles.max_diameter_mm >= self.bubbles.min_diameter_mm),
-            ("bubbles.density_kg_m3", self.bubbles.density_kg_m3, pos(self.bubbles.density_kg_m3)),
+            (
+                "fluid_density_kg_m3",
+                self.fluid_density_kg_m3,
+                pos(self.fluid_density_kg_m3),
+            ),
+            (
+                "fluid_viscosity_pa_s",
+                self.fluid_viscosity_pa_s,
+                pos(self.fluid_viscosity_pa_s),
+            ),
+            (
+                "blood.particle_volume_ul",
+                self.blood.particle_volume_ul,
+                pos(self.blood.particle_volume_ul),
+            ),
+            (
+                "blood.attenuation_per_mm",
+                self.blood.attenuation_per_mm,
+                nonneg(self.blood.attenuation_per_mm),
+            ),
+            (
+                "blood.density_kg_m3",
+                self.blood.density_kg_m3,
+                pos(self.blood.density_kg_m3),
+            ),
+            (
+                "blood.droplet_diameter_mm",
+                self.blood.droplet_diameter_mm,
+                pos(self.blood.droplet_diameter_mm),
+            ),
+            (
+                "bubbles.per_ml",
+                self.bubbles.per_ml,
+                nonneg(self.bubbles.per_ml),
+            ),
+            (
+                "bubbles.min_diameter_mm",
+                self.bubbles.min_diameter_mm,
+                pos(self.bubbles.min_diameter_mm),
+            ),
+            (
+                "bubbles.max_diameter_mm",
+                self.bubbles.max_diameter_mm,
+                pos(self.bubbles.max_diameter_mm)
+                    && self.bubbles.max_diameter_mm >= self.bubbles.min_diameter_mm,
+            ),
+            (
+                "bubbles.density_kg_m3",
+                self.bubbles.density_kg_m3,
+                pos(self.bubbles.density_kg_m3),
+            ),
         ];
         for (key, v, ok) in checks {
             if !ok {
-                return Err(format!("`particles.{key}` = {v}: out of range (see docs/particles.md)"));
+                return Err(format!(
+                    "`particles.{key}` = {v}: out of range (see docs/particles.md)"
+                ));
             }
         }
         for (n, s) in self.blood.sources.iter().enumerate() {
             let key = |k: &str| format!("`particles.blood.sources[{n}].{k}`");
             if s.position_mm.iter().any(|v| !v.is_finite()) {
-                return Err(format!("{} = {:?}: expected finite coordinates", key("position_mm"), s.position_mm));
+                return Err(format!(
+                    "{} = {:?}: expected finite coordinates",
+                    key("position_mm"),
+                    s.position_mm
+                ));
             }
             for (k, v) in [
                 ("rate_ml_min", s.rate_ml_min),
@@ -325,15 +375,26 @@ impl ParticleSpec {
                 }
             }
             if s.duration_s.is_nan() || s.duration_s < 0.0 {
-                return Err(format!("{} = {}: expected a duration >= 0", key("duration_s"), s.duration_s));
+                return Err(format!(
+                    "{} = {}: expected a duration >= 0",
+                    key("duration_s"),
+                    s.duration_s
+                ));
             }
         }
         for (n, f) in self.fragments.iter().enumerate() {
             let key = |k: &str| format!("`particles.fragments[{n}].{k}`");
             if f.position_mm.iter().any(|v| !v.is_finite()) {
-                return Err(format!("{} = {:?}: expected finite coordinates", key("position_mm"), f.position_mm));
+                return Err(format!(
+                    "{} = {:?}: expected finite coordinates",
+                    key("position_mm"),
+                    f.position_mm
+                ));
             }
-            for (k, v) in [("diameter_mm", f.diameter_mm), ("density_kg_m3", f.density_kg_m3)] {
+            for (k, v) in [
+                ("diameter_mm", f.diameter_mm),
+                ("density_kg_m3", f.density_kg_m3),
+            ] {
                 if !pos(v) {
                     return Err(format!("{} = {v}: expected a finite value > 0", key(k)));
                 }
@@ -587,7 +648,12 @@ impl ParticleSystem {
 
     /// Builds the cell-centred velocity (cells/s): the mean of the faces in fluid and open
     /// cells (plus the overlay's), the prescribed velocity in port and wall cells, zero elsewhere.
-    fn build_field(&mut self, solver: &FluidSolver, kinds: &[VoxelKind], overlay: Option<[&[f32]; 3]>) {
+    fn build_field(
+        &mut self,
+        solver: &FluidSolver,
+        kinds: &[VoxelKind],
+        overlay: Option<[&[f32]; 3]>,
+    ) {
         let [nx, ny, nz] = self.dims;
         let inv_h = (1.0 / self.h) as f32;
         let grid = solver.grid();
@@ -694,7 +760,11 @@ impl ParticleSystem {
     fn advance(&mut self, kinds: &[VoxelKind], dt_s: f64) {
         let inv_h = 1.0 / self.h;
         for (c, s) in self.classes.iter().zip(&mut self.class_step) {
-            let e = if c.tau_s > 0.0 { (-dt_s / c.tau_s).exp() } else { 0.0 };
+            let e = if c.tau_s > 0.0 {
+                (-dt_s / c.tau_s).exp()
+            } else {
+                0.0
+            };
             let disp = c.tau_s * (1.0 - e);
             let t = self.gravity.map(|g| (g * c.settle_m_s * inv_h) as f32);
             *s = (t, e as f32, disp as f32);
@@ -754,7 +824,9 @@ impl ParticleSystem {
                 w1[a] = wt[a] + (w0[a] - wt[a]) * e;
             }
             let k1 = Self::sample(field, dims, p);
-            let travel = (k1[0].abs() + k1[1].abs() + k1[2].abs()
+            let travel = (k1[0].abs()
+                + k1[1].abs()
+                + k1[2].abs()
                 + (slip_d[0].abs() + slip_d[1].abs() + slip_d[2].abs()) / dt.max(1e-30))
                 * dt;
             let subs = (travel / 0.9).ceil().clamp(1.0, max_sub as f32) as usize;
@@ -861,7 +933,9 @@ impl ParticleSystem {
         for &c in &self.class {
             let _ = writeln!(s, "{}", self.classes[c as usize].kind as u8);
         }
-        s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"diameter_m\" format=\"ascii\">\n");
+        s.push_str(
+            "</DataArray>\n<DataArray type=\"Float32\" Name=\"diameter_m\" format=\"ascii\">\n",
+        );
         for &c in &self.class {
             let _ = writeln!(s, "{:e}", self.classes[c as usize].diameter_m as f32);
         }
@@ -899,7 +973,11 @@ fn relocate(p: [f32; 3], kind_at: &impl Fn([f32; 3]) -> VoxelKind) -> Option<[f3
     for dz in -1..=1 {
         for dy in -1..=1 {
             for dx in -1..=1 {
-                let q = [base[0] + dx as f32, base[1] + dy as f32, base[2] + dz as f32];
+                let q = [
+                    base[0] + dx as f32,
+                    base[1] + dy as f32,
+                    base[2] + dz as f32,
+                ];
                 if kind_at(q) == VoxelKind::Fluid {
                     let d = (0..3).map(|a| (q[a] - p[a]).powi(2)).sum::<f32>();
                     if best.is_none_or(|b| d < b.1) {
@@ -1174,7 +1252,9 @@ impl Particles {
         self.emit_bubbles(scene, dt_s);
         self.emit_fragments(scene, t);
         let overlay = scene.vortices.as_ref().and_then(|v| v.overlay_faces());
-        let view = scene.scope().map(|sc| self.spec.view.cone(sc.tip_m, sc.dir));
+        let view = scene
+            .scope()
+            .map(|sc| self.spec.view.cone(sc.tip_m, sc.dir));
         let Some(sys) = self.system.as_mut() else {
             return false;
         };
@@ -1187,7 +1267,8 @@ impl Particles {
             .map(|s| s.onset_s + s.duration_s)
             .fold(f64::NEG_INFINITY, f64::max);
         if let Some(c) = self.clarity {
-            self.tracker.update(t, c, bleed_end.is_finite().then_some(bleed_end));
+            self.tracker
+                .update(t, c, bleed_end.is_finite().then_some(bleed_end));
         }
         true
     }
@@ -1239,7 +1320,11 @@ impl Particles {
                 n = n.map(|x| -x);
             }
             // A tangent basis.
-            let a = if n[0].abs() < 0.9 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+            let a = if n[0].abs() < 0.9 {
+                [1.0, 0.0, 0.0]
+            } else {
+                [0.0, 1.0, 0.0]
+            };
             let t1 = unit(cross(n, a));
             let t2 = cross(n, t1);
             for _ in 0..count as usize {
@@ -1289,10 +1374,13 @@ impl Particles {
                 }
                 let mut q = [i as i64, j as i64, k as i64];
                 q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
-                if q.iter().zip([nx, ny, nz]).all(|(&x, d)| x >= 0 && (x as usize) < d)
+                if q.iter()
+                    .zip([nx, ny, nz])
+                    .all(|(&x, d)| x >= 0 && (x as usize) < d)
                     && self.emit_points.len() < self.emit_points.capacity()
                 {
-                    self.emit_points.push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
+                    self.emit_points
+                        .push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
                 }
             }
         }
@@ -1347,12 +1435,21 @@ impl Particles {
                 }
                 let mut q = [i as i64, j as i64, k as i64];
                 q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
-                if q.iter().zip([nx, ny, nz]).all(|(&x, d)| x >= 0 && (x as usize) < d) {
+                if q.iter()
+                    .zip([nx, ny, nz])
+                    .all(|(&x, d)| x >= 0 && (x as usize) < d)
+                {
                     starts.push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
                 }
             }
         }
-        Some(time_to_traverse(solver, &scene.kinds, &starts, dt_s, max_time_s))
+        Some(time_to_traverse(
+            solver,
+            &scene.kinds,
+            &starts,
+            dt_s,
+            max_time_s,
+        ))
     }
 }
 

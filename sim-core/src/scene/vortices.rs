@@ -112,7 +112,9 @@ impl VortexSpec {
             ("max_peak_speed_m_s", self.max_peak_speed_m_s),
         ] {
             if !pos(v) {
-                return Err(format!("`vortices.{key}` = {v}: expected a finite value > 0"));
+                return Err(format!(
+                    "`vortices.{key}` = {v}: expected a finite value > 0"
+                ));
             }
         }
         if !(self.intensity.is_finite() && self.intensity >= 0.0) {
@@ -151,7 +153,10 @@ fn taper(x: f64, a: f64, b: f64) -> (f64, f64) {
         (0.0, 0.0)
     } else {
         let t = (x - a) / (b - a);
-        (1.0 - t * t * (3.0 - 2.0 * t), -6.0 * t * (1.0 - t) / (b - a))
+        (
+            1.0 - t * t * (3.0 - 2.0 * t),
+            -6.0 * t * (1.0 - t) / (b - a),
+        )
     }
 }
 
@@ -225,8 +230,12 @@ impl Vortex {
 
     /// Half extent (m) of the vortex's support along each axis.
     pub fn half_extent_m(&self) -> [f64; 3] {
-        let (l, r) = (AXIAL_END_CORES * self.core_radius_m, CUTOFF_CORES * self.core_radius_m);
-        self.axis.map(|n| l * n.abs() + r * (1.0 - n * n).max(0.0).sqrt())
+        let (l, r) = (
+            AXIAL_END_CORES * self.core_radius_m,
+            CUTOFF_CORES * self.core_radius_m,
+        );
+        self.axis
+            .map(|n| l * n.abs() + r * (1.0 - n * n).max(0.0).sqrt())
     }
 }
 
@@ -297,7 +306,8 @@ impl VortexField {
         let dims = g.dims();
         let h = g.spacing_m();
         let nodes = (dims[0] + 1) * (dims[1] + 1) * (dims[2] + 1);
-        let faces: [Vec<f32>; 3] = std::array::from_fn(|c| vec![0.0; solver.face_velocities(c).len()]);
+        let faces: [Vec<f32>; 3] =
+            std::array::from_fn(|c| vec![0.0; solver.face_velocities(c).len()]);
         let qmax = CUTOFF_CORES * CUTOFF_CORES;
         let table = (0..=TABLE_SIZE)
             .map(|i| {
@@ -373,7 +383,8 @@ impl VortexField {
         self.revision = g.revision();
         let [nx, ny, nz] = self.dims;
         let labels = g.labels();
-        let fluid = |i: usize, j: usize, k: usize| labels[i + nx * (j + ny * k)] == CellLabel::Fluid;
+        let fluid =
+            |i: usize, j: usize, k: usize| labels[i + nx * (j + ny * k)] == CellLabel::Fluid;
         self.fluid_cells.clear();
         for (n, l) in labels.iter().enumerate() {
             if *l == CellLabel::Fluid {
@@ -386,7 +397,9 @@ impl VortexField {
                 for i in 0..=nx {
                     let inside = i > 0 && j > 0 && k > 0 && i < nx && j < ny && k < nz;
                     let m = inside
-                        && (0..8).all(|b| fluid(i - 1 + (b & 1), j - 1 + (b >> 1 & 1), k - 1 + (b >> 2)));
+                        && (0..8).all(|b| {
+                            fluid(i - 1 + (b & 1), j - 1 + (b >> 1 & 1), k - 1 + (b >> 2))
+                        });
                     self.node_mask[i + sx * (j + sy * k)] = m as u8;
                 }
             }
@@ -540,7 +553,9 @@ impl VortexField {
             let mut hi = [0usize; 3];
             let mut empty = false;
             for a in 0..3 {
-                let l = ((v.centre_m[a] - ext[a] - self.origin[a]) / h).ceil().max(0.0);
+                let l = ((v.centre_m[a] - ext[a] - self.origin[a]) / h)
+                    .ceil()
+                    .max(0.0);
                 let u = ((v.centre_m[a] + ext[a] - self.origin[a]) / h)
                     .floor()
                     .min(self.dims[a] as f64);
@@ -716,7 +731,9 @@ impl Vortices {
     /// Advances the vortices after the fluid step; returns whether the stage ran (not below the
     /// flow-rate threshold with no vortex left).
     pub(crate) fn step(&mut self, scene: &mut Scene, dt_s: f64) -> bool {
-        let target = self.spec.target_count(scene.hydraulic_state.flows.inflow_m3_per_s);
+        let target = self
+            .spec
+            .target_count(scene.hydraulic_state.flows.inflow_m3_per_s);
         let Some(solver) = scene.fluid.as_mut() else {
             return false;
         };
