@@ -357,20 +357,20 @@ fn advection_matches_exact_trajectories_uniform_and_solid_body_rotation() {
 
 #[test]
 fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
-    let n = 16;
-    let h = 1e-3;
-    let mut s = solver([n, n, n], h);
-    let mut rng = Lcg(42);
-    let mut kinds = vec![VoxelKind::Fluid; n * n * n];
-    let mut sys = ParticleSystem::new(s.grid(), 200, 4, [0.0, -1.0, 0.0]);
-    let cls = tracer(&mut sys);
-    let mut steps = 0usize;
-    let mut round = 0;
-    let mut walled = 0;
-    while steps < 100_000 {
-        // New walls (random blocks, some touching the particles' cells) and a new random field
-        // of up to 3 cells per step.
-        if round % 5 == 0 {
+    // 200 particles (one thread) and 20000 (two halves on two threads).
+    for count in [200usize, 20_000] {
+        let n = 16;
+        let h = 1e-3;
+        let mut s = solver([n, n, n], h);
+        let mut rng = Lcg(42 + count as u64);
+        let mut kinds = vec![VoxelKind::Fluid; n * n * n];
+        let mut sys = ParticleSystem::new(s.grid(), count, 4, [0.0, -1.0, 0.0]);
+        let cls = tracer(&mut sys);
+        let mut steps = 0usize;
+        let mut walled = 0;
+        while steps < 100_000 {
+            // New walls (random cells, some under particles) and a new random field of up to
+            // 3 cells per step.
             for k in kinds.iter_mut() {
                 *k = if rng.unit() < 0.25 {
                     VoxelKind::Wall
@@ -382,29 +382,28 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
                 let p = sys.position_m(i).map(|x| (x / h).floor() as usize);
                 walled += (kinds[p[0] + n * (p[1] + n * p[2])] != VoxelKind::Fluid) as usize;
             }
-        }
-        round += 1;
-        let amp = 0.18;
-        let mut r2 = Lcg(rng.0 ^ 7);
-        s.set_velocity_field(|_, _| amp * (2.0 * r2.unit() - 1.0));
-        while sys.len() < 200 {
-            let p = [0, 1, 2].map(|_| rng.unit() * n as f64 * h);
-            sys.emit(&kinds, cls, p);
-        }
-        for _ in 0..10 {
-            sys.step(&s, &kinds, None, 1.0 / 60.0, None);
-            steps += sys.len();
-            for i in 0..sys.len() {
-                let p = sys.position_m(i).map(|x| (x / h).floor() as usize);
-                assert_eq!(
-                    kinds[p[0] + n * (p[1] + n * p[2])],
-                    VoxelKind::Fluid,
-                    "particle {i}"
-                );
+            let amp = 0.18;
+            let mut r2 = Lcg(rng.0 ^ 7);
+            s.set_velocity_field(|_, _| amp * (2.0 * r2.unit() - 1.0));
+            while sys.len() < count {
+                let p = [0, 1, 2].map(|_| rng.unit() * n as f64 * h);
+                sys.emit(&kinds, cls, p);
+            }
+            for _ in 0..5 {
+                sys.step(&s, &kinds, None, 1.0 / 60.0, None);
+                steps += sys.len();
+                for i in 0..sys.len() {
+                    let p = sys.position_m(i).map(|x| (x / h).floor() as usize);
+                    assert_eq!(
+                        kinds[p[0] + n * (p[1] + n * p[2])],
+                        VoxelKind::Fluid,
+                        "particle {i}"
+                    );
+                }
             }
         }
+        assert!(walled > 100, "walls moved onto particles: {walled}");
     }
-    assert!(walled > 100, "walls moved onto particles: {walled}");
 }
 
 /// A channel along x: an inflow port (velocity cells) at x = 0, an outflow (open) at the far

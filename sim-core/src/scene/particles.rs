@@ -509,6 +509,8 @@ pub struct ParticleSystem {
     field: Vec<[f32; 4]>,
     /// Per class and step: slip decay, slip displacement factor, terminal slip (cells/s).
     class_step: Vec<([f32; 3], f32, f32)>,
+    /// Per particle, this step: KEEP or how it left.
+    fate: Vec<u8>,
     counts: ParticleCounts,
     time_s: f64,
 }
@@ -549,6 +551,7 @@ impl ParticleSystem {
             birth_s: Vec::with_capacity(capacity),
             field: vec![[0.0; 4]; grid.cell_count()],
             class_step: Vec::with_capacity(256),
+            fate: Vec::with_capacity(capacity),
             counts: ParticleCounts::default(),
             time_s: 0.0,
         }
@@ -769,126 +772,55 @@ impl ParticleSystem {
             let t = self.gravity.map(|g| (g * c.settle_m_s * inv_h) as f32);
             *s = (t, e as f32, disp as f32);
         }
-        let dims = self.dims;
-        let dt = dt_s as f32;
-        let max_sub = self.max_substeps;
-        // Taken out for the loop (removal borrows `self` mutably); put back below.
-        let field_owned = std::mem::take(&mut self.field);
-        let field = &field_owned[..];
-        let kind_at = |p: [f32; 3]| -> VoxelKind {
-            if !(p[0] >= 0.0 && p[1] >= 0.0 && p[2] >= 0.0) {
-                return VoxelKind::Solid;
-            }
-            let (i, j, k) = (p[0] as usize, p[1] as usize, p[2] as usize);
-            if i < dims[0] && j < dims[1] && k < dims[2] {
-                kinds[i + dims[0] * (j + dims[1] * k)]
-            } else {
-                VoxelKind::Solid
-            }
+        let k = Kernel {
+            field: &self.field,
+            kinds,
+            dims: self.dims,
+            class_step: &self.class_step,
+            dt: dt_s as f32,
+            max_sub: self.max_substeps,
         };
-        let mut n = 0;
-        while n < self.pos.len() {
-            let mut p = self.pos[n];
-            let cls = self.class[n] as usize;
-            let kind = self.classes[cls].kind as usize;
-            // A cell that stopped being fluid: leave through an outlet, or move to a fluid
-            // neighbour, or be lost.
-            match kind_at(p) {
-                VoxelKind::Fluid => {}
-                VoxelKind::Outflow => {
-                    self.counts.outflow[kind] += 1;
-                    self.remove(n);
-                    continue;
+        let n = self.pos.len();
+        // The fate of every particle this step (KEEP, or the outlet), then a compaction.
+        self.fate.clear();
+        self.fate.resize(n, KEEP);
+        let chunk = PARALLEL_CHUNK;
+        if n >= 2 * chunk {
+            use rayon::prelude::*;
+            self.pos
+                .par_chunks_mut(chunk)
+                .zip(self.slip.par_chunks_mut(chunk))
+                .zip(self.class.par_chunks(chunk))
+                .zip(self.fate.par_chunks_mut(chunk))
+                .for_each(|(((p, w), c), f)| k.run(p, w, c, f));
+        } else {
+            k.run(&mut self.pos, &mut self.slip, &self.class, &mut self.fate);
+        }
+        // Compaction (order kept) and the counters.
+        let mut out = 0;
+        for i in 0..n {
+            let f = self.fate[i];
+            if f == KEEP {
+                if out != i {
+                    self.pos[out] = self.pos[i];
+                    self.slip[out] = self.slip[i];
+                    self.class[out] = self.class[i];
+                    self.birth_s[out] = self.birth_s[i];
                 }
-                VoxelKind::Open => {
-                    self.counts.open[kind] += 1;
-                    self.remove(n);
-                    continue;
-                }
-                _ => match relocate(p, &kind_at) {
-                    Some(q) => p = q,
-                    None => {
-                        self.counts.lost[kind] += 1;
-                        self.remove(n);
-                        continue;
-                    }
-                },
+                out += 1;
+                continue;
             }
-            // Slip: w(t) = wt + (w0 - wt) e^(-t/tau), integrated exactly over the step.
-            let (wt, e, disp) = self.class_step[cls];
-            let w0 = self.slip[n];
-            let mut slip_d = [0.0f32; 3];
-            let mut w1 = [0.0f32; 3];
-            for a in 0..3 {
-                slip_d[a] = wt[a] * dt + (w0[a] - wt[a]) * disp;
-                w1[a] = wt[a] + (w0[a] - wt[a]) * e;
-            }
-            let k1 = Self::sample(field, dims, p);
-            let travel = (k1[0].abs()
-                + k1[1].abs()
-                + k1[2].abs()
-                + (slip_d[0].abs() + slip_d[1].abs() + slip_d[2].abs()) / dt.max(1e-30))
-                * dt;
-            let subs = (travel / 0.9).ceil().clamp(1.0, max_sub as f32) as usize;
-            let hs = dt / subs as f32;
-            let sd = slip_d.map(|d| d / subs as f32);
-            let mut exit = None;
-            let mut k1 = k1;
-            for sub in 0..subs {
-                if sub > 0 {
-                    k1 = Self::sample(field, dims, p);
-                }
-                let mid = std::array::from_fn(|a| p[a] + 0.5 * hs * k1[a] + 0.5 * sd[a]);
-                let k2 = Self::sample(field, dims, mid);
-                let q: [f32; 3] = std::array::from_fn(|a| p[a] + hs * k2[a] + sd[a]);
-                match kind_at(q) {
-                    VoxelKind::Fluid => p = q,
-                    VoxelKind::Outflow => {
-                        exit = Some(true);
-                        break;
-                    }
-                    VoxelKind::Open => {
-                        exit = Some(false);
-                        break;
-                    }
-                    _ => {
-                        // Slide: revert one axis (the first that lands in fluid), else stay.
-                        for a in 0..3 {
-                            let mut r = q;
-                            r[a] = p[a];
-                            if kind_at(r) == VoxelKind::Fluid {
-                                p = r;
-                                break;
-                            }
-                        }
-                    }
-                }
-            }
-            match exit {
-                Some(true) => {
-                    self.counts.outflow[kind] += 1;
-                    self.remove(n);
-                }
-                Some(false) => {
-                    self.counts.open[kind] += 1;
-                    self.remove(n);
-                }
-                None => {
-                    self.pos[n] = p;
-                    self.slip[n] = w1;
-                    n += 1;
-                }
+            let kind = self.classes[self.class[i] as usize].kind as usize;
+            match f {
+                OUTFLOW => self.counts.outflow[kind] += 1,
+                OPEN => self.counts.open[kind] += 1,
+                _ => self.counts.lost[kind] += 1,
             }
         }
-        self.field = field_owned;
-    }
-
-    #[inline]
-    fn remove(&mut self, n: usize) {
-        self.pos.swap_remove(n);
-        self.slip.swap_remove(n);
-        self.class.swap_remove(n);
-        self.birth_s.swap_remove(n);
+        self.pos.truncate(out);
+        self.slip.truncate(out);
+        self.class.truncate(out);
+        self.birth_s.truncate(out);
     }
 
     /// The clarity of `view` (see [`View`]): `exp(-mean optical depth over the view cone)`.
@@ -963,6 +895,115 @@ impl ParticleSystem {
     /// Writes [`ParticleSystem::vtp_string`] to `path`.
     pub fn write_vtp(&self, path: &Path) -> std::io::Result<()> {
         std::fs::write(path, self.vtp_string())
+    }
+}
+
+const KEEP: u8 = 0;
+const OUTFLOW: u8 = 1;
+const OPEN: u8 = 2;
+const LOST: u8 = 3;
+/// Particles per parallel task (two tasks from twice this many).
+const PARALLEL_CHUNK: usize = 8192;
+
+/// The per-particle step, shared by the threads.
+struct Kernel<'a> {
+    field: &'a [[f32; 4]],
+    kinds: &'a [VoxelKind],
+    dims: [usize; 3],
+    class_step: &'a [([f32; 3], f32, f32)],
+    dt: f32,
+    max_sub: usize,
+}
+
+impl Kernel<'_> {
+    #[inline(always)]
+    fn kind_at(&self, p: [f32; 3]) -> VoxelKind {
+        let d = self.dims;
+        if !(p[0] >= 0.0 && p[1] >= 0.0 && p[2] >= 0.0) {
+            return VoxelKind::Solid;
+        }
+        let (i, j, k) = (p[0] as usize, p[1] as usize, p[2] as usize);
+        if i < d[0] && j < d[1] && k < d[2] {
+            self.kinds[i + d[0] * (j + d[1] * k)]
+        } else {
+            VoxelKind::Solid
+        }
+    }
+
+    fn run(&self, pos: &mut [[f32; 3]], slip: &mut [[f32; 3]], class: &[u8], fate: &mut [u8]) {
+        let (dims, dt, field) = (self.dims, self.dt, self.field);
+        for n in 0..pos.len() {
+            let mut p = pos[n];
+            // A cell that stopped being fluid: leave through an outlet, or move to a fluid
+            // neighbour, or be lost.
+            match self.kind_at(p) {
+                VoxelKind::Fluid => {}
+                VoxelKind::Outflow => {
+                    fate[n] = OUTFLOW;
+                    continue;
+                }
+                VoxelKind::Open => {
+                    fate[n] = OPEN;
+                    continue;
+                }
+                _ => match relocate(p, &|q| self.kind_at(q)) {
+                    Some(q) => p = q,
+                    None => {
+                        fate[n] = LOST;
+                        continue;
+                    }
+                },
+            }
+            // Slip: w(t) = wt + (w0 - wt) e^(-t/tau), integrated exactly over the step.
+            let (wt, e, disp) = self.class_step[class[n] as usize];
+            let w0 = slip[n];
+            let mut slip_d = [0.0f32; 3];
+            let mut w1 = [0.0f32; 3];
+            for a in 0..3 {
+                slip_d[a] = wt[a] * dt + (w0[a] - wt[a]) * disp;
+                w1[a] = wt[a] + (w0[a] - wt[a]) * e;
+            }
+            let mut k1 = ParticleSystem::sample(field, dims, p);
+            let travel = (k1[0].abs() + k1[1].abs() + k1[2].abs()) * dt
+                + slip_d[0].abs()
+                + slip_d[1].abs()
+                + slip_d[2].abs();
+            let subs = (travel / 0.9).ceil().clamp(1.0, self.max_sub as f32) as usize;
+            let hs = dt / subs as f32;
+            let sd = slip_d.map(|d| d / subs as f32);
+            for sub in 0..subs {
+                if sub > 0 {
+                    k1 = ParticleSystem::sample(field, dims, p);
+                }
+                let mid = std::array::from_fn(|a| p[a] + 0.5 * hs * k1[a] + 0.5 * sd[a]);
+                let k2 = ParticleSystem::sample(field, dims, mid);
+                let q: [f32; 3] = std::array::from_fn(|a| p[a] + hs * k2[a] + sd[a]);
+                match self.kind_at(q) {
+                    VoxelKind::Fluid => p = q,
+                    VoxelKind::Outflow => {
+                        fate[n] = OUTFLOW;
+                        break;
+                    }
+                    VoxelKind::Open => {
+                        fate[n] = OPEN;
+                        break;
+                    }
+                    _ => {
+                        // Slide: revert one axis (the first that lands in fluid), else stay.
+                        for a in 0..3 {
+                            let mut r = q;
+                            r[a] = p[a];
+                            if self.kind_at(r) == VoxelKind::Fluid {
+                                p = r;
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+            pos[n] = p;
+            slip[n] = w1;
+        }
     }
 }
 
