@@ -368,7 +368,9 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
         let cls = tracer(&mut sys);
         let mut steps = 0usize;
         let mut walled = 0;
-        while steps < 100_000 {
+        let mut rounds = 0;
+        while steps < 100_000 || rounds < 4 {
+            rounds += 1;
             // New walls (random cells, some under particles) and a new random field of up to
             // 3 cells per step.
             for k in kinds.iter_mut() {

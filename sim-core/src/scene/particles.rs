@@ -16,6 +16,7 @@ use serde::{Deserialize, Serialize};
 
 use super::clarity::{ClarityTracker, ViewSpec};
 use super::random::SplitMix64;
+use super::vortices::cross;
 use super::{Scene, VoxelKind};
 use crate::fluid::{CellLabel, FluidGrid, FluidSolver};
 
@@ -1404,27 +1405,8 @@ impl Particles {
         self.bubble_owed -= count;
         // The fluid cells next to the inflow port.
         self.emit_points.clear();
+        inflow_neighbours(scene, &mut self.emit_points);
         let c = &scene.cells;
-        let [nx, ny, nz] = c.dims;
-        for b in &scene.inflow {
-            let n = b.cell as usize;
-            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-            for f in 0..6 {
-                if b.faces >> f & 1 == 0 {
-                    continue;
-                }
-                let mut q = [i as i64, j as i64, k as i64];
-                q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
-                if q.iter()
-                    .zip([nx, ny, nz])
-                    .all(|(&x, d)| x >= 0 && (x as usize) < d)
-                    && self.emit_points.len() < self.emit_points.capacity()
-                {
-                    self.emit_points
-                        .push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
-                }
-            }
-        }
         let (Some(sys), Some(rng)) = (self.system.as_mut(), self.rng.as_mut()) else {
             return;
         };
@@ -1464,26 +1446,8 @@ impl Particles {
     /// fluid cells next to the inflow port (see [`time_to_traverse`]).
     pub fn time_to_traverse(scene: &Scene, dt_s: f64, max_time_s: f64) -> Option<Traverse> {
         let solver = scene.fluid.as_ref()?;
-        let c = &scene.cells;
-        let [nx, ny, nz] = c.dims;
-        let mut starts = Vec::new();
-        for b in &scene.inflow {
-            let n = b.cell as usize;
-            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-            for f in 0..6 {
-                if b.faces >> f & 1 == 0 {
-                    continue;
-                }
-                let mut q = [i as i64, j as i64, k as i64];
-                q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
-                if q.iter()
-                    .zip([nx, ny, nz])
-                    .all(|(&x, d)| x >= 0 && (x as usize) < d)
-                {
-                    starts.push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
-                }
-            }
-        }
+        let mut starts = Vec::with_capacity(scene.inflow.len() * 6);
+        inflow_neighbours(scene, &mut starts);
         Some(time_to_traverse(
             solver,
             &scene.kinds,
@@ -1491,6 +1455,31 @@ impl Particles {
             dt_s,
             max_time_s,
         ))
+    }
+}
+
+/// Centres of the cells next to the inflow port's fluid faces, appended to `out` up to its
+/// capacity (no allocation).
+fn inflow_neighbours(scene: &Scene, out: &mut Vec<[f64; 3]>) {
+    let c = &scene.cells;
+    let [nx, ny, nz] = c.dims;
+    for b in &scene.inflow {
+        let n = b.cell as usize;
+        let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+        for f in 0..6 {
+            if b.faces >> f & 1 == 0 {
+                continue;
+            }
+            let mut q = [i as i64, j as i64, k as i64];
+            q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
+            if q.iter()
+                .zip([nx, ny, nz])
+                .all(|(&x, d)| x >= 0 && (x as usize) < d)
+                && out.len() < out.capacity()
+            {
+                out.push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
+            }
+        }
     }
 }
 
@@ -1505,14 +1494,6 @@ fn kind_at_m(scene: &Scene, p: [f64; 3]) -> VoxelKind {
         idx[a] = x as usize;
     }
     scene.kinds[c.index(idx[0], idx[1], idx[2])]
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 fn unit(a: [f64; 3]) -> [f64; 3] {
