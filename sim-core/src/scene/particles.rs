@@ -1099,7 +1099,7 @@ pub fn time_to_traverse(
             out.released += 1;
         }
     }
-    if out.released == 0 || !(dt_s > 0.0) {
+    if out.released == 0 || dt_s.is_nan() || dt_s <= 0.0 {
         return out;
     }
     let mut t = 0.0;
@@ -1349,7 +1349,7 @@ impl Particles {
                 }
             }
             let m = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-            if !(m > 0.0) {
+            if m.is_nan() || m <= 0.0 {
                 continue;
             }
             let mut n = n.map(|x| x / m);

@@ -368,9 +368,8 @@ impl VortexField {
     pub fn velocity_at(&self, p: [f64; 3]) -> [f64; 3] {
         let mut v = [0.0; 3];
         for w in &self.vortices {
-            let u = w.velocity_m_s(p);
-            for a in 0..3 {
-                v[a] += u[a];
+            for (x, u) in v.iter_mut().zip(w.velocity_m_s(p)) {
+                *x += u;
             }
         }
         v
@@ -490,8 +489,8 @@ impl VortexField {
         while i < self.vortices.len() {
             let mut v = self.vortices[i];
             let u = solver.sample_velocity_m_s(v.centre_m);
-            for a in 0..3 {
-                v.centre_m[a] += dt_s * u[a];
+            for (c, u) in v.centre_m.iter_mut().zip(u) {
+                *c += dt_s * u;
             }
             if self.in_fluid(solver, v.centre_m) {
                 self.orient(solver, &mut v);
@@ -560,7 +559,7 @@ impl VortexField {
                 let u = ((v.centre_m[a] + ext[a] - self.origin[a]) / h)
                     .floor()
                     .min(self.dims[a] as f64);
-                if !(l <= u) {
+                if l.is_nan() || u.is_nan() || l > u {
                     empty = true;
                 }
                 lo[a] = l as usize;
