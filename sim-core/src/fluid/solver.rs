@@ -273,6 +273,12 @@ impl FluidSolver {
     pub fn face_velocities(&self, c: usize) -> &[f32] {
         &self.u[c]
     }
+    /// Face velocities of component `c`, to add a divergence-free field between steps (the scene's
+    /// injected vortices). The caller leaves the faces beside solid, velocity and outflow cells
+    /// as they are; the next step re-applies them and refreshes the extrapolation layers.
+    pub fn face_velocities_mut(&mut self, c: usize) -> &mut [f32] {
+        &mut self.u[c]
+    }
     /// Number of fluid cells.
     pub fn fluid_cells(&self) -> usize {
         self.pressure.mg.levels.first().map_or(0, |l| l.rows())

@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::particles::ParticleSpec;
+use super::vortices::VortexSpec;
 use super::SceneError;
 use crate::anatomy::AnatomyParams;
 use crate::fem::material::MaterialSet;
@@ -177,6 +179,10 @@ struct RawScene {
     stages: StagesSpec,
     #[serde(default)]
     skip: SkipSpec,
+    #[serde(default)]
+    vortices: VortexSpec,
+    #[serde(default)]
+    particles: ParticleSpec,
     hydraulics: Option<toml::Table>,
 }
 
@@ -205,12 +211,23 @@ pub struct SceneDesc {
     pub stages: StagesSpec,
     /// Skip tolerances.
     pub skip: SkipSpec,
+    /// The vortex stage (`docs/particles.md`).
+    pub vortices: VortexSpec,
+    /// The particle stage (`docs/particles.md`).
+    pub particles: ParticleSpec,
 }
 
 impl Default for SceneDesc {
     fn default() -> Self {
         // ok: the built-in default is parsed in a test.
         Self::builtin("default").unwrap_or_else(|e| unreachable!("built-in default scene: {e}"))
+    }
+}
+
+fn invalid_message(origin: &str, message: String) -> SceneError {
+    SceneError::Description {
+        origin: origin.to_string(),
+        message,
     }
 }
 
@@ -365,6 +382,8 @@ impl SceneDesc {
             fluid: raw.fluid,
             stages: raw.stages,
             skip: raw.skip,
+            vortices: raw.vortices,
+            particles: raw.particles,
         };
         desc.validate()?;
         Ok(desc)
@@ -490,6 +509,12 @@ impl SceneDesc {
                 ),
             ));
         }
+        self.vortices
+            .validate()
+            .map_err(|m| invalid_message(o, m))?;
+        self.particles
+            .validate()
+            .map_err(|m| invalid_message(o, m))?;
         if (self.stages.vortices || self.stages.particles) && !self.stages.fluid {
             return Err(invalid(
                 o,

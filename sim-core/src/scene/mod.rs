@@ -29,11 +29,13 @@
 //! # Ok::<(), hydrometra_sim::scene::SceneError>(())
 //! ```
 
+pub mod clarity;
 pub mod counters;
 pub mod desc;
 pub mod particles;
 mod ports;
 pub mod prepare;
+mod random;
 pub mod surface;
 pub mod vortices;
 pub mod voxelize;
@@ -449,8 +451,14 @@ impl Scene {
         counters.get_mut(Stage::Fluid).present = fluid.is_some();
         counters.get_mut(Stage::Vortices).present = desc.stages.vortices;
         counters.get_mut(Stage::Particles).present = desc.stages.particles;
-        let vortices = desc.stages.vortices.then(vortices::Vortices::default);
-        let particles = desc.stages.particles.then(particles::Particles::default);
+        let vortices = desc
+            .stages
+            .vortices
+            .then(|| vortices::Vortices::new(desc.vortices.clone()));
+        let particles = desc
+            .stages
+            .particles
+            .then(|| particles::Particles::new(desc.particles.clone()));
         Ok(Self {
             surface,
             voxelizer,
@@ -539,6 +547,10 @@ impl Scene {
     /// The particles, if the scene has them.
     pub fn particles(&self) -> Option<&particles::Particles> {
         self.particles.as_ref()
+    }
+    /// The vortices, if the scene has them.
+    pub fn vortices(&self) -> Option<&vortices::Vortices> {
+        self.vortices.as_ref()
     }
 
     /// Advances the scene by `dt_s` seconds.

@@ -1,18 +1,770 @@
-//! Rankine vortices superimposed on the resolved flow (the paper's turbulence at high flow rates).
-//! Not built yet: the stage exists in the pipeline and its counters, and does nothing.
+//! Rankine vortices superimposed on the resolved flow: the paper's turbulent look at high flow
+//! rates (`docs/particles.md` specifies the model; the paper's section 3, "vortices").
+//!
+//! Each vortex has a centre `c`, a unit axis `n` (the curl of the resolved velocity at `c`), a core
+//! radius `R` and a circulation `Gamma`. Its velocity is `g(s) v_theta(r) e_theta` with
+//! `s = (x - c).n`, `r` the distance from the axis and `e_theta = n x r_hat`: exactly
+//! divergence-free for any radial profile and axial window. `v_theta` is Rankine's
+//! (`Gamma r / (2 pi R^2)` inside the core, `Gamma / (2 pi r)` outside) out to `1.5 R`, tapered
+//! to zero at `2.5 R`; `g` is 1 for `|s| <= R` and tapers to zero at `2 R`, so a vortex touches only
+//! a few cells. On the MAC grid the field is the discrete curl of an edge-centred vector potential
+//! `A = g(s) Psi(r) n` (`Psi' = -v_theta`), zero on every edge that touches a non-fluid cell: the
+//! face velocities are then discretely divergence-free in every cell (div curl = 0 identically)
+//! and no flux crosses a wall, a port or the open os.
+//!
+//! Two modes: `overlay` keeps the solver's state untouched and offers the field to the particles
+//! and the display; `injected` adds, each step, the change of the field (new minus last injected)
+//! to the solver's face velocities, so the solver carries and dissipates it.
 
+use serde::{Deserialize, Serialize};
+
+use super::random::SplitMix64;
 use super::Scene;
+use crate::fluid::{CellLabel, FluidSolver};
 
-/// The vortex stage.
+/// Rankine's profile holds exactly out to this many core radii.
+pub const RANKINE_EXACT_CORES: f64 = 1.5;
+/// The tangential velocity is zero from this many core radii.
+pub const CUTOFF_CORES: f64 = 2.5;
+/// The axial window is 1 up to this many core radii from the centre plane.
+pub const AXIAL_FLAT_CORES: f64 = 1.0;
+/// The axial window is zero from this many core radii.
+pub const AXIAL_END_CORES: f64 = 2.0;
+/// Entries of the potential's table over `q = r^2 / R^2` in `[0, CUTOFF_CORES^2]`.
+const TABLE_SIZE: usize = 512;
+
+/// Where the vortices act.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum VortexMode {
+    /// Display and particles only: the solver's state is untouched.
+    #[default]
+    Overlay,
+    /// Added to the solver's face velocities (discretely divergence-free).
+    Injected,
+}
+
+/// The `[vortices]` table of a scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct VortexSpec {
+    /// Most vortices at once (the paper: up to 100).
+    pub max_count: usize,
+    /// Overlay or injected.
+    pub mode: VortexMode,
+    /// No vortices below this inflow, ml/min.
+    pub threshold_ml_min: f64,
+    /// `max_count` vortices from this inflow, ml/min; linear in between.
+    pub full_flow_ml_min: f64,
+    /// Core radius, mm (raised to `min_core_voxels` voxels).
+    pub core_radius_mm: f64,
+    /// Smallest core radius in voxels (a core the grid cannot resolve is invisible).
+    pub min_core_voxels: f64,
+    /// Peak tangential speed (at `r = R`) over the resolved speed at the centre.
+    pub intensity: f64,
+    /// Upper bound of the peak tangential speed, m/s.
+    pub max_peak_speed_m_s: f64,
+    /// Seed of the placement.
+    pub seed: u64,
+}
+
+impl Default for VortexSpec {
+    fn default() -> Self {
+        Self {
+            max_count: 100,
+            mode: VortexMode::Overlay,
+            threshold_ml_min: 100.0,
+            full_flow_ml_min: 400.0,
+            core_radius_mm: 1.2,
+            min_core_voxels: 1.0,
+            intensity: 0.5,
+            max_peak_speed_m_s: 1.0,
+            seed: 1,
+        }
+    }
+}
+
+impl VortexSpec {
+    /// Checks every range; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |v: f64| v.is_finite() && v > 0.0;
+        if self.max_count > 10_000 {
+            return Err(format!(
+                "`vortices.max_count` = {}: expected at most 10000",
+                self.max_count
+            ));
+        }
+        if !(self.threshold_ml_min.is_finite() && self.threshold_ml_min >= 0.0) {
+            return Err(format!(
+                "`vortices.threshold_ml_min` = {}: expected a flow >= 0",
+                self.threshold_ml_min
+            ));
+        }
+        if !(self.full_flow_ml_min.is_finite() && self.full_flow_ml_min > self.threshold_ml_min) {
+            return Err(format!(
+                "`vortices.full_flow_ml_min` = {}: expected a finite flow above `threshold_ml_min` ({})",
+                self.full_flow_ml_min, self.threshold_ml_min
+            ));
+        }
+        for (key, v) in [
+            ("core_radius_mm", self.core_radius_mm),
+            ("min_core_voxels", self.min_core_voxels),
+            ("max_peak_speed_m_s", self.max_peak_speed_m_s),
+        ] {
+            if !pos(v) {
+                return Err(format!(
+                    "`vortices.{key}` = {v}: expected a finite value > 0"
+                ));
+            }
+        }
+        if !(self.intensity.is_finite() && self.intensity >= 0.0) {
+            return Err(format!(
+                "`vortices.intensity` = {}: expected a finite value >= 0",
+                self.intensity
+            ));
+        }
+        Ok(())
+    }
+
+    /// Vortices wanted at an inflow of `inflow_m3_per_s`: none below the threshold, `max_count`
+    /// from the full flow, linear in between (rounded).
+    pub fn target_count(&self, inflow_m3_per_s: f64) -> usize {
+        let q = inflow_m3_per_s * 6e7;
+        if !(q.is_finite() && q > self.threshold_ml_min) {
+            return 0;
+        }
+        let f = ((q - self.threshold_ml_min) / (self.full_flow_ml_min - self.threshold_ml_min))
+            .clamp(0.0, 1.0);
+        (f * self.max_count as f64).round() as usize
+    }
+
+    /// The core radius on a grid of spacing `h_m`, m.
+    pub fn core_radius_m(&self, h_m: f64) -> f64 {
+        (self.core_radius_mm * 1e-3).max(self.min_core_voxels * h_m)
+    }
+}
+
+/// Smoothstep taper: 1 for `x <= a`, 0 for `x >= b`, C1 in between; and its derivative.
+#[inline]
+fn taper(x: f64, a: f64, b: f64) -> (f64, f64) {
+    if x <= a {
+        (1.0, 0.0)
+    } else if x >= b {
+        (0.0, 0.0)
+    } else {
+        let t = (x - a) / (b - a);
+        (
+            1.0 - t * t * (3.0 - 2.0 * t),
+            -6.0 * t * (1.0 - t) / (b - a),
+        )
+    }
+}
+
+/// Rankine's stream function over `Gamma / (2 pi)`, zero at the cutoff: `r` in core radii.
+#[inline]
+fn rankine_psi(r: f64) -> f64 {
+    if r <= 1.0 {
+        0.5 * (1.0 - r * r) + CUTOFF_CORES.ln()
+    } else {
+        (CUTOFF_CORES / r).ln()
+    }
+}
+
+/// One Rankine vortex.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vortex {
+    /// Centre, m.
+    pub centre_m: [f64; 3],
+    /// Unit axis (the vorticity's direction).
+    pub axis: [f64; 3],
+    /// Circulation, m^2/s (positive: counter-clockwise about the axis).
+    pub circulation_m2_s: f64,
+    /// Core radius, m.
+    pub core_radius_m: f64,
+}
+
+impl Vortex {
+    /// Tangential speed at `r_m` from the axis in the centre plane (m/s): Rankine's out to
+    /// `RANKINE_EXACT_CORES`, tapered to zero at `CUTOFF_CORES`.
+    pub fn tangential_speed_m_s(&self, r_m: f64) -> f64 {
+        let big_r = self.core_radius_m;
+        let r = r_m.abs() / big_r;
+        let k = self.circulation_m2_s / (2.0 * std::f64::consts::PI * big_r);
+        let rankine = if r <= 1.0 { r } else { 1.0 / r };
+        let (w, dw) = taper(r, RANKINE_EXACT_CORES, CUTOFF_CORES);
+        // v = -(Psi w)' with Psi' = -rankine (in units of Gamma / (2 pi R)).
+        k * (rankine * w - rankine_psi(r) * dw)
+    }
+
+    /// The axial window at `s_m` from the centre plane.
+    pub fn axial_window(&self, s_m: f64) -> f64 {
+        let r = self.core_radius_m;
+        taper(s_m.abs(), AXIAL_FLAT_CORES * r, AXIAL_END_CORES * r).0
+    }
+
+    /// `(s, r_vec, r)`: the axial coordinate and the radial vector of `p`.
+    fn frame(&self, p: [f64; 3]) -> (f64, [f64; 3], f64) {
+        let d: [f64; 3] = std::array::from_fn(|a| p[a] - self.centre_m[a]);
+        let s = dot(d, self.axis);
+        let rv: [f64; 3] = std::array::from_fn(|a| d[a] - s * self.axis[a]);
+        (s, rv, dot(rv, rv).sqrt())
+    }
+
+    /// The vortex's velocity at `p` (m/s), closed form.
+    pub fn velocity_m_s(&self, p: [f64; 3]) -> [f64; 3] {
+        let (s, rv, r) = self.frame(p);
+        if r == 0.0 {
+            return [0.0; 3];
+        }
+        let m = self.axial_window(s) * self.tangential_speed_m_s(r) / r;
+        cross(self.axis, rv).map(|v| v * m)
+    }
+
+    /// The vector potential's magnitude at `p`, m^2/s (`A = phi n`, `curl A` = the velocity).
+    pub fn potential_m2_s(&self, p: [f64; 3]) -> f64 {
+        let (s, _, r) = self.frame(p);
+        let rr = r / self.core_radius_m;
+        let k = self.circulation_m2_s / (2.0 * std::f64::consts::PI);
+        self.axial_window(s) * k * rankine_psi(rr) * taper(rr, RANKINE_EXACT_CORES, CUTOFF_CORES).0
+    }
+
+    /// Half extent (m) of the vortex's support along each axis.
+    pub fn half_extent_m(&self) -> [f64; 3] {
+        let (l, r) = (
+            AXIAL_END_CORES * self.core_radius_m,
+            CUTOFF_CORES * self.core_radius_m,
+        );
+        self.axis
+            .map(|n| l * n.abs() + r * (1.0 - n * n).max(0.0).sqrt())
+    }
+}
+
+#[inline]
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The cross product.
+#[inline]
+pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// What the last [`VortexField::step`] did.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct VortexStats {
+    /// Vortices alive.
+    pub count: usize,
+    /// Vortices respawned because they left the fluid.
+    pub respawned: usize,
+    /// Vortices added to follow the flow rate.
+    pub spawned: usize,
+    /// Vortices removed to follow the flow rate.
+    pub removed: usize,
+    /// Grid nodes whose potential was evaluated.
+    pub nodes_evaluated: usize,
+}
+
+/// The vortices on one MAC grid, and their field as face velocities.
+#[derive(Debug, Clone)]
+pub struct VortexField {
+    spec: VortexSpec,
+    rng: SplitMix64,
+    vortices: Vec<Vortex>,
+    dims: [usize; 3],
+    h: f64,
+    origin: [f64; 3],
+    core_radius_m: f64,
+    revision: u64,
+    /// Per node: 1 when all eight cells around it are fluid.
+    node_mask: Vec<u8>,
+    fluid_cells: Vec<u32>,
+    /// Node-centred vector potential, per component, m^2/s.
+    pot: [Vec<f32>; 3],
+    /// The field's face velocities, m/s (the solver's layout).
+    faces: [Vec<f32>; 3],
+    /// The field last added to the solver (injected mode).
+    injected: [Vec<f32>; 3],
+    /// Node boxes written last time (`[lo; 3], [hi; 3]` inclusive), to clear.
+    boxes: Vec<([usize; 3], [usize; 3])>,
+    /// `Psi(q) w(q)` over `Gamma / (2 pi)` at `q = r^2/R^2`.
+    table: Vec<f32>,
+    stats: VortexStats,
+}
+
+impl VortexField {
+    /// Vortices for the grid of `solver` (not periodic).
+    pub fn new(spec: VortexSpec, solver: &FluidSolver) -> Result<Self, String> {
+        spec.validate()?;
+        let g = solver.grid();
+        if g.periodic().iter().any(|&p| p) {
+            return Err("vortices: periodic fluid grids are not supported".into());
+        }
+        let dims = g.dims();
+        let h = g.spacing_m();
+        let nodes = (dims[0] + 1) * (dims[1] + 1) * (dims[2] + 1);
+        let faces: [Vec<f32>; 3] =
+            std::array::from_fn(|c| vec![0.0; solver.face_velocities(c).len()]);
+        let qmax = CUTOFF_CORES * CUTOFF_CORES;
+        let table = (0..=TABLE_SIZE)
+            .map(|i| {
+                let r = (qmax * i as f64 / TABLE_SIZE as f64).sqrt();
+                (rankine_psi(r) * taper(r, RANKINE_EXACT_CORES, CUTOFF_CORES).0) as f32
+            })
+            .collect();
+        Ok(Self {
+            rng: SplitMix64::new(spec.seed),
+            vortices: Vec::with_capacity(spec.max_count),
+            boxes: Vec::with_capacity(spec.max_count),
+            core_radius_m: spec.core_radius_m(h),
+            spec,
+            dims,
+            h,
+            origin: g.origin_m(),
+            revision: 0,
+            node_mask: vec![0; nodes],
+            fluid_cells: Vec::new(),
+            pot: std::array::from_fn(|_| vec![0.0; nodes]),
+            injected: faces.clone(),
+            faces,
+            table,
+            stats: VortexStats::default(),
+        })
+    }
+
+    /// The description.
+    pub fn spec(&self) -> &VortexSpec {
+        &self.spec
+    }
+    /// The vortices.
+    pub fn vortices(&self) -> &[Vortex] {
+        &self.vortices
+    }
+    /// Replaces the vortices (tests, replays); the count is capped at `max_count`.
+    pub fn set_vortices(&mut self, vortices: &[Vortex]) {
+        self.vortices.clear();
+        let n = vortices.len().min(self.spec.max_count);
+        self.vortices.extend_from_slice(&vortices[..n]);
+    }
+    /// The core radius on this grid, m.
+    pub fn core_radius_m(&self) -> f64 {
+        self.core_radius_m
+    }
+    /// The field's face velocities of component `c` (the solver's layout), from the last
+    /// [`VortexField::rebuild`].
+    pub fn face_velocities(&self, c: usize) -> &[f32] {
+        &self.faces[c]
+    }
+    /// What the last step did.
+    pub fn stats(&self) -> VortexStats {
+        self.stats
+    }
+
+    /// The closed-form sum of the vortices' velocities at `p`, m/s.
+    pub fn velocity_at(&self, p: [f64; 3]) -> [f64; 3] {
+        let mut v = [0.0; 3];
+        for w in &self.vortices {
+            for (x, u) in v.iter_mut().zip(w.velocity_m_s(p)) {
+                *x += u;
+            }
+        }
+        v
+    }
+
+    fn sync_labels(&mut self, solver: &FluidSolver) {
+        let g = solver.grid();
+        if g.revision() == self.revision {
+            return;
+        }
+        self.revision = g.revision();
+        let [nx, ny, nz] = self.dims;
+        let labels = g.labels();
+        let fluid =
+            |i: usize, j: usize, k: usize| labels[i + nx * (j + ny * k)] == CellLabel::Fluid;
+        self.fluid_cells.clear();
+        for (n, l) in labels.iter().enumerate() {
+            if *l == CellLabel::Fluid {
+                self.fluid_cells.push(n as u32);
+            }
+        }
+        let (sx, sy) = (nx + 1, ny + 1);
+        for k in 0..=nz {
+            for j in 0..=ny {
+                for i in 0..=nx {
+                    let inside = i > 0 && j > 0 && k > 0 && i < nx && j < ny && k < nz;
+                    let m = inside
+                        && (0..8).all(|b| {
+                            fluid(i - 1 + (b & 1), j - 1 + (b >> 1 & 1), k - 1 + (b >> 2))
+                        });
+                    self.node_mask[i + sx * (j + sy * k)] = m as u8;
+                }
+            }
+        }
+        // The potential's support moved with the labels: start the field afresh (what was
+        // injected stays in the solver's state and decays there).
+        for c in 0..3 {
+            self.faces[c].fill(0.0);
+            self.injected[c].fill(0.0);
+            self.pot[c].fill(0.0);
+        }
+        self.boxes.clear();
+        // Vortices now outside the fluid respawn on the next step.
+    }
+
+    fn cell_of(&self, p: [f64; 3]) -> Option<usize> {
+        let mut c = [0usize; 3];
+        for a in 0..3 {
+            let x = (p[a] - self.origin[a]) / self.h;
+            if !(x >= 0.0 && x < self.dims[a] as f64) {
+                return None;
+            }
+            c[a] = x as usize;
+        }
+        Some(c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2]))
+    }
+
+    fn in_fluid(&self, solver: &FluidSolver, p: [f64; 3]) -> bool {
+        self.cell_of(p)
+            .is_some_and(|n| solver.grid().label_at(n) == CellLabel::Fluid)
+    }
+
+    /// The curl of the resolved velocity at `p` (central differences over one cell), 1/s.
+    fn curl(&self, solver: &FluidSolver, p: [f64; 3]) -> [f64; 3] {
+        let h = self.h;
+        let d = |a: usize, c: usize| {
+            let mut lo = p;
+            let mut hi = p;
+            lo[a] -= h;
+            hi[a] += h;
+            (solver.sample_velocity_m_s(hi)[c] - solver.sample_velocity_m_s(lo)[c]) / (2.0 * h)
+        };
+        [d(1, 2) - d(2, 1), d(2, 0) - d(0, 2), d(0, 1) - d(1, 0)]
+    }
+
+    /// Axis and circulation from the resolved flow at the vortex's centre; a vortex where the
+    /// flow has no curl keeps its axis.
+    fn orient(&self, solver: &FluidSolver, v: &mut Vortex) {
+        let w = self.curl(solver, v.centre_m);
+        let m = dot(w, w).sqrt();
+        if m.is_finite() && m > 1e-9 {
+            v.axis = w.map(|x| x / m);
+        }
+        let u = solver.sample_velocity_m_s(v.centre_m);
+        let speed = dot(u, u).sqrt();
+        let peak = (self.spec.intensity * speed).min(self.spec.max_peak_speed_m_s);
+        let peak = if peak.is_finite() { peak } else { 0.0 };
+        v.circulation_m2_s = 2.0 * std::f64::consts::PI * v.core_radius_m * peak;
+    }
+
+    fn spawn(&mut self, solver: &FluidSolver) -> Option<Vortex> {
+        if self.fluid_cells.is_empty() {
+            return None;
+        }
+        let n = self.fluid_cells[self.rng.below(self.fluid_cells.len())] as usize;
+        let [nx, ny, _] = self.dims;
+        let c = [n % nx, (n / nx) % ny, n / (nx * ny)];
+        let centre: [f64; 3] =
+            std::array::from_fn(|a| self.origin[a] + (c[a] as f64 + self.rng.unit()) * self.h);
+        let mut v = Vortex {
+            centre_m: centre,
+            axis: self.rng.direction(),
+            circulation_m2_s: 0.0,
+            core_radius_m: self.core_radius_m,
+        };
+        self.orient(solver, &mut v);
+        Some(v)
+    }
+
+    /// Moves the vortices by an Euler step with the resolved velocity at their centres,
+    /// respawns those that left the fluid, re-orients them from the curl, brings their number
+    /// to `target_count` (capped at `max_count`) and rebuilds the field's face velocities.
+    pub fn step(&mut self, solver: &FluidSolver, target_count: usize, dt_s: f64) -> VortexStats {
+        self.sync_labels(solver);
+        let mut stats = VortexStats::default();
+        let mut i = 0;
+        while i < self.vortices.len() {
+            let mut v = self.vortices[i];
+            let u = solver.sample_velocity_m_s(v.centre_m);
+            for (c, u) in v.centre_m.iter_mut().zip(u) {
+                *c += dt_s * u;
+            }
+            if self.in_fluid(solver, v.centre_m) {
+                self.orient(solver, &mut v);
+                self.vortices[i] = v;
+                i += 1;
+            } else if let Some(w) = self.spawn(solver) {
+                stats.respawned += 1;
+                self.vortices[i] = w;
+                i += 1;
+            } else {
+                self.vortices.swap_remove(i);
+                stats.removed += 1;
+            }
+        }
+        let target = target_count.min(self.spec.max_count);
+        while self.vortices.len() > target {
+            self.vortices.pop();
+            stats.removed += 1;
+        }
+        while self.vortices.len() < target {
+            match self.spawn(solver) {
+                Some(v) => {
+                    self.vortices.push(v);
+                    stats.spawned += 1;
+                }
+                None => break,
+            }
+        }
+        stats.nodes_evaluated = self.rebuild(solver);
+        stats.count = self.vortices.len();
+        self.stats = stats;
+        stats
+    }
+
+    /// Recomputes the node potential of the current vortices and the face velocities (the
+    /// discrete curl) on every face of the fluid cells of `solver`'s grid; returns the nodes
+    /// evaluated.
+    pub fn rebuild(&mut self, solver: &FluidSolver) -> usize {
+        self.sync_labels(solver);
+        let [nx, ny, _] = self.dims;
+        let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
+        for &(lo, hi) in &self.boxes {
+            for k in lo[2]..=hi[2] {
+                for j in lo[1]..=hi[1] {
+                    let row = sx * j + sy * k;
+                    for p in &mut self.pot {
+                        p[row + lo[0]..=row + hi[0]].fill(0.0);
+                    }
+                }
+            }
+        }
+        self.boxes.clear();
+        let mut evaluated = 0;
+        let qmax = (CUTOFF_CORES * CUTOFF_CORES) as f32;
+        let tscale = TABLE_SIZE as f32 / qmax;
+        let h = self.h;
+        for v in &self.vortices {
+            let ext = v.half_extent_m();
+            let mut lo = [0usize; 3];
+            let mut hi = [0usize; 3];
+            let mut empty = false;
+            for a in 0..3 {
+                let l = ((v.centre_m[a] - ext[a] - self.origin[a]) / h)
+                    .ceil()
+                    .max(0.0);
+                let u = ((v.centre_m[a] + ext[a] - self.origin[a]) / h)
+                    .floor()
+                    .min(self.dims[a] as f64);
+                if l.is_nan() || u.is_nan() || l > u {
+                    empty = true;
+                }
+                lo[a] = l as usize;
+                hi[a] = u.max(0.0) as usize;
+            }
+            if empty || v.circulation_m2_s == 0.0 {
+                continue;
+            }
+            self.boxes.push((lo, hi));
+            let n = v.axis.map(|x| x as f32);
+            let amp = (v.circulation_m2_s / (2.0 * std::f64::consts::PI)) as f32;
+            let inv_r2 = (1.0 / (v.core_radius_m * v.core_radius_m)) as f32;
+            let (flat, end) = (
+                (AXIAL_FLAT_CORES * v.core_radius_m) as f32,
+                (AXIAL_END_CORES * v.core_radius_m) as f32,
+            );
+            let inv_len = 1.0 / (end - flat);
+            let dx0 = (self.origin[0] + lo[0] as f64 * h - v.centre_m[0]) as f32;
+            let hf = h as f32;
+            let table = &self.table[..];
+            let [p0, p1, p2] = &mut self.pot;
+            for k in lo[2]..=hi[2] {
+                let dz = self.origin[2] + k as f64 * h - v.centre_m[2];
+                for j in lo[1]..=hi[1] {
+                    let dy = self.origin[1] + j as f64 * h - v.centre_m[1];
+                    let s0 = (dy * v.axis[1] + dz * v.axis[2]) as f32;
+                    let e0 = (dy * dy + dz * dz) as f32;
+                    let row = sx * j + sy * k;
+                    for i in lo[0]..=hi[0] {
+                        let node = row + i;
+                        if self.node_mask[node] == 0 {
+                            continue;
+                        }
+                        let dx = dx0 + (i - lo[0]) as f32 * hf;
+                        let s = s0 + dx * n[0];
+                        let sa = s.abs();
+                        if sa >= end {
+                            continue;
+                        }
+                        let q = (dx * dx + e0 - s * s).max(0.0) * inv_r2;
+                        if q >= qmax {
+                            continue;
+                        }
+                        evaluated += 1;
+                        let g = if sa <= flat {
+                            1.0
+                        } else {
+                            let t = (sa - flat) * inv_len;
+                            1.0 - t * t * (3.0 - 2.0 * t)
+                        };
+                        let x = q * tscale;
+                        let m = (x as usize).min(TABLE_SIZE - 1);
+                        let f = x - m as f32;
+                        let psi = table[m] + f * (table[m + 1] - table[m]);
+                        let phi = amp * g * psi;
+                        p0[node] += phi * n[0];
+                        p1[node] += phi * n[1];
+                        p2[node] += phi * n[2];
+                    }
+                }
+            }
+        }
+        self.curl_faces();
+        evaluated
+    }
+
+    /// Face velocities of the fluid cells' faces from the node potential.
+    fn curl_faces(&mut self) {
+        let [nx, ny, nz] = self.dims;
+        let stride = [1, nx + 1, (nx + 1) * (ny + 1)];
+        let inv = (0.5 / self.h) as f32;
+        let pot = &self.pot;
+        for &n in &self.fluid_cells {
+            let n = n as usize;
+            let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            for c in 0..3 {
+                // Both faces of the cell along c (the lower one may border a non-fluid cell).
+                for up in 0..2 {
+                    let mut f = cell;
+                    f[c] += up;
+                    let (a, b) = ((c + 1) % 3, (c + 2) % 3);
+                    let base = f[0] + stride[1] * f[1] + stride[2] * f[2];
+                    let (sa, sb) = (stride[a], stride[b]);
+                    let (na, nb) = (&pot[a], &pot[b]);
+                    let u = (nb[base + sa] + nb[base + sa + sb] - nb[base] - nb[base + sb])
+                        - (na[base + sb] + na[base + sa + sb] - na[base] - na[base + sa]);
+                    let mut fd = [nx, ny, nz];
+                    fd[c] += 1;
+                    self.faces[c][f[0] + fd[0] * (f[1] + fd[1] * f[2])] = u * inv;
+                }
+            }
+        }
+    }
+
+    /// Adds the change of the field since the last injection to the solver's face velocities
+    /// (fluid cells' faces only; the change is discretely divergence-free and zero on faces
+    /// beside walls, ports and the open os).
+    pub fn inject(&mut self, solver: &mut FluidSolver) {
+        if solver.grid().revision() != self.revision {
+            return;
+        }
+        let [nx, ny, nz] = self.dims;
+        for c in 0..3 {
+            let mut fd = [nx, ny, nz];
+            fd[c] += 1;
+            let u = solver.face_velocities_mut(c);
+            for &n in &self.fluid_cells {
+                let n = n as usize;
+                let f = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                for up in 0..2 {
+                    let mut g = f;
+                    g[c] += up;
+                    let idx = g[0] + fd[0] * (g[1] + fd[1] * g[2]);
+                    let d = self.faces[c][idx] - self.injected[c][idx];
+                    if d != 0.0 {
+                        u[idx] += d;
+                        self.injected[c][idx] = self.faces[c][idx];
+                    }
+                }
+            }
+        }
+    }
+
+    /// Adds the field's cell-centred velocity to `out` (one per cell, x fastest) in fluid cells.
+    pub fn overlay_into(&self, out: &mut [[f32; 3]]) {
+        let [nx, ny, nz] = self.dims;
+        for &n in &self.fluid_cells {
+            let n = n as usize;
+            if n >= out.len() {
+                continue;
+            }
+            let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            for c in 0..3 {
+                let mut fd = [nx, ny, nz];
+                fd[c] += 1;
+                let lo = cell[0] + fd[0] * (cell[1] + fd[1] * cell[2]);
+                let stride = [1, fd[0], fd[0] * fd[1]][c];
+                out[n][c] += 0.5 * (self.faces[c][lo] + self.faces[c][lo + stride]);
+            }
+        }
+    }
+}
+
+/// The vortex stage of a scene.
 #[derive(Debug, Clone, Default)]
-pub struct Vortices {}
+pub struct Vortices {
+    spec: VortexSpec,
+    field: Option<VortexField>,
+}
 
 impl Vortices {
-    /// Advances the vortices after the fluid step; returns whether the stage ran.
-    pub(crate) fn step(&mut self, _scene: &mut Scene, _dt_s: f64) -> bool {
-        false
+    /// The stage for a scene's `[vortices]` table.
+    pub fn new(spec: VortexSpec) -> Self {
+        Self { spec, field: None }
+    }
+
+    /// The vortices and their field, once the stage has run.
+    pub fn field(&self) -> Option<&VortexField> {
+        self.field.as_ref()
+    }
+
+    /// The display-only field's face velocities (overlay mode), for the particles.
+    pub(crate) fn overlay_faces(&self) -> Option<[&[f32]; 3]> {
+        let f = self.field.as_ref()?;
+        (self.spec.mode == VortexMode::Overlay && !f.vortices.is_empty())
+            .then(|| std::array::from_fn(|c| f.face_velocities(c)))
+    }
+
+    /// Advances the vortices after the fluid step; returns whether the stage ran (not below the
+    /// flow-rate threshold with no vortex left).
+    pub(crate) fn step(&mut self, scene: &mut Scene, dt_s: f64) -> bool {
+        let target = self
+            .spec
+            .target_count(scene.hydraulic_state.flows.inflow_m3_per_s);
+        let Some(solver) = scene.fluid.as_mut() else {
+            return false;
+        };
+        if target == 0 && self.field.as_ref().is_none_or(|f| f.vortices.is_empty()) {
+            return false;
+        }
+        if self.field.is_none() {
+            match VortexField::new(self.spec.clone(), solver) {
+                Ok(f) => self.field = Some(f),
+                Err(e) => {
+                    tracing::warn!("vortices disabled: {e}");
+                    return false;
+                }
+            }
+        }
+        let Some(field) = self.field.as_mut() else {
+            return false;
+        };
+        field.step(solver, target, dt_s);
+        if self.spec.mode == VortexMode::Injected {
+            field.inject(solver);
+        }
+        true
     }
 
     /// Adds the display-only overlay to cell-centred velocities (x fastest, one per cell).
-    pub(crate) fn overlay_into(&self, _scene: &Scene, _out: &mut [[f32; 3]]) {}
+    pub(crate) fn overlay_into(&self, _scene: &Scene, out: &mut [[f32; 3]]) {
+        if self.spec.mode == VortexMode::Overlay {
+            if let Some(f) = &self.field {
+                f.overlay_into(out);
+            }
+        }
+    }
 }
