@@ -30,6 +30,7 @@ pub mod field;
 pub mod mesh;
 pub mod names;
 pub mod particles;
+pub mod slice;
 pub mod status;
 
 pub use names::{ServiceNames, DEFAULT_SERVICE_PREFIX};

@@ -8,7 +8,7 @@ use clap::Parser;
 use hydrometra_daemon::service::{self, config};
 
 /// The hydrometra simulation daemon: reads the rig, runs the simulation at a fixed rate and
-/// publishes status (and later mesh, flow field and particles) over iceoryx2 shared memory.
+/// publishes status, cavity mesh, flow field and particles over iceoryx2 shared memory.
 ///
 /// Flags override the configuration file. Stop with SIGINT or SIGTERM; shared memory is released.
 #[derive(Parser, Debug)]
@@ -42,6 +42,19 @@ struct Args {
     /// Start a new procedure (deficit 0) instead of restoring the saved one.
     #[arg(long)]
     new_procedure: bool,
+    /// The scene: a built-in name ("default", "myoma-figo1") or a scene file (overrides
+    /// `[scene] scene`).
+    #[arg(long, value_name = "NAME|FILE")]
+    scene: Option<String>,
+    /// Run no scene: status and hydraulics only (overrides `[scene] enabled`).
+    #[arg(long, conflicts_with = "scene")]
+    no_scene: bool,
+    /// Scene frames per second (overrides `[scene] rate_hz`).
+    #[arg(long, value_name = "HZ")]
+    scene_rate_hz: Option<f64>,
+    /// Where built atlases are cached (overrides `[scene] atlas_cache_dir`).
+    #[arg(long, value_name = "DIR")]
+    atlas_cache_dir: Option<PathBuf>,
     /// Print the default configuration (commented TOML) and exit.
     #[arg(long)]
     print_default_config: bool,
@@ -75,6 +88,10 @@ fn main() -> anyhow::Result<()> {
         status_rate_hz: args.status_rate_hz,
         procedure_record: args.procedure_record,
         new_procedure: args.new_procedure,
+        scene: args.scene,
+        no_scene: args.no_scene,
+        scene_rate_hz: args.scene_rate_hz,
+        atlas_cache_dir: args.atlas_cache_dir,
     })?;
     let duration = match args.duration {
         Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),

@@ -26,7 +26,7 @@ EVENT_SHUTDOWN = 15  # event id: the daemon is stopping
 
 
 class Status(ctypes.Structure):
-    """hydrometra.v1.Status: 352 bytes, 8-byte aligned, native (little-endian) byte order."""
+    """hydrometra.v1.Status: 704 bytes, 8-byte aligned, native (little-endian) byte order."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -88,6 +88,14 @@ class Status(ctypes.Structure):
         ("procedure_time_s", ctypes.c_double),
         ("deficit_warning_stage", ctypes.c_uint64),
         ("hydraulic_flags", ctypes.c_uint64),
+        ("scene_state", ctypes.c_uint64),
+        ("scene_frames", ctypes.c_uint64),
+        ("scene_stage_runs", ctypes.c_uint64 * 7),
+        ("scene_stage_skips", ctypes.c_uint64 * 7),
+        ("scene_stage_p99_s", ctypes.c_double * 7),
+        ("scene_step_p99_s", ctypes.c_double),
+        ("view_clarity", ctypes.c_double),
+        ("cavity_surface_volume_m3", ctypes.c_double),
     ]
 
     @staticmethod
@@ -96,7 +104,7 @@ class Status(ctypes.Structure):
         return "hydrometra.v1.Status"
 
 
-assert ctypes.sizeof(Status) == 496, ctypes.sizeof(Status)
+assert ctypes.sizeof(Status) == 704, ctypes.sizeof(Status)
 
 
 def as_dict(s: Status) -> dict:
