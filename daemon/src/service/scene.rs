@@ -26,6 +26,7 @@ use hydrometra_sim::scene::{
 };
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
 use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::{ipc, AllocationStrategy, NodeBuilder, NodeName, SignalHandlingMode};
 
 use super::latency::{LatencyHistogram, LatencySummary};
@@ -460,6 +461,16 @@ fn run(
 
         let cavity = scene.cavity();
         let errors = &log.publish_errors;
+        // Hands the history sample (the topology, the last flow field) to subscribers that came
+        // since the last send: a publisher that sends rarely must do it itself.
+        for updated in [
+            ports.topology.update_connections(),
+            ports.flow.update_connections(),
+        ] {
+            if updated.is_err() {
+                errors.fetch_add(1, Ordering::Relaxed);
+            }
+        }
         if published_revision != Some(cavity.topology_revision) {
             let tris = cavity.triangles;
             let sent = ports
