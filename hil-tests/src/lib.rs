@@ -100,6 +100,37 @@ pub fn monitor_once_json(prefix: &str) -> serde_json::Value {
     serde_json::from_str(&out).unwrap_or_else(|e| panic!("monitor printed no JSON ({e}): {out}"))
 }
 
+/// The atlas cache every hil-test shares (`target/hil-atlas`), holding the atlas of `scene`
+/// (a built-in name or file): built once, in this process, by the first test that needs it;
+/// tests running in parallel (nextest: one process per test) wait on a lock file instead of
+/// building it twice.
+pub fn shared_atlas_cache(scene: &str) -> PathBuf {
+    use hydrometra_sim::scene::{prepare, SceneDesc};
+    let exe = std::env::current_exe().expect("current_exe");
+    // target/<profile>/deps/<test> -> target/hil-atlas
+    let dir = exe
+        .ancestors()
+        .nth(3)
+        .expect("test executable in target/<profile>/deps")
+        .join("hil-atlas");
+    std::fs::create_dir_all(&dir).expect("atlas cache dir");
+    let desc = SceneDesc::load(scene).unwrap_or_else(|e| panic!("scene {scene}: {e}"));
+    let lock = std::fs::File::create(dir.join(".lock")).expect("atlas cache lock file");
+    lock.lock().expect("lock the atlas cache");
+    if !prepare::cache_path(&desc, &dir).is_file() {
+        let started = Instant::now();
+        eprintln!(
+            "building the shared test atlas of {scene} in {}",
+            dir.display()
+        );
+        prepare::load_or_build(&desc, Some(&dir), &mut |_, _, _, _| {})
+            .unwrap_or_else(|e| panic!("building the atlas of {scene}: {e}"));
+        eprintln!("atlas built in {:.1} s", started.elapsed().as_secs_f64());
+    }
+    drop(lock);
+    dir
+}
+
 /// A running `hydrometrad` child process; killed (SIGKILL) on drop if still running.
 pub struct Daemon {
     child: Child,
@@ -109,11 +140,25 @@ pub struct Daemon {
 }
 
 impl Daemon {
-    /// Starts `hydrometrad --service-prefix PREFIX ARGS...` with its log in a temp file.
+    /// Starts `hydrometrad --service-prefix PREFIX ARGS...` with its log in a temp file. Without
+    /// `--scene` in `args` the daemon runs no scene (`--no-scene`: status and hydraulics only);
+    /// with it, the scene's atlas comes from the shared test cache ([`shared_atlas_cache`]).
     pub fn start(prefix: &str, args: &[&str]) -> Daemon {
         let log = temp_dir("daemon-log").join("hydrometrad.log");
         let log_file = std::fs::File::create(&log).expect("log file");
-        let child = Command::new(binary("hydrometrad"))
+        let mut command = Command::new(binary("hydrometrad"));
+        match args.iter().position(|a| *a == "--scene") {
+            Some(i) => {
+                let scene = args.get(i + 1).expect("--scene NAME");
+                command
+                    .arg("--atlas-cache-dir")
+                    .arg(shared_atlas_cache(scene));
+            }
+            None => {
+                command.arg("--no-scene");
+            }
+        }
+        let child = command
             .arg("--service-prefix")
             .arg(prefix)
             .args(args)

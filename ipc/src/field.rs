@@ -1,4 +1,4 @@
-//! Flow field service (specified, published once the fluid stage lands).
+//! Flow field service: the fluid's cell labels and cell-centred velocities, every fluid step.
 
 use iceoryx2::prelude::ZeroCopySend;
 
@@ -14,6 +14,10 @@ pub mod label {
     pub const OUTFLOW: u8 = 3;
     /// Occupied by the scope.
     pub const SCOPE: u8 = 4;
+    /// The cavity wall, a moving solid: its velocity is the wall's.
+    pub const WALL: u8 = 5;
+    /// The open external os: fluid leaks out (or in) freely at pressure 0.
+    pub const OPEN: u8 = 6;
 }
 
 /// User header of `<prefix>/flow`; payload: `[u8]` of `total_bytes` with two sections:

@@ -31,6 +31,7 @@ pub mod hydraulic_flags;
 pub mod mesh;
 pub mod names;
 pub mod particles;
+pub mod slice;
 pub mod status;
 
 pub use names::{ServiceNames, DEFAULT_SERVICE_PREFIX};

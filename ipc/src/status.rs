@@ -144,6 +144,22 @@ pub struct Status {
     /// ([`link_down_reason::DETAIL_UNKNOWN`] if unreadable), the device's protocol version for
     /// `incompatible-version`, otherwise 0.
     pub link_down_detail: u32,
+    /// Scene: one of [`scene_state`] (0 none, 1 preparing, 2 running, 3 idle, 4 failed).
+    pub scene_state: u64,
+    /// Scene: frames stepped since the scene started.
+    pub scene_frames: u64,
+    /// Scene: runs per stage since the scene started, indexed by [`scene_stage`].
+    pub scene_stage_runs: [u64; 7],
+    /// Scene: skips per stage (inputs unchanged, nothing to do, at rest), indexed by [`scene_stage`].
+    pub scene_stage_skips: [u64; 7],
+    /// Scene: 99th percentile of each stage's recent run times, s, indexed by [`scene_stage`].
+    pub scene_stage_p99_s: [f64; 7],
+    /// Scene: 99th percentile of the recent whole scene steps, s.
+    pub scene_step_p99_s: f64,
+    /// Scene: view clarity in front of the scope in [0, 1] (1 clear); NaN without a particle stage.
+    pub view_clarity: f64,
+    /// Scene: volume enclosed by the last published cavity surface, m^3 (NaN before the first).
+    pub cavity_surface_volume_m3: f64,
 }
 
 /// Why the rig link is down, as carried in [`Status::link_down_reason`]. The daemon logs the full
@@ -189,6 +205,61 @@ pub mod link_down_reason {
             _ => "unknown",
         }
     }
+}
+
+/// Values of [`Status::scene_state`].
+pub mod scene_state {
+    /// No scene (disabled in the configuration).
+    pub const NONE: u64 = 0;
+    /// The scene's atlas is being loaded or built; the scene services do not exist yet.
+    pub const PREPARING: u64 = 1;
+    /// The scene steps and publishes; the fluid moves.
+    pub const RUNNING: u64 = 2;
+    /// The scene steps and publishes positions, but the fluid stage is at rest (skipped).
+    pub const IDLE: u64 = 3;
+    /// The scene could not be prepared (the log says why); hydraulics and status go on.
+    pub const FAILED: u64 = 4;
+
+    /// Human-readable name of a scene state value.
+    pub fn name(value: u64) -> &'static str {
+        match value {
+            NONE => "none",
+            PREPARING => "preparing",
+            RUNNING => "running",
+            IDLE => "idle",
+            FAILED => "failed",
+            _ => "unknown",
+        }
+    }
+}
+
+/// Indices of the per-stage arrays [`Status::scene_stage_runs`], `scene_stage_skips` and
+/// `scene_stage_p99_s`: the scene pipeline's stages in order.
+pub mod scene_stage {
+    /// Names, by index.
+    pub const NAMES: [&str; 7] = [
+        "hydraulics",
+        "deformation",
+        "voxelize",
+        "ports",
+        "fluid",
+        "vortices",
+        "particles",
+    ];
+    /// The scene following the 1 kHz loop's hydraulic state.
+    pub const HYDRAULICS: usize = 0;
+    /// Atlas replay of the cavity surface.
+    pub const DEFORMATION: usize = 1;
+    /// Cavity surface to cell labels.
+    pub const VOXELIZE: usize = 2;
+    /// Scope, port and wall cells and their velocities.
+    pub const PORTS: usize = 3;
+    /// The fluid step.
+    pub const FLUID: usize = 4;
+    /// Rankine vortices.
+    pub const VORTICES: usize = 5;
+    /// Particles and view clarity.
+    pub const PARTICLES: usize = 6;
 }
 
 /// Rig link states as carried in [`Status::link_state`].
@@ -281,6 +352,14 @@ impl Default for Status {
             hydraulic_flags: 0,
             link_down_reason: link_down_reason::NONE,
             link_down_detail: 0,
+            scene_state: scene_state::NONE,
+            scene_frames: 0,
+            scene_stage_runs: [0; 7],
+            scene_stage_skips: [0; 7],
+            scene_stage_p99_s: [0.0; 7],
+            scene_step_p99_s: 0.0,
+            view_clarity: f64::NAN,
+            cavity_surface_volume_m3: f64::NAN,
         }
     }
 }
@@ -332,8 +411,9 @@ mod tests {
     fn status_has_no_implicit_padding() {
         // The sum of the field sizes equals the struct size: nothing hidden between fields.
         // 30 scalar 8-byte fields, 10 f64 in arrays, 8 u32 (2 at the start, 6 at the end), then
-        // the 18 appended 8-byte hydraulic fields, then the 2 appended u32 link-down fields.
-        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2;
+        // the 18 appended 8-byte hydraulic fields, then the 2 appended u32 link-down fields, then
+        // the scene's 2 + 3 * 7 + 3 8-byte fields.
+        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2 + 8 * (2 + 3 * 7 + 3);
         assert_eq!(core::mem::size_of::<Status>(), fields);
         assert_eq!(core::mem::size_of::<Status>() % 8, 0);
         assert_eq!(core::mem::align_of::<Status>(), 8);

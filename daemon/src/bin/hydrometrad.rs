@@ -8,7 +8,7 @@ use clap::Parser;
 use hydrometra_daemon::service::{self, config};
 
 /// The hydrometra simulation daemon: reads the rig, runs the simulation at a fixed rate and
-/// publishes status (and later mesh, flow field and particles) over iceoryx2 shared memory.
+/// publishes status, cavity mesh, flow field and particles over iceoryx2 shared memory.
 ///
 /// Flags override the configuration file. Stop with SIGINT or SIGTERM; shared memory is released.
 #[derive(Parser, Debug)]
@@ -55,6 +55,19 @@ struct Args {
     /// Record nothing (overrides `[record] enabled`).
     #[arg(long, conflicts_with = "record_dir")]
     no_record: bool,
+    /// The scene: a built-in name ("default", "myoma-figo1") or a scene file (overrides
+    /// `[scene] scene`).
+    #[arg(long, value_name = "NAME|FILE")]
+    scene: Option<String>,
+    /// Run no scene: status and hydraulics only (overrides `[scene] enabled`).
+    #[arg(long, conflicts_with = "scene")]
+    no_scene: bool,
+    /// Scene frames per second (overrides `[scene] rate_hz`).
+    #[arg(long, value_name = "HZ")]
+    scene_rate_hz: Option<f64>,
+    /// Where built atlases are cached (overrides `[scene] atlas_cache_dir`).
+    #[arg(long, value_name = "DIR")]
+    atlas_cache_dir: Option<PathBuf>,
     /// Print the default configuration (commented TOML) and exit.
     #[arg(long)]
     print_default_config: bool,
@@ -96,6 +109,10 @@ fn main() -> anyhow::Result<()> {
         replay_speed: args.replay_speed,
         record_dir: args.record_dir,
         no_record: args.no_record,
+        scene: args.scene,
+        no_scene: args.no_scene,
+        scene_rate_hz: args.scene_rate_hz,
+        atlas_cache_dir: args.atlas_cache_dir,
     })?;
     let duration = match args.duration {
         Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),

@@ -293,6 +293,51 @@ impl HydraulicsConfig {
     }
 }
 
+/// `[scene]`: the scene the daemon runs (cavity deformation, voxelization, fluid, particles) on
+/// its own thread, and where its atlas is cached.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SceneConfig {
+    /// Run a scene at all (false: status and hydraulics only, no mesh, flow or particles).
+    pub enabled: bool,
+    /// A built-in scene name (`default`, `myoma-figo1`) or a scene file (docs/scene.md).
+    pub scene: String,
+    /// Scene frames per second (positions and particles every frame, flow every fluid step).
+    pub rate_hz: f64,
+    /// Where built atlases are cached under their key; default `<paths.state_dir>/atlas`, else
+    /// `$XDG_CACHE_HOME/hydrometra/atlas`, else `~/.cache/hydrometra/atlas`.
+    pub atlas_cache_dir: Option<PathBuf>,
+}
+
+impl Default for SceneConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            scene: "default".into(),
+            rate_hz: 60.0,
+            atlas_cache_dir: None,
+        }
+    }
+}
+
+impl SceneConfig {
+    /// The atlas cache directory: `atlas_cache_dir`, else `<state_dir>/atlas`, else the user's
+    /// cache directory; none when no home is known.
+    pub fn cache_dir(&self, paths: &PathsConfig) -> Option<PathBuf> {
+        if let Some(d) = &self.atlas_cache_dir {
+            return Some(d.clone());
+        }
+        if let Some(d) = &paths.state_dir {
+            return Some(d.join("atlas"));
+        }
+        let xdg = std::env::var_os("XDG_CACHE_HOME").filter(|v| !v.is_empty());
+        let base = xdg
+            .map(PathBuf::from)
+            .or_else(|| std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache")))?;
+        Some(base.join("hydrometra").join("atlas"))
+    }
+}
+
 /// The whole configuration.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -310,6 +355,8 @@ pub struct Config {
     pub hydraulics: HydraulicsConfig,
     /// `[record]`.
     pub record: RecordConfig,
+    /// `[scene]`.
+    pub scene: SceneConfig,
 }
 
 /// Command-line overrides, applied after the file.
@@ -337,6 +384,14 @@ pub struct Overrides {
     pub record_dir: Option<PathBuf>,
     /// `--no-record`: record nothing.
     pub no_record: bool,
+    /// `--scene NAME|FILE`.
+    pub scene: Option<String>,
+    /// `--no-scene`.
+    pub no_scene: bool,
+    /// `--scene-rate-hz`.
+    pub scene_rate_hz: Option<f64>,
+    /// `--atlas-cache-dir DIR`.
+    pub atlas_cache_dir: Option<PathBuf>,
 }
 
 impl Config {
@@ -405,6 +460,19 @@ impl Config {
             self.hydraulics.record = Some(record.clone());
         }
         self.hydraulics.new_procedure |= o.new_procedure;
+        if let Some(scene) = &o.scene {
+            self.scene.scene = scene.clone();
+            self.scene.enabled = true;
+        }
+        if o.no_scene {
+            self.scene.enabled = false;
+        }
+        if let Some(rate) = o.scene_rate_hz {
+            self.scene.rate_hz = rate;
+        }
+        if let Some(dir) = &o.atlas_cache_dir {
+            self.scene.atlas_cache_dir = Some(dir.clone());
+        }
         self.validate("command line")
     }
 
@@ -485,6 +553,22 @@ impl Config {
                     "valid parameters",
                 ),
             });
+        }
+        check_range(
+            origin,
+            "scene.rate_hz",
+            self.scene.rate_hz,
+            1.0,
+            self.sim_loop.tick_rate_hz,
+            "Hz (at most loop.tick_rate_hz)",
+        )?;
+        if self.scene.enabled && self.scene.scene.trim().is_empty() {
+            return Err(invalid(
+                origin,
+                "scene.scene",
+                "\"\"",
+                "a built-in scene name such as \"default\" or a scene file path",
+            ));
         }
         let e = &self.rig.emulated;
         check_range(

@@ -69,6 +69,9 @@ pub struct HydraulicsSetup {
     pub save_interval: Duration,
     /// Start a new procedure instead of restoring the record.
     pub new_procedure: bool,
+    /// The scene's hand-over: the stage offers its state every tick and takes the atlas's
+    /// compliance from it when the scene is ready.
+    pub scene: Option<Arc<super::scene::SceneFeed>>,
 }
 
 /// The record writer thread and its channel.
@@ -137,6 +140,7 @@ pub struct HydraulicsStage {
     since_save_s: f64,
     last_alarm_bits: u32,
     reset: Arc<AtomicBool>,
+    scene: Option<Arc<super::scene::SceneFeed>>,
 }
 
 impl HydraulicsStage {
@@ -235,6 +239,7 @@ impl HydraulicsStage {
             since_save_s: 0.0,
             last_alarm_bits,
             reset,
+            scene: setup.scene,
         })
     }
 
@@ -262,6 +267,10 @@ impl Stage for HydraulicsStage {
             );
             self.send_record();
         }
+        if let Some(compliance) = self.scene.as_ref().and_then(|f| f.take_compliance()) {
+            // The cavity keeps its volume; its pressure follows the atlas's P-V curve from now.
+            self.model.set_compliance(compliance);
+        }
         self.clock_s += dt_s;
         let case_t = match self.case_period_s {
             Some(period) => self.clock_s.rem_euclid(period),
@@ -274,6 +283,9 @@ impl Stage for HydraulicsStage {
             perforation: self.case.perforated_at(case_t),
         };
         let bits = self.model.step(&h, dt_s).deficit.alarm_bits();
+        if let Some(feed) = &self.scene {
+            feed.offer(inputs, self.model.state(), h.perforation);
+        }
         self.since_save_s += dt_s;
         if bits != self.last_alarm_bits || self.since_save_s >= self.save_interval_s {
             if bits != self.last_alarm_bits {

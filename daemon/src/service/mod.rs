@@ -9,6 +9,7 @@ pub mod publisher;
 pub mod realtime;
 pub mod rig_connection;
 pub mod rig_source;
+pub mod scene;
 pub mod sim;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -154,12 +155,28 @@ pub fn emulated_scenario(config: &Config) -> anyhow::Result<Option<Scenario>> {
         .with_context(|| format!("rig.emulated.scenario = {spec:?}"))
 }
 
-/// The simulation stages the loop steps every tick, in order. Each stage reads the inputs (the
-/// rig's or the safe ones) and writes its fields into the status: hydraulics now; deformation,
-/// fluid and particle stages are added here as they land. `scenario` is the emulated rig's.
+/// The scene the configuration asks for (parsed at once: a bad scene is a start-up error), with
+/// `[paths] atlas` as its atlas file when set.
+pub fn scene_desc(config: &Config) -> anyhow::Result<Option<hydrometra_sim::scene::SceneDesc>> {
+    if !config.scene.enabled {
+        return Ok(None);
+    }
+    let mut desc = hydrometra_sim::scene::SceneDesc::load(&config.scene.scene)
+        .with_context(|| format!("[scene] scene = {:?}", config.scene.scene))?;
+    if let Some(atlas) = &config.paths.atlas {
+        desc.atlas.file = Some(atlas.clone());
+    }
+    Ok(Some(desc))
+}
+
+/// The stages the 1 kHz loop steps every tick, in order: the hydraulics (which hand their state
+/// to the scene thread through `feed`) and the copy of the scene's figures into status. The
+/// scene itself (deformation, voxelization, fluid, particles) runs on its own thread.
+/// `scenario` is the emulated rig's.
 pub fn build_stages(
     config: &Config,
     scenario: Option<&Scenario>,
+    scene: Option<(&hydrometra_sim::scene::SceneDesc, Arc<scene::SceneFeed>)>,
 ) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
     let h = &config.hydraulics;
     // A replay reproduces the recorded procedure: the recorded configuration's scenario case and
@@ -183,7 +200,14 @@ pub fn build_stages(
         None => Default::default(),
     };
     let h_params = &source.hydraulics.params;
-    let params = case.params.clone().unwrap_or_else(|| h_params.clone());
+    let mut params = case.params.clone().unwrap_or_else(|| h_params.clone());
+    if let Some((desc, _)) = &scene {
+        // The port areas are the scope's (one source): the status port velocities then match the
+        // jet the flow field carries.
+        params.inflow.port_area_mm2 = desc.hydraulics.inflow.port_area_mm2;
+        params.outflow.port_area_mm2 = desc.hydraulics.outflow.port_area_mm2;
+    }
+    let feed = scene.map(|(_, feed)| feed);
     let stage = hydraulics::HydraulicsStage::start(hydraulics::HydraulicsSetup {
         params,
         case,
@@ -195,8 +219,42 @@ pub fn build_stages(
         },
         save_interval: Duration::from_millis(h.save_interval_ms),
         new_procedure: h.new_procedure || replayed.is_some(),
+        scene: feed.clone(),
     })?;
-    Ok(vec![Box::new(stage)])
+    let mut stages: Vec<Box<dyn sim::Stage>> = vec![Box::new(stage)];
+    if let Some(feed) = feed {
+        stages.push(Box::new(scene::SceneStatusStage(feed)));
+    }
+    Ok(stages)
+}
+
+/// The scene's line for the log and systemd `STATUS=`: its state, atlas progress while
+/// preparing, and the rig-sample-to-flow latency.
+fn scene_status_line(
+    feed: &scene::SceneFeed,
+    thread: Option<&scene::SceneThread>,
+) -> Option<String> {
+    use hydrometra_ipc::status::scene_state;
+    let thread = thread?;
+    let state = feed.figures.state();
+    let name = scene_state::name(state);
+    Some(if state == scene_state::PREPARING {
+        let done = thread.log.atlas_levels_done.load(Ordering::Relaxed);
+        let all = thread.log.atlas_levels.load(Ordering::Relaxed);
+        format!("scene preparing (atlas level {done}/{all})")
+    } else {
+        let l = thread.log.flow_latency();
+        format!(
+            "scene {name}: positions {}, flow fields {} (rig-sample-to-flow ms p50 {} p99 {} max {}, n {}), publish errors {}",
+            thread.log.positions_published.load(Ordering::Relaxed),
+            thread.log.flows_published.load(Ordering::Relaxed),
+            ms(l.p50_s),
+            ms(l.p99_s),
+            ms(l.max_s),
+            l.count,
+            thread.log.publish_errors.load(Ordering::Relaxed),
+        )
+    })
 }
 
 /// In replay mode, the configuration the recording was made with (its `config_toml` metadata).
@@ -279,7 +337,13 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let started = Instant::now();
 
     let scenario = emulated_scenario(config)?;
-    let stages = build_stages(config, scenario.as_ref())?;
+    let desc = scene_desc(config)?;
+    let feed = Arc::new(scene::SceneFeed::default());
+    let stages = build_stages(
+        config,
+        scenario.as_ref(),
+        desc.as_ref().map(|d| (d, feed.clone())),
+    )?;
     // Real-time scheduling is set on the main thread before any other thread starts, so the rig
     // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
     let priority = config.sim_loop.realtime_priority;
@@ -332,6 +396,24 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
                 // `frames_tx` drops here: the publisher drains and stops.
             })
             .context("cannot start the simulation thread")?
+    };
+
+    // The scene thread starts after the loop: it prepares its atlas (maybe building it for a
+    // minute or two) while status and hydraulics already run.
+    let scene_stop = Arc::new(AtomicBool::new(false));
+    let scene_thread = match desc {
+        Some(desc) => Some(scene::SceneThread::spawn(
+            scene::SceneSettings {
+                desc,
+                cache_dir: config.scene.cache_dir(&config.paths),
+                rate_hz: config.scene.rate_hz,
+                names: names.clone(),
+            },
+            feed.clone(),
+            telemetry.clone(),
+            scene_stop.clone(),
+        )?),
+        None => None,
     };
 
     tracing::info!(
@@ -400,11 +482,16 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
                 "rig link"
             );
             log_summary("running", &s);
+            let scene_line = scene_status_line(&feed, scene_thread.as_ref());
+            if let Some(line) = &scene_line {
+                tracing::info!("{line}");
+            }
             systemd.status(&format!(
-                "link {:?}; latency p99 {} ms; deadline misses {}",
+                "link {:?}; latency p99 {} ms; deadline misses {}{}",
                 view.link_state,
                 ms(s.latency.p99_s),
-                s.deadline_misses
+                s.deadline_misses,
+                scene_line.map(|l| format!("; {l}")).unwrap_or_default()
             ));
         }
     }
@@ -412,6 +499,10 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     tracing::info!("shutting down");
     drop(janitor);
     systemd.stopping();
+    scene_stop.store(true, Ordering::Relaxed);
+    if let Some(t) = scene_thread {
+        t.join(&feed);
+    }
     sim_stop.store(true, Ordering::Relaxed);
     if sim.join().is_err() {
         tracing::error!("simulation thread panicked");

@@ -32,3 +32,20 @@ pub fn apply(thread: &str, priority: u8) {
         Err(e) => tracing::warn!(thread, "{e}; running at normal priority"),
     }
 }
+
+/// Puts the calling thread back under normal scheduling (SCHED_OTHER): for threads that inherit
+/// SCHED_FIFO but must never preempt the real-time loop (the scene thread and its helpers).
+pub fn set_current_thread_normal() -> Result<(), String> {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: pthread_self() is the calling thread; `param` is a valid sched_param.
+    let rc =
+        unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "cannot leave real-time scheduling: {}",
+            std::io::Error::from_raw_os_error(rc)
+        ))
+    }
+}

@@ -27,6 +27,8 @@ pub struct SimInputs {
     pub scope: ScopePose,
     /// True when these are the safe inputs, not the rig's.
     pub safe_state: bool,
+    /// Host arrival time of the rig sample these inputs come from (none in the safe state).
+    pub sample_received_at: Option<Instant>,
 }
 
 /// The scope pose before any sample: at the external os looking along +z, invalid.
@@ -51,6 +53,7 @@ pub fn inputs_from(view: &RigView, timeout: Duration) -> SimInputs {
             pump_set_pressure_pa: s.pump_set_pressure_pa,
             scope: s.scope,
             safe_state: false,
+            sample_received_at: Some(s.received_at),
         },
         (_, latest) => SimInputs {
             valve_in_opening: 0.0,
@@ -61,6 +64,7 @@ pub fn inputs_from(view: &RigView, timeout: Duration) -> SimInputs {
                 ..latest.map_or(INITIAL_SCOPE, |s| s.scope)
             },
             safe_state: true,
+            sample_received_at: None,
         },
     }
 }

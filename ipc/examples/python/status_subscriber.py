@@ -26,7 +26,7 @@ EVENT_SHUTDOWN = 15  # event id: the daemon is stopping
 
 
 class Status(ctypes.Structure):
-    """hydrometra.v1.Status: 504 bytes, 8-byte aligned, native (little-endian) byte order."""
+    """hydrometra.v1.Status: 712 bytes, 8-byte aligned, native (little-endian) byte order."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -90,6 +90,14 @@ class Status(ctypes.Structure):
         ("hydraulic_flags", ctypes.c_uint64),
         ("link_down_reason", ctypes.c_uint32),
         ("link_down_detail", ctypes.c_uint32),
+        ("scene_state", ctypes.c_uint64),
+        ("scene_frames", ctypes.c_uint64),
+        ("scene_stage_runs", ctypes.c_uint64 * 7),
+        ("scene_stage_skips", ctypes.c_uint64 * 7),
+        ("scene_stage_p99_s", ctypes.c_double * 7),
+        ("scene_step_p99_s", ctypes.c_double),
+        ("view_clarity", ctypes.c_double),
+        ("cavity_surface_volume_m3", ctypes.c_double),
     ]
 
     @staticmethod
@@ -98,7 +106,7 @@ class Status(ctypes.Structure):
         return "hydrometra.v1.Status"
 
 
-assert ctypes.sizeof(Status) == 504, ctypes.sizeof(Status)
+assert ctypes.sizeof(Status) == 712, ctypes.sizeof(Status)
 
 
 def as_dict(s: Status) -> dict:

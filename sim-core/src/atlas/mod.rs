@@ -355,8 +355,7 @@ impl Atlas {
         for (m, &i) in ids.iter().enumerate() {
             let i = i as usize;
             for c in 0..3 {
-                positions_out[m][c] =
-                    c0 * x0[i][c] + d0 * g0[i][c] + c1 * x1[i][c] + d1 * g1[i][c];
+                positions_out[m][c] = c0 * x0[i][c] + d0 * g0[i][c] + c1 * x1[i][c] + d1 * g1[i][c];
                 dxdp_out[m][c] = e0 * (x0[i][c] - x1[i][c]) + f0 * g0[i][c] + f1 * g1[i][c];
             }
         }

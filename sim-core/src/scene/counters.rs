@@ -168,6 +168,8 @@ mod tests {
             c.ran(1.0);
         }
         assert_eq!(c.p99_ms(), 1.0);
-        assert!((c.mean_ms() - (5050.0 + RECENT_RUNS as f64) / (100 + RECENT_RUNS) as f64).abs() < 1e-9);
+        assert!(
+            (c.mean_ms() - (5050.0 + RECENT_RUNS as f64) / (100 + RECENT_RUNS) as f64).abs() < 1e-9
+        );
     }
 }

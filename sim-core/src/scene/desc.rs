@@ -325,7 +325,8 @@ impl SceneDesc {
             }
             (Some(p), None) => {
                 let (t, o) = read(p, "material_file")?;
-                MaterialSet::from_toml_str(&t, &o).map_err(|e| invalid(origin, "material_file", e))?
+                MaterialSet::from_toml_str(&t, &o)
+                    .map_err(|e| invalid(origin, "material_file", e))?
             }
             (None, Some(table)) => MaterialSet::from_toml_str(&table.to_string(), "[material]")
                 .map_err(|e| invalid(origin, "material", e))?,
@@ -485,7 +486,11 @@ impl SceneDesc {
             if v.is_finite() && v >= 0.0 {
                 Ok(())
             } else {
-                Err(invalid(o, key, format!("{v}: expected a finite value >= 0")))
+                Err(invalid(
+                    o,
+                    key,
+                    format!("{v}: expected a finite value >= 0"),
+                ))
             }
         };
         non_negative("skip.pressure_tolerance_pa", k.pressure_tolerance_pa)?;
@@ -582,20 +587,34 @@ mod tests {
             ("colour = 1", "colour"),
             ("[fluid]\nvoxel_mm = 0", "fluid.voxel_mm"),
             ("[fluid]\nvoxels = 1", "voxels"),
-            ("[scope]\nsheath_outer_diameter_mm = -1", "scope.sheath_outer_diameter_mm"),
-            ("[scope]\ninflow_channel_area_mm2 = 50", "scope.inflow_channel_area_mm2"),
-            ("[hydraulics.inflow]\nport_area_mm2 = 3", "hydraulics.inflow.port_area_mm2"),
+            (
+                "[scope]\nsheath_outer_diameter_mm = -1",
+                "scope.sheath_outer_diameter_mm",
+            ),
+            (
+                "[scope]\ninflow_channel_area_mm2 = 50",
+                "scope.inflow_channel_area_mm2",
+            ),
+            (
+                "[hydraulics.inflow]\nport_area_mm2 = 3",
+                "hydraulics.inflow.port_area_mm2",
+            ),
             ("[hydraulics]\nbogus = 3", "bogus"),
             ("[anatomy]\nheight_mm = 3", "height_mm"),
             ("[atlas]\nelement = \"hex8\"", "atlas.element"),
             ("[atlas]\nlevels = 1", "atlas.levels"),
             ("[fluid]\nroi_min_mm = [0, 0, 0]", "roi_min_mm"),
             ("[stages]\nfluid = false\nparticles = true", "stages"),
-            ("[skip]\nvoxel_move_fraction = 0.9", "skip.voxel_move_fraction"),
+            (
+                "[skip]\nvoxel_move_fraction = 0.9",
+                "skip.voxel_move_fraction",
+            ),
             ("anatomy_file = \"/does/not/exist.toml\"", "anatomy_file"),
         ];
         for (text, key) in cases {
-            let e = SceneDesc::parse(text, "test.toml", None).unwrap_err().to_string();
+            let e = SceneDesc::parse(text, "test.toml", None)
+                .unwrap_err()
+                .to_string();
             assert!(e.contains(key) && e.contains("test.toml"), "{text}: {e}");
         }
     }

@@ -440,7 +440,8 @@ impl Scene {
         let compliance = prepare::compliance_of(&atlas).map_err(|e| {
             SceneError::Prepare(format!("{}: the atlas's P-V curve: {e}", desc.origin))
         })?;
-        let hydraulics = HydraulicModel::with_compliance(desc.hydraulics.clone(), Box::new(compliance))?;
+        let hydraulics =
+            HydraulicModel::with_compliance(desc.hydraulics.clone(), Box::new(compliance))?;
         let hydraulic_state = *hydraulics.state();
         let n = cells.cell_count();
         let mut counters = Counters::default();
@@ -556,7 +557,11 @@ impl Scene {
     /// Advances the scene by `dt_s` seconds.
     pub fn step(&mut self, inputs: &SceneInputs<'_>, dt_s: f64) -> Result<&StepReport, SceneError> {
         let started = Instant::now();
-        let dt_s = if dt_s.is_finite() && dt_s > 0.0 { dt_s.min(1.0) } else { 0.0 };
+        let dt_s = if dt_s.is_finite() && dt_s > 0.0 {
+            dt_s.min(1.0)
+        } else {
+            0.0
+        };
         self.report.frame += 1;
         self.report.time_s += dt_s;
         self.report.relabelled_cells = 0;
@@ -666,7 +671,10 @@ impl Scene {
         let t = Instant::now();
         let min_cells = self.desc.fluid.min_fluid_cells;
         let rest = self.desc.skip.rest_speed_m_s;
-        let solver = self.fluid.as_mut().ok_or_else(|| SceneError::Prepare("no fluid".into()))?;
+        let solver = self
+            .fluid
+            .as_mut()
+            .ok_or_else(|| SceneError::Prepare("no fluid".into()))?;
         let fluid_cells = self.report.fluid_cells;
         self.report.fluid_idle = fluid_cells < min_cells;
         let at_rest = !flows_on && !relabel && solver.max_speed_m_s() < rest;
@@ -743,7 +751,10 @@ impl Scene {
                 let q_out = (now.outflow_m3 - prev.outflow_m3) / dt;
                 let lost = (now.lost_m3 - prev.lost_m3) / dt;
                 let dvdt = (now.volume_m3 - prev.volume_m3) / dt;
-                ((q_in, q_out, lost, dvdt), (now.pressure_pa - prev.pressure_pa) / dt)
+                (
+                    (q_in, q_out, lost, dvdt),
+                    (now.pressure_pa - prev.pressure_pa) / dt,
+                )
             }
             Some(prev) if dt_s > 0.0 && now.time_s == prev.time_s => {
                 // The external model did not advance: nothing flowed.
@@ -760,7 +771,10 @@ impl Scene {
             (Some(a), Some(b)) => {
                 let h = self.cells.spacing_m;
                 let f = self.desc.skip.scope_move_fraction.max(1e-6);
-                let dx = (0..3).map(|i| (a.tip_m[i] - b.tip_m[i]).powi(2)).sum::<f64>().sqrt();
+                let dx = (0..3)
+                    .map(|i| (a.tip_m[i] - b.tip_m[i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
                 let cos = (0..3).map(|i| a.dir[i] * b.dir[i]).sum::<f64>();
                 // The far end of the 200 mm sheath moves by L sin(angle): only the part in the
                 // grid matters, so the angle is compared over the grid's diagonal.
@@ -877,7 +891,8 @@ impl Scene {
                 best = m + 1;
             }
         }
-        self.inflow.extend(self.candidates[..best].iter().map(|c| c.1));
+        self.inflow
+            .extend(self.candidates[..best].iter().map(|c| c.1));
         for b in &self.inflow {
             self.kinds[b.cell as usize] = VoxelKind::Inflow;
         }
@@ -963,7 +978,12 @@ impl Scene {
         flux.inflow_blocked = false;
         flux.outflow_blocked = false;
         if let Some(sc) = self.scope_built {
-            let g_in: f64 = self.inflow.iter().map(|b| face_weight(b.faces, sc.dir)).sum::<f64>() * h2;
+            let g_in: f64 = self
+                .inflow
+                .iter()
+                .map(|b| face_weight(b.faces, sc.dir))
+                .sum::<f64>()
+                * h2;
             let u = if g_in > 0.0 { q_in / g_in } else { 0.0 };
             flux.inflow_blocked = g_in <= 0.0 && q_in > 0.0;
             for b in &self.inflow {

@@ -50,7 +50,11 @@ impl ScopeGeometry {
     /// Axial coordinate `s` and axis distance `r` of a point.
     #[inline]
     pub fn axial_radial(&self, p: [f64; 3]) -> (f64, f64) {
-        let q = [p[0] - self.tip_m[0], p[1] - self.tip_m[1], p[2] - self.tip_m[2]];
+        let q = [
+            p[0] - self.tip_m[0],
+            p[1] - self.tip_m[1],
+            p[2] - self.tip_m[2],
+        ];
         let s = q[0] * self.dir[0] + q[1] * self.dir[1] + q[2] * self.dir[2];
         let r2 = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - s * s).max(0.0);
         (s, r2.sqrt())

@@ -133,8 +133,13 @@ pub fn build_atlas(
         },
         "levels": {"count": levels.len(), "max_mmhg": desc.atlas.max_mmhg},
     });
-    Atlas::new(atlas::mesh_hash(mesh), metadata, mesh.positions_m.clone(), &levels)
-        .map_err(|e| fail("atlas", &e))
+    Atlas::new(
+        atlas::mesh_hash(mesh),
+        metadata,
+        mesh.positions_m.clone(),
+        &levels,
+    )
+    .map_err(|e| fail("atlas", &e))
 }
 
 /// Where the atlas of `desc` is cached under `cache_dir`.
@@ -170,7 +175,10 @@ pub fn load_or_build(
     if let Some(file) = &desc.atlas.file {
         let atlas = Atlas::read(file).map_err(SceneError::Atlas)?;
         let origin = file.display().to_string();
-        return Ok((SceneAssets::new(mesh, atlas, &origin)?, AtlasSource::File(file.clone())));
+        return Ok((
+            SceneAssets::new(mesh, atlas, &origin)?,
+            AtlasSource::File(file.clone()),
+        ));
     }
     let mut cache_problem = None;
     if let Some(dir) = cache_dir {

@@ -356,13 +356,23 @@ impl Voxelizer {
         for n in 0..self.bins[bin].len() {
             let t = self.bins[bin][n] as usize;
             let r = self.range[t];
-            if (j as i32) < r.lo[1] || (j as i32) > r.hi[1] || (k as i32) < r.lo[2] || (k as i32) > r.hi[2] {
+            if (j as i32) < r.lo[1]
+                || (j as i32) > r.hi[1]
+                || (k as i32) < r.lo[2]
+                || (k as i32) > r.hi[2]
+            {
                 continue;
             }
             let tri = self.triangles[t];
             let v = tri.map(|i| self.pos[i as usize]);
             // Band: the triangle clipped to the row's slab, its x-extent.
-            if let Some((x0, x1)) = clip_x_extent(&v, j as f64 - EPS, j as f64 + 1.0 + EPS, k as f64 - EPS, k as f64 + 1.0 + EPS) {
+            if let Some((x0, x1)) = clip_x_extent(
+                &v,
+                j as f64 - EPS,
+                j as f64 + 1.0 + EPS,
+                k as f64 - EPS,
+                k as f64 + 1.0 + EPS,
+            ) {
                 let lo = (x0 - EPS).floor().max(0.0);
                 let hi = (x1 + EPS).floor().min(nx as f64 - 1.0);
                 if lo <= hi {
@@ -380,8 +390,7 @@ impl Voxelizer {
             }
         }
         if !self.crossings.is_empty() {
-            self.crossings
-                .sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+            self.crossings.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
             let mut winding = 0i32;
             let mut next = 0;
             for i in 0..nx {
@@ -425,7 +434,13 @@ fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Optio
     // Planes as (axis, bound, keep >= bound?).
     for (axis, bound, ge) in [(1, y0, true), (1, y1, false), (2, z0, true), (2, z1, false)] {
         let mut m = 0;
-        let keep = |p: &[f64; 3]| if ge { p[axis] >= bound } else { p[axis] <= bound };
+        let keep = |p: &[f64; 3]| {
+            if ge {
+                p[axis] >= bound
+            } else {
+                p[axis] <= bound
+            }
+        };
         for s in 0..n {
             let p = a[s];
             let q = a[(s + 1) % n];
@@ -436,7 +451,11 @@ fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Optio
             }
             if kp != kq {
                 let t = (bound - p[axis]) / (q[axis] - p[axis]);
-                let t = if t.is_finite() { t.clamp(0.0, 1.0) } else { 0.0 };
+                let t = if t.is_finite() {
+                    t.clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 let mut x: [f64; 3] = std::array::from_fn(|c| p[c] + t * (q[c] - p[c]));
                 x[axis] = bound;
                 b[m] = x;
@@ -494,8 +513,14 @@ fn edge_sign(ia: u32, a: &[f64; 3], ib: u32, b: &[f64; 3], py: f64, pz: f64) -> 
 #[inline]
 fn crossing(tri: &[u32; 3], v: &[[f64; 3]; 3], py: f64, pz: f64) -> Option<(f64, i32)> {
     // Quick reject on the (y, z) box.
-    let (ymin, ymax) = (v[0][1].min(v[1][1]).min(v[2][1]), v[0][1].max(v[1][1]).max(v[2][1]));
-    let (zmin, zmax) = (v[0][2].min(v[1][2]).min(v[2][2]), v[0][2].max(v[1][2]).max(v[2][2]));
+    let (ymin, ymax) = (
+        v[0][1].min(v[1][1]).min(v[2][1]),
+        v[0][1].max(v[1][1]).max(v[2][1]),
+    );
+    let (zmin, zmax) = (
+        v[0][2].min(v[1][2]).min(v[2][2]),
+        v[0][2].max(v[1][2]).max(v[2][2]),
+    );
     if py < ymin || py > ymax || pz < zmin || pz > zmax {
         return None;
     }

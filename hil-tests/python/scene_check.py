@@ -1,0 +1,117 @@
+#!/usr/bin/env python3
+"""A renderer-side check of hydrometrad's scene services, written from docs/ipc.md alone (with the
+example module ipc/examples/python/hydrometra_scene.py). Subscribes to status, cavity/topology,
+cavity/positions and flow for --seconds and prints one JSON object per received sample:
+
+  {"kind": "topology", "revision", "triangles", "vertices", "t"}
+  {"kind": "positions", "t", "revision", "pressure_pa", "volume_m3", "status": {...} | null}
+  {"kind": "flow", "t", "inflow_cells", "jet", "status": {...} | null}
+  {"kind": "end", "statuses", "last_status": {...}}
+
+"status" is the status with the sample's status_sequence (null when this subscriber did not get
+it). hil-tests/tests/scene_stream.rs asserts on the lines.
+"""
+
+import argparse
+import ctypes
+import json
+import os
+import sys
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+sys.path.insert(0, os.path.join(HERE, "..", "..", "ipc", "examples", "python"))
+
+import iceoryx2 as iox2  # noqa: E402
+
+import hydrometra_scene as hs  # noqa: E402
+from status_subscriber import Status  # noqa: E402
+
+
+def brief(s):
+    return {
+        "sequence": s.sequence,
+        "cavity_pressure_pa": s.cavity_pressure_pa,
+        "cavity_volume_m3": s.cavity_volume_m3,
+        "cavity_surface_volume_m3": s.cavity_surface_volume_m3,
+        "inflow_port_velocity_m_per_s": s.inflow_port_velocity_m_per_s,
+        "scope_view_direction": list(s.scope_view_direction),
+        "scope_tip_position_m": list(s.scope_tip_position_m),
+        "valve_in_opening": s.valve_in_opening,
+        "valve_out_opening": s.valve_out_opening,
+        "scene_state": s.scene_state,
+        "scene_stage_runs": list(s.scene_stage_runs),
+        "scene_stage_skips": list(s.scene_stage_skips),
+        "scene_stage_p99_s": list(s.scene_stage_p99_s),
+        "deadline_misses": s.deadline_misses,
+        "ticks": s.ticks,
+    }
+
+
+def main() -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("--prefix", required=True)
+    p.add_argument("--seconds", type=float, required=True)
+    p.add_argument("--timeout", type=float, default=120.0)
+    args = p.parse_args()
+    prefix = args.prefix.rstrip("/")
+    iox2.set_log_level_from_env_or(iox2.LogLevel.Error)
+    node = iox2.NodeBuilder.new().create(iox2.ServiceType.Ipc)
+    deadline = time.monotonic() + args.timeout
+    status = hs.open_service(node, f"{prefix}/status", lambda b: b.publish_subscribe(Status).open(),
+                             deadline).subscriber_builder().create()
+    topo = hs.open_slice(node, prefix, "cavity/topology", ctypes.c_uint32, hs.MeshTopologyHeader,
+                         deadline).subscriber_builder().create()
+    pos = hs.open_slice(node, prefix, "cavity/positions", ctypes.c_float, hs.MeshPositionsHeader,
+                        deadline).subscriber_builder().create()
+    flow = hs.open_slice(node, prefix, "flow", ctypes.c_uint8, hs.FlowFieldHeader,
+                         deadline).subscriber_builder().create()
+    listener = hs.open_service(node, f"{prefix}/events", lambda b: b.event().open(),
+                               deadline).listener_builder().create()
+    print(json.dumps({"kind": "ready", "t": time.monotonic()}), flush=True)
+
+    statuses, count, last = {}, 0, None
+    tris, revision = None, None
+    pending = []  # samples waiting for their status
+    end = time.monotonic() + args.seconds
+    while time.monotonic() < end:
+        listener.timed_wait(iox2.Duration.from_millis(5))
+        now = time.monotonic()
+        while (s := status.receive()) is not None:
+            st = s.payload().contents
+            statuses[st.sequence] = brief(st)
+            last = statuses[st.sequence]
+            count += 1
+        while (s := topo.receive()) is not None:
+            h, tris = hs.triangles(s)
+            revision = h.topology_revision
+            print(json.dumps({"kind": "topology", "t": now, "revision": revision,
+                              "triangles": len(tris), "vertices": h.vertex_count}), flush=True)
+        while (s := pos.receive()) is not None:
+            h, verts = hs.positions(s)
+            volume = hs.enclosed_volume_m3(tris, verts) if tris is not None and h.topology_revision == revision else None
+            pending.append(({"kind": "positions", "t": now, "revision": h.topology_revision,
+                             "pressure_pa": h.cavity_pressure_pa, "volume_m3": volume}, h.status_sequence, now))
+        while (s := flow.receive()) is not None:
+            f = hs.FlowField(s)
+            jet, cells = f.mean_velocity(hs.INFLOW)
+            pending.append(({"kind": "flow", "t": now, "inflow_cells": cells,
+                             "jet": None if jet is None else [float(x) for x in jet]}, f.status_sequence, now))
+        # A sample's status may arrive a little after the sample: wait up to 50 ms for it.
+        keep = []
+        for line, seq, at in pending:
+            if seq in statuses or now - at > 0.05:
+                line["status"] = statuses.get(seq)
+                print(json.dumps(line), flush=True)
+            else:
+                keep.append((line, seq, at))
+        pending = keep
+        if len(statuses) > 20000:
+            for k in sorted(statuses)[:-5000]:
+                del statuses[k]
+    print(json.dumps({"kind": "end", "statuses": count, "last_status": last}), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

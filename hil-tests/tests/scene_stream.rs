@@ -1,0 +1,264 @@
+//! Emulated rig -> `hydrometrad` running the built-in `default` scene -> a Python subscriber
+//! written from docs/ipc.md (`hil-tests/python/scene_check.py`): the cavity mesh, the flow field
+//! and status agree, the flow service goes quiet at rest, and a subscriber killed mid-stream
+//! does not disturb the daemon.
+
+use std::process::{Command, Stdio};
+use std::time::Duration;
+
+use hydrometra_hil_tests::{temp_dir, unique_prefix, workspace_root, Daemon, StatusReader};
+use hydrometra_ipc::status::{scene_stage, scene_state};
+use serde_json::Value;
+
+fn python() -> String {
+    let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&python)
+        .args(["-c", "import iceoryx2, numpy"])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ok,
+        "{python} cannot import iceoryx2 and numpy: run .ci/setup"
+    );
+    python
+}
+
+/// Runs the checker for `seconds` and returns its JSON lines.
+fn check(prefix: &str, seconds: f64, during: impl FnOnce()) -> Vec<Value> {
+    let script = workspace_root().join("hil-tests/python/scene_check.py");
+    let child = Command::new(python())
+        .arg(&script)
+        .args(["--prefix", prefix, "--seconds", &seconds.to_string()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("start the Python checker");
+    during();
+    let out = child.wait_with_output().expect("checker output");
+    assert!(
+        out.status.success(),
+        "the Python checker failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("one JSON object per line"))
+        .collect()
+}
+
+fn of<'a>(lines: &'a [Value], kind: &str) -> Vec<&'a Value> {
+    lines.iter().filter(|l| l["kind"] == kind).collect()
+}
+
+fn f(v: &Value) -> f64 {
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+fn vec3(v: &Value) -> [f64; 3] {
+    std::array::from_fn(|k| f(&v[k]))
+}
+
+fn norm(a: [f64; 3]) -> f64 {
+    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
+}
+
+/// Waits until status shows the scene publishing.
+fn wait_running(reader: &StatusReader) {
+    reader.until("the scene running", Duration::from_secs(180), |s| {
+        s.scene_state == scene_state::RUNNING || s.scene_state == scene_state::IDLE
+    });
+}
+
+#[test]
+fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_with_status() {
+    let prefix = unique_prefix("scene");
+    let rate_hz = 30.0;
+    let mut daemon = Daemon::start(
+        &prefix,
+        &[
+            "--emulated",
+            "default",
+            "--scene",
+            "default",
+            "--scene-rate-hz",
+            "30",
+            "--status-rate-hz",
+            "250",
+        ],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(20));
+    wait_running(&reader);
+    // The default scenario opens the inflow valve from t = 0 s (0.8 at 8 s); the jet is checked
+    // from 8 s on. A second subscriber is killed with SIGKILL in the middle.
+    let misses_before = reader.drain().last().map_or(0, |s| s.deadline_misses);
+    let mut statuses = Vec::new();
+    let lines = check(&prefix, 14.0, || {
+        statuses.extend(reader.collect_for(Duration::from_secs(4)));
+        let mut victim = Command::new(python())
+            .arg(workspace_root().join("ipc/examples/python/cavity_volume.py"))
+            .args(["--prefix", &prefix, "--count", "0"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start the second subscriber");
+        statuses.extend(reader.collect_for(Duration::from_secs(3)));
+        victim.kill().expect("kill -9 the subscriber");
+        let _ = victim.wait();
+        statuses.extend(reader.collect_for(Duration::from_secs(8)));
+    });
+    statuses.extend(reader.drain());
+    assert!(
+        daemon.wait_exit(Duration::ZERO).is_none(),
+        "daemon died:\n{}",
+        daemon.log()
+    );
+
+    // Topology once (history 1 gives it to this late subscriber), one revision.
+    let topo = of(&lines, "topology");
+    assert_eq!(topo.len(), 1, "topology received {} times", topo.len());
+    let vertices = topo[0]["vertices"].as_u64().unwrap();
+    assert!(vertices > 100 && topo[0]["triangles"].as_u64().unwrap() > vertices);
+
+    // Positions at the configured rate (within 10 %), including across the SIGKILL.
+    let pos = of(&lines, "positions");
+    let ready = f(&of(&lines, "ready")[0]["t"]);
+    let times: Vec<f64> = pos
+        .iter()
+        .map(|p| f(&p["t"]))
+        .filter(|t| *t > ready + 1.0)
+        .collect();
+    // The enclosed volume of the published mesh = status cavity volume within 1 %.
+    let mut compared = 0;
+    for p in &pos {
+        let (Some(volume), Some(st)) = (p["volume_m3"].as_f64(), p["status"].as_object()) else {
+            continue;
+        };
+        // Below 0 Pa (suction) the hydraulics extrapolate the P-V curve while the surface stays
+        // at the atlas's lowest level: compared within the atlas's range only.
+        if f(&p["pressure_pa"]) < 0.0 {
+            continue;
+        }
+        let status_volume = f(&st["cavity_volume_m3"]);
+        let err = (volume - status_volume).abs() / status_volume;
+        assert!(
+            err <= 0.01,
+            "published cavity {:.4} ml vs status {:.4} ml ({:.2} %) at {:.0} Pa",
+            volume * 1e6,
+            status_volume * 1e6,
+            err * 100.0,
+            f(&p["pressure_pa"])
+        );
+        compared += 1;
+    }
+    assert!(
+        compared >= pos.len() / 2,
+        "only {compared} of {} frames paired with their status",
+        pos.len()
+    );
+
+    // The jet at the scope tip: along the status view direction, at the status port velocity.
+    let mut jets = 0;
+    for fl in of(&lines, "flow") {
+        let Some(st) = fl["status"].as_object() else {
+            continue;
+        };
+        let port = f(&st["inflow_port_velocity_m_per_s"]);
+        if port < 0.05 || fl["jet"].is_null() {
+            continue;
+        }
+        let jet = vec3(&fl["jet"]);
+        let view = vec3(&st["scope_view_direction"]);
+        let speed = norm(jet);
+        let cos = (jet[0] * view[0] + jet[1] * view[1] + jet[2] * view[2]) / (speed * norm(view));
+        assert!(cos > 0.99, "jet {jet:?} vs view {view:?} (cos {cos:.4})");
+        assert!(
+            (speed - port).abs() <= 0.1 * port,
+            "jet {speed:.3} m/s vs status inflow port velocity {port:.3} m/s"
+        );
+        jets += 1;
+    }
+    assert!(jets >= 10, "only {jets} flow fields with an inflow jet");
+
+    // Checked last, so a slow machine still shows the checks above.
+    let span = times.last().unwrap() - times.first().unwrap();
+    let rate = (times.len() - 1) as f64 / span;
+    assert!(
+        (rate - rate_hz).abs() <= 0.1 * rate_hz,
+        "positions at {rate:.1} Hz, configured {rate_hz} Hz"
+    );
+    let longest_gap = times.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+    assert!(
+        longest_gap < 0.25,
+        "positions stalled for {longest_gap:.3} s"
+    );
+
+    // The SIGKILL disturbed nothing: status contiguous, no deadline misses in the run.
+    hydrometra_hil_tests::assert_contiguous(&statuses);
+    let misses_after = statuses.last().map_or(0, |s| s.deadline_misses);
+    assert_eq!(
+        misses_after,
+        misses_before,
+        "deadline misses during the run:\n{}",
+        daemon.log()
+    );
+}
+
+#[test]
+fn flow_service_goes_quiet_with_both_valves_closed_and_the_field_at_rest() {
+    let dir = temp_dir("quiet");
+    let scenario = dir.join("closed.toml");
+    std::fs::write(
+        &scenario,
+        "name = \"closed\"\n\
+         [[keyframe]]\nt_s = 0.0\nvalve_in = 0.0\nvalve_out = 0.0\npump_mmhg = 90.0\n\
+         tip_mm = [0.0, 0.0, 20.0]\nview_dir = [0.0, 0.0, 1.0]\n\
+         [[keyframe]]\nt_s = 1000.0\nvalve_in = 0.0\nvalve_out = 0.0\npump_mmhg = 90.0\n\
+         tip_mm = [0.0, 0.0, 20.0]\nview_dir = [0.0, 0.0, 1.0]\n",
+    )
+    .unwrap();
+    let prefix = unique_prefix("quiet");
+    let scenario = scenario.display().to_string();
+    let mut daemon = Daemon::start(
+        &prefix,
+        &[
+            "--emulated",
+            &scenario,
+            "--scene",
+            "default",
+            "--status-rate-hz",
+            "100",
+        ],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(20));
+    wait_running(&reader);
+    // Let the field come to rest, then watch for 3 s.
+    let settled = *reader
+        .until("the fluid at rest", Duration::from_secs(20), |s| {
+            s.scene_state == scene_state::IDLE
+        })
+        .last()
+        .unwrap();
+    let lines = check(&prefix, 3.0, || {});
+    let last = reader.drain().pop().unwrap_or(settled);
+    let fluid = scene_stage::FLUID;
+    assert_eq!(
+        last.scene_stage_runs[fluid],
+        settled.scene_stage_runs[fluid],
+        "the fluid stage ran while at rest:\n{}",
+        daemon.log()
+    );
+    assert!(last.scene_stage_skips[fluid] >= settled.scene_stage_skips[fluid] + 60);
+    assert_eq!(last.scene_state, scene_state::IDLE);
+    assert!(
+        daemon.wait_exit(Duration::ZERO).is_none(),
+        "daemon died:\n{}",
+        daemon.log()
+    );
+    // Positions go on; the flow service is quiet (at most the history sample of the last field).
+    assert!(of(&lines, "positions").len() >= 100);
+    assert!(
+        of(&lines, "flow").len() <= 1,
+        "{} flow fields at rest",
+        of(&lines, "flow").len()
+    );
+}

@@ -1,0 +1,111 @@
+//! Reconstructs the cavity mesh from `cavity/topology` and `cavity/positions` and prints the
+//! volume it encloses, frame by frame (docs/ipc.md, "Cavity mesh").
+//!
+//!     cargo run -p hydrometra-ipc --example cavity_volume -- [PREFIX] [FRAMES]
+
+use core::time::Duration;
+
+use hydrometra_ipc::slice::{self, Positions, Topology};
+use hydrometra_ipc::{events, ServiceNames};
+use iceoryx2::prelude::*;
+
+/// Volume enclosed by a closed surface whose normals point inward (into the cavity's fluid).
+fn enclosed_volume_m3(triangles: &[u32], positions: &[f32]) -> f64 {
+    let p = |i: u32| -> [f64; 3] { std::array::from_fn(|k| positions[3 * i as usize + k] as f64) };
+    let mut six_v = 0.0;
+    for t in triangles.chunks_exact(3) {
+        let (a, b, c) = (p(t[0]), p(t[1]), p(t[2]));
+        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
+            + a[2] * (b[0] * c[1] - b[1] * c[0]);
+    }
+    -six_v / 6.0
+}
+
+fn main() -> Result<(), Box<dyn core::error::Error>> {
+    set_log_level_from_env_or(LogLevel::Error);
+    let mut args = std::env::args().skip(1);
+    let prefix = args
+        .next()
+        .unwrap_or_else(|| hydrometra_ipc::DEFAULT_SERVICE_PREFIX.into());
+    let frames: usize = args.next().map_or(Ok(0), |n| n.parse())?;
+    let names = ServiceNames::new(&prefix)?;
+    let node = NodeBuilder::new().create::<ipc::Service>()?;
+    let hint = "is hydrometrad running with a scene, and is the scene ready (status scene_state)?";
+    let topology = slice::open::<Topology, _>(&node, &names)
+        .map_err(|e| {
+            format!(
+                "{}: {e}: {hint}",
+                names.full(hydrometra_ipc::names::suffix::MESH_TOPOLOGY)
+            )
+        })?
+        .subscriber_builder()
+        .create()?;
+    let positions = slice::open::<Positions, _>(&node, &names)
+        .map_err(|e| {
+            format!(
+                "{}: {e}: {hint}",
+                names.full(hydrometra_ipc::names::suffix::MESH_POSITIONS)
+            )
+        })?
+        .subscriber_builder()
+        .create()?;
+    let listener = events::open(&node, &names)?.listener_builder().create()?;
+    let mut triangles: Vec<u32> = Vec::new();
+    let mut revision = None;
+    let mut printed = 0;
+    while frames == 0 || printed < frames {
+        listener.timed_wait(|_| {}, Duration::from_millis(100))?;
+        while let Some(sample) = topology.receive()? {
+            triangles.clear();
+            triangles.extend_from_slice(sample.payload());
+            revision = Some(sample.user_header().topology_revision);
+        }
+        let mut newest = None;
+        while let Some(sample) = positions.receive()? {
+            newest = Some(sample);
+        }
+        let Some(sample) = newest else { continue };
+        let h = *sample.user_header();
+        if Some(h.topology_revision) != revision {
+            continue; // positions of a topology not received yet
+        }
+        let volume = enclosed_volume_m3(&triangles, sample.payload());
+        println!(
+            "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml",
+            h.sim_time_s,
+            h.cavity_pressure_pa / 133.322,
+            h.vertex_count,
+            triangles.len() / 3,
+            volume * 1e6
+        );
+        printed += 1;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_unit_cube_with_inward_normals_encloses_one() {
+        let p: Vec<f32> = (0..8)
+            .flat_map(|i| [(i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32])
+            .collect();
+        // Outward counter-clockwise faces, then reversed (inward).
+        let out = [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ];
+        let inward: Vec<u32> = out.iter().flat_map(|t| [t[0], t[2], t[1]]).collect();
+        assert!((super::enclosed_volume_m3(&inward, &p) - 1.0).abs() < 1e-12);
+    }
+}
