@@ -13,6 +13,10 @@ use iceoryx2::service::Service;
 
 use crate::names::{suffix, ServiceNames};
 
+/// The port factory of slice service `K` on service type `S`.
+pub type SliceFactory<S, K> =
+    PortFactory<S, [<K as SliceService>::Element], <K as SliceService>::Header>;
+
 /// Quality of service of one slice service.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SliceQos {
@@ -121,7 +125,7 @@ impl std::error::Error for SliceServiceError {}
 pub fn create<K: SliceService, S: Service>(
     node: &Node<S>,
     names: &ServiceNames,
-) -> Result<PortFactory<S, [K::Element], K::Header>, SliceServiceError> {
+) -> Result<SliceFactory<S, K>, SliceServiceError> {
     let name = names
         .service(K::SUFFIX)
         .map_err(|e| SliceServiceError::Name(format!("{}: {e:?}", names.full(K::SUFFIX))))?;
@@ -143,7 +147,7 @@ pub fn create<K: SliceService, S: Service>(
 pub fn open<K: SliceService, S: Service>(
     node: &Node<S>,
     names: &ServiceNames,
-) -> Result<PortFactory<S, [K::Element], K::Header>, SliceServiceError> {
+) -> Result<SliceFactory<S, K>, SliceServiceError> {
     let name = names
         .service(K::SUFFIX)
         .map_err(|e| SliceServiceError::Name(format!("{}: {e:?}", names.full(K::SUFFIX))))?;

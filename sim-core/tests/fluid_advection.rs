@@ -2,8 +2,8 @@
 //! ABC (3D) effective viscosity, and case files naming every scheme.
 
 use hydrometra_sim::fluid::case::Case;
-use hydrometra_sim::harness::validation::{abc_flow, taylor_green};
 use hydrometra_sim::fluid::AdvectionScheme;
+use hydrometra_sim::harness::validation::{abc_flow, taylor_green};
 
 fn run(r: hydrometra_sim::harness::validation::ValidationResult) -> f64 {
     assert!(r.all_converged, "{r:?}");

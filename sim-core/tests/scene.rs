@@ -54,10 +54,12 @@ fn coarse(voxel_mm: f64) -> (SceneDesc, SceneAssets) {
 fn scope_in_cavity(scene: &Scene) -> ScopePose {
     let atlas = scene.atlas();
     let mut s = scene.cavity_surface().clone();
-    s.replay(atlas, atlas.pressure_pa[atlas.level_count() - 1]).unwrap();
+    s.replay(atlas, atlas.pressure_pa[atlas.level_count() - 1])
+        .unwrap();
     let p = s.positions_m();
     let n = p.len() - 1; // the last vertex is the opening's centroid
-    let c: [f64; 3] = std::array::from_fn(|a| p[..n].iter().map(|q| q[a] as f64).sum::<f64>() / n as f64);
+    let c: [f64; 3] =
+        std::array::from_fn(|a| p[..n].iter().map(|q| q[a] as f64).sum::<f64>() / n as f64);
     let os = p[n].map(f64::from);
     ScopePose {
         tip_position_m: c,
@@ -106,22 +108,38 @@ fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
         // 1e-5 ml/min.
         let close = |fluid: f64, hyd: f64, what: &str| {
             let tol = 1e-5 * hyd.abs() + 1e-13;
-            assert!((fluid - hyd).abs() <= tol, "frame {f}: {what}: fluid {fluid:e} hydraulics {hyd:e}");
+            assert!(
+                (fluid - hyd).abs() <= tol,
+                "frame {f}: {what}: fluid {fluid:e} hydraulics {hyd:e}"
+            );
         };
         if !fl.inflow_blocked {
-            close(fl.fluid_inflow_m3_per_s, fl.hydraulic_inflow_m3_per_s, "inflow");
+            close(
+                fl.fluid_inflow_m3_per_s,
+                fl.hydraulic_inflow_m3_per_s,
+                "inflow",
+            );
         }
         if !fl.outflow_blocked {
-            close(fl.fluid_outflow_m3_per_s, fl.hydraulic_outflow_m3_per_s, "outflow");
+            close(
+                fl.fluid_outflow_m3_per_s,
+                fl.hydraulic_outflow_m3_per_s,
+                "outflow",
+            );
         }
-        close(fl.fluid_wall_m3_per_s, fl.hydraulic_dvdt_m3_per_s, "walls (dV/dt)");
+        close(
+            fl.fluid_wall_m3_per_s,
+            fl.hydraulic_dvdt_m3_per_s,
+            "walls (dV/dt)",
+        );
         // The open os carries the losses, up to what the projection tolerance allows: each fluid
         // cell may keep tol * U * h^2 of flux imbalance.
         let h = scene.cells().spacing_m;
         let u = scene.flow().unwrap().solver().max_speed_m_s().max(1e-3);
-        let slack = r.fluid_cells as f64 * 1e-5 * u * h * h
-            + fl.closed_region_mismatch_m3_per_s.abs();
-        let in_minus_out = fl.fluid_inflow_m3_per_s - fl.fluid_outflow_m3_per_s - fl.fluid_wall_m3_per_s;
+        let slack =
+            r.fluid_cells as f64 * 1e-5 * u * h * h + fl.closed_region_mismatch_m3_per_s.abs();
+        let in_minus_out =
+            fl.fluid_inflow_m3_per_s - fl.fluid_outflow_m3_per_s - fl.fluid_wall_m3_per_s;
         assert!(
             (in_minus_out - fl.fluid_open_m3_per_s).abs() <= slack,
             "frame {f}: the fluid is not incompressible: in - out - walls {in_minus_out:e}, open {:e}",
@@ -141,7 +159,10 @@ fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
         checked += 1;
     }
     assert!(checked > 200, "the fluid ran {checked} times");
-    assert_eq!(saw, [true; 3], "inflow, outflow and moving walls each carried flow");
+    assert_eq!(
+        saw, [true; 3],
+        "inflow, outflow and moving walls each carried flow"
+    );
 }
 
 #[test]
@@ -158,7 +179,12 @@ fn the_resting_slit_idles_and_unchanged_inputs_skip_every_stage() {
     }
     let r = scene.report();
     let c = &r.counters;
-    assert_eq!(c.get(Stage::Deformation).runs, 1, "{:?}", c.get(Stage::Deformation));
+    assert_eq!(
+        c.get(Stage::Deformation).runs,
+        1,
+        "{:?}",
+        c.get(Stage::Deformation)
+    );
     assert_eq!(c.get(Stage::Deformation).skips, 29);
     assert_eq!(c.get(Stage::Voxelize).runs, 1);
     assert_eq!(c.get(Stage::Fluid).runs, 0, "nothing flows at rest");
@@ -169,7 +195,9 @@ fn the_resting_slit_idles_and_unchanged_inputs_skip_every_stage() {
     }
     // Distend: every stage runs.
     for _ in 0..120 {
-        scene.step(&own(inputs(1.0, 0.3, 100.0, scope)), DT).unwrap();
+        scene
+            .step(&own(inputs(1.0, 0.3, 100.0, scope)), DT)
+            .unwrap();
     }
     let c = scene.report().counters.clone();
     assert!(c.get(Stage::Deformation).runs > 60);
@@ -198,7 +226,11 @@ fn the_resting_slit_idles_and_unchanged_inputs_skip_every_stage() {
     for _ in 0..60 {
         scene.step(&own(inputs(0.0, 0.0, 0.0, scope)), DT).unwrap();
     }
-    assert_eq!(scene.report().counters.get(Stage::Fluid).runs, runs, "the fluid woke up at rest");
+    assert_eq!(
+        scene.report().counters.get(Stage::Fluid).runs,
+        runs,
+        "the fluid woke up at rest"
+    );
 }
 
 #[test]
@@ -247,5 +279,10 @@ fn steady_steps_do_not_allocate() {
     }
     let after = ALLOCS.load(Ordering::Relaxed);
     assert!(fluid_runs > 50, "the fluid ran {fluid_runs} times");
-    assert_eq!(after - before, 0, "{} allocations in 60 steady steps", after - before);
+    assert_eq!(
+        after - before,
+        0,
+        "{} allocations in 60 steady steps",
+        after - before
+    );
 }

@@ -1,3 +1,5 @@
+// Per-axis loops index several arrays at once.
+#![allow(clippy::needless_range_loop)]
 //! The voxelizer against analytic solids and independent tests: every cell's state is checked
 //! against the solid's analytic inside test (or a generalized winding number: solid angles, no
 //! ray casting) and a separating-axis triangle/box test (no clipping); the volume of the inside cells converges to the solid's at
@@ -101,7 +103,11 @@ fn transform(mesh: &Mesh, scale: [f64; 3], rot_z: f64, rot_x: f64, c: [f64; 3]) 
             let s: [f64; 3] = std::array::from_fn(|a| q[a] as f64 * scale[a]);
             let z = [cz * s[0] - sz * s[1], sz * s[0] + cz * s[1], s[2]];
             let x = [z[0], cx * z[1] - sx * z[2], sx * z[1] + cx * z[2]];
-            [(x[0] + c[0]) as f32, (x[1] + c[1]) as f32, (x[2] + c[2]) as f32]
+            [
+                (x[0] + c[0]) as f32,
+                (x[1] + c[1]) as f32,
+                (x[2] + c[2]) as f32,
+            ]
         })
         .collect();
     (p, mesh.1.clone())
@@ -114,7 +120,11 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 fn norm(a: [f64; 3]) -> f64 {
     dot(a, a).sqrt()
@@ -220,17 +230,31 @@ fn check_all_cells(
                     assert_eq!(s, state::BAND, "cell {i},{j},{k} is touched by a triangle");
                 }
                 if s == state::BAND {
-                    assert!(loose[n], "cell {i},{j},{k} is band but no triangle is near it");
+                    assert!(
+                        loose[n],
+                        "cell {i},{j},{k} is band but no triangle is near it"
+                    );
                     let o = v.owners()[n];
-                    assert!(loose_owners[n].contains(&o) && o <= min_strict[n], "owner of {i},{j},{k}");
+                    assert!(
+                        loose_owners[n].contains(&o) && o <= min_strict[n],
+                        "owner of {i},{j},{k}"
+                    );
                     continue;
                 }
                 if inside(c) {
-                    assert_eq!(s, state::INSIDE, "cell {i},{j},{k}: centre inside, untouched");
+                    assert_eq!(
+                        s,
+                        state::INSIDE,
+                        "cell {i},{j},{k}: centre inside, untouched"
+                    );
                     checked_inside += 1;
                     volume += h * h * h;
                 } else {
-                    assert_eq!(s, state::OUTSIDE, "cell {i},{j},{k}: centre outside, untouched");
+                    assert_eq!(
+                        s,
+                        state::OUTSIDE,
+                        "cell {i},{j},{k}: centre outside, untouched"
+                    );
                 }
             }
         }
@@ -252,7 +276,7 @@ fn box_around(mesh: &Mesh, h: f64, margin_cells: usize) -> VoxelBox {
     let dims = std::array::from_fn(|a| ((hi[a] - lo[a]) / h).ceil() as usize + 2 * margin_cells);
     VoxelBox {
         dims,
-        origin_m: std::array::from_fn(|a| lo[a] - (margin_cells as f64 - 0.3183) * h),
+        origin_m: std::array::from_fn(|a| lo[a] - (margin_cells as f64 - 0.3177) * h),
         spacing_m: h,
     }
 }
@@ -275,13 +299,19 @@ fn convergence(mesh: &Mesh, h0: f64, what: &str, inside: &dyn Fn([f64; 3]) -> bo
         let mut v = Voxelizer::new(cells, mesh.1.clone(), mesh.0.len());
         v.full(&mesh.0);
         let vol = check_all_cells(mesh, cells, &v, inside);
-        assert!(vol < exact, "{what}: conservative volume {vol} >= exact {exact}");
+        assert!(
+            vol < exact,
+            "{what}: conservative volume {vol} >= exact {exact}"
+        );
         errors.push((exact - vol) / exact);
     }
     let o1 = (errors[0] / errors[1]).log2();
     let o2 = (errors[1] / errors[2]).log2();
     eprintln!("{what}: relative volume errors {errors:?}, orders {o1:.2} {o2:.2}");
-    assert!(errors[2] < errors[1] && errors[1] < errors[0], "{what}: {errors:?}");
+    assert!(
+        errors[2] < errors[1] && errors[1] < errors[0],
+        "{what}: {errors:?}"
+    );
     assert!((0.7..1.4).contains(&o2), "{what}: order {o2}");
 }
 
@@ -338,7 +368,10 @@ fn slivers_and_degenerate_triangles_change_nothing() {
     // Here the independent test is the generalized winding number of the dirty mesh itself.
     let inside = |x: [f64; 3]| {
         let w = winding(&dirty, x).abs();
-        assert!((w - w.round()).abs() < 1e-6, "winding {w} at an untouched centre");
+        assert!(
+            (w - w.round()).abs() < 1e-6,
+            "winding {w} at an untouched centre"
+        );
         w > 0.5
     };
     check_all_cells(&dirty, cells, &b, &inside);
@@ -395,8 +428,14 @@ fn incremental_equals_full_after_random_moves() {
         inc.update(&pos, 1e-4);
         let mut full = Voxelizer::new(cells, base.1.clone(), pos.len());
         full.full(inc.voxel_positions_m());
-        assert!(inc.states() == full.states(), "states differ after step {step}");
-        assert!(inc.owners() == full.owners(), "owners differ after step {step}");
+        assert!(
+            inc.states() == full.states(),
+            "states differ after step {step}"
+        );
+        assert!(
+            inc.owners() == full.owners(),
+            "owners differ after step {step}"
+        );
     }
 }
 
@@ -418,5 +457,5 @@ fn small_moves_are_skipped_and_nan_is_contained() {
     p[3] = [f32::NAN; 3];
     let st = v.update(&p, 1e-4);
     assert_eq!(st.moved_vertices, 1);
-    assert!(v.states().iter().any(|&s| s == state::INSIDE));
+    assert!(v.states().contains(&state::INSIDE));
 }

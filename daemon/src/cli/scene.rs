@@ -154,7 +154,10 @@ fn assets(desc: &SceneDesc, arg: &SceneArg) -> Result<(SceneAssets, prepare::Atl
 }
 
 /// Rig inputs from a scenario sample (clinical units and mm at the edge, SI inside).
-fn rig_inputs(s: &hydrometra_drivers::emulator::scenario::ScenarioSample, perforation: bool) -> RigInputs {
+fn rig_inputs(
+    s: &hydrometra_drivers::emulator::scenario::ScenarioSample,
+    perforation: bool,
+) -> RigInputs {
     RigInputs {
         valve_in_opening: s.valve_in,
         valve_out_opening: s.valve_out,
@@ -214,7 +217,13 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         let deficit_m3 = scene.hydraulic_state().deficit.deficit_m3;
         let r = scene.report();
         let c = &r.counters;
-        let last = |s: Stage| if c.get(s).ran_last { c.get(s).last_ms } else { 0.0 };
+        let last = |s: Stage| {
+            if c.get(s).ran_last {
+                c.get(s).last_ms
+            } else {
+                0.0
+            }
+        };
         let fl = &r.flux;
         let (its, div) = r
             .fluid
@@ -276,8 +285,11 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "voxel_mm": scene.desc().fluid.voxel_mm,
         "stages": stage_json(&r.counters),
     });
-    std::fs::write(a.out.join("summary.json"), serde_json::to_string_pretty(&summary)?)
-        .context("writing summary.json")?;
+    std::fs::write(
+        a.out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?,
+    )
+    .context("writing summary.json")?;
     println!("{}", serde_json::to_string_pretty(&summary)?);
     println!(
         "wrote {} (open scene.pvd in ParaView), scene.csv, summary.json",
@@ -314,7 +326,9 @@ fn cavity_vtu(scene: &Scene) -> String {
     let mut s = String::with_capacity(40 * (np + nc));
     s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
     let _ = writeln!(s, "<Piece NumberOfPoints=\"{np}\" NumberOfCells=\"{nc}\">");
-    s.push_str("<CellData Scalars=\"cap\">\n<DataArray type=\"UInt8\" Name=\"cap\" format=\"ascii\">\n");
+    s.push_str(
+        "<CellData Scalars=\"cap\">\n<DataArray type=\"UInt8\" Name=\"cap\" format=\"ascii\">\n",
+    );
     for t in 0..nc {
         s.push_str(if t < c.cap_triangles { "1\n" } else { "0\n" });
     }
@@ -362,7 +376,16 @@ fn flow_vtu(scene: &Scene) -> String {
     for &n in &cells {
         let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
         // VTK_VOXEL order: x fastest, then y, then z.
-        for (dk, dj, di) in [(0, 0, 0), (0, 0, 1), (0, 1, 0), (0, 1, 1), (1, 0, 0), (1, 0, 1), (1, 1, 0), (1, 1, 1)] {
+        for (dk, dj, di) in [
+            (0, 0, 0),
+            (0, 0, 1),
+            (0, 1, 0),
+            (0, 1, 1),
+            (1, 0, 0),
+            (1, 0, 1),
+            (1, 1, 0),
+            (1, 1, 1),
+        ] {
             let q = node(i + di, j + dj, k + dk);
             if id[q] == u32::MAX {
                 id[q] = points.len() as u32;
@@ -373,7 +396,12 @@ fn flow_vtu(scene: &Scene) -> String {
     }
     let mut s = String::with_capacity(64 * (points.len() + cells.len()));
     s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
-    let _ = writeln!(s, "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">", points.len(), cells.len());
+    let _ = writeln!(
+        s,
+        "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
+        points.len(),
+        cells.len()
+    );
     s.push_str("<CellData Scalars=\"label\" Vectors=\"velocity\">\n<DataArray type=\"UInt8\" Name=\"label\" format=\"ascii\">\n");
     for &n in &cells {
         let _ = writeln!(s, "{}", kinds[n] as u8);
@@ -385,7 +413,11 @@ fn flow_vtu(scene: &Scene) -> String {
     }
     s.push_str("</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
     for &q in &points {
-        let (i, j, k) = (q % (nx + 1), (q / (nx + 1)) % (ny + 1), q / ((nx + 1) * (ny + 1)));
+        let (i, j, k) = (
+            q % (nx + 1),
+            (q / (nx + 1)) % (ny + 1),
+            q / ((nx + 1) * (ny + 1)),
+        );
         let _ = writeln!(
             s,
             "{:e} {:e} {:e}",
@@ -396,7 +428,11 @@ fn flow_vtu(scene: &Scene) -> String {
     }
     s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
     for c in conn.chunks(8) {
-        let _ = writeln!(s, "{} {} {} {} {} {} {} {}", c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]);
+        let _ = writeln!(
+            s,
+            "{} {} {} {} {} {} {} {}",
+            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
+        );
     }
     s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
     for i in 0..cells.len() {
@@ -461,15 +497,28 @@ fn bench(a: &BenchArgs) -> Result<()> {
             }
         };
         for f in 0..a.warmup {
-            scene.step(&SceneInputs { rig: at(f), hydraulics: HydraulicsInput::Own }, dt)?;
+            scene.step(
+                &SceneInputs {
+                    rig: at(f),
+                    hydraulics: HydraulicsInput::Own,
+                },
+                dt,
+            )?;
         }
         let start = scene.report().counters.clone();
         let mut its = 0usize;
         let mut max_div = 0.0f64;
         let mut fluid_runs = 0usize;
-        let (mut rebuilds, mut topology_ms, mut advect_ms, mut project_ms) = (0usize, 0.0, 0.0, 0.0);
+        let (mut rebuilds, mut topology_ms, mut advect_ms, mut project_ms) =
+            (0usize, 0.0, 0.0, 0.0);
         for f in a.warmup..a.warmup + a.steps {
-            let r = scene.step(&SceneInputs { rig: at(f), hydraulics: HydraulicsInput::Own }, dt)?;
+            let r = scene.step(
+                &SceneInputs {
+                    rig: at(f),
+                    hydraulics: HydraulicsInput::Own,
+                },
+                dt,
+            )?;
             if let Some(s) = r.fluid {
                 its += s.projection_iterations;
                 max_div = max_div.max(s.max_div_rel);
@@ -490,7 +539,11 @@ fn bench(a: &BenchArgs) -> Result<()> {
         let delta_mean = |s: Stage| {
             let (now, then) = (c.get(s), start.get(s));
             let runs = now.runs - then.runs;
-            if runs == 0 { 0.0 } else { (now.total_ms - then.total_ms) / runs as f64 }
+            if runs == 0 {
+                0.0
+            } else {
+                (now.total_ms - then.total_ms) / runs as f64
+            }
         };
         let step_mean = (c.step.total_ms - start.step.total_ms) / a.steps as f64;
         // A full voxelization, timed alone.

@@ -328,23 +328,22 @@ impl Case {
                 )
             })?;
         }
-        p.projection = match s.projection.as_deref() {
-            None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
-            Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
-            Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
-                sweeps: s.sweeps.unwrap_or(20),
-            },
-            Some("red_black_gauss_seidel") => ProjectionMethod::RedBlackGaussSeidel {
-                sweeps: s.sweeps.unwrap_or(20),
-            },
-            Some(o) => {
-                return Err(invalid(
+        p.projection =
+            match s.projection.as_deref() {
+                None | Some("multigrid_pcg") => ProjectionMethod::MultigridPcg,
+                Some("jacobi_pcg") => ProjectionMethod::JacobiPcg,
+                Some("gauss_seidel") => ProjectionMethod::GaussSeidel {
+                    sweeps: s.sweeps.unwrap_or(20),
+                },
+                Some("red_black_gauss_seidel") => ProjectionMethod::RedBlackGaussSeidel {
+                    sweeps: s.sweeps.unwrap_or(20),
+                },
+                Some(o) => return Err(invalid(
                     "solver.projection",
                     o,
                     "expected multigrid_pcg, jacobi_pcg, gauss_seidel or red_black_gauss_seidel",
-                ))
-            }
-        };
+                )),
+            };
         if s.sweeps.is_some() && !p.projection.is_fixed_sweeps() {
             return Err(invalid(
                 "solver.sweeps",

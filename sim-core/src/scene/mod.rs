@@ -801,9 +801,7 @@ impl Scene {
         for n in 0..cells.cell_count() {
             self.kinds[n] = match states[n] {
                 state::INSIDE => VoxelKind::Fluid,
-                state::BAND if owners[n] < caps => {
-                    VoxelKind::Open
-                }
+                state::BAND if owners[n] < caps => VoxelKind::Open,
                 state::BAND => VoxelKind::Wall,
                 _ => VoxelKind::Solid,
             };

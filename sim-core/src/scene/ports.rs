@@ -64,7 +64,7 @@ impl ScopeGeometry {
     #[inline]
     pub fn part(&self, p: [f64; 3], h: f64) -> ScopePart {
         let (s, r) = self.axial_radial(p);
-        if r > self.radius_m || s > 0.0 || s < -SHEATH_LENGTH_M {
+        if r > self.radius_m || !(-SHEATH_LENGTH_M..=0.0).contains(&s) {
             ScopePart::None
         } else if s > -h {
             ScopePart::Tip
@@ -104,7 +104,7 @@ impl ScopeGeometry {
             let (s0, s1) = ((-SHEATH_LENGTH_M - e) / d[0], -e / d[0]);
             lo = lo.max(s0.min(s1));
             hi = hi.min(s0.max(s1));
-        } else if e > 0.0 || e < -SHEATH_LENGTH_M {
+        } else if !(-SHEATH_LENGTH_M..=0.0).contains(&e) {
             return None;
         }
         if lo > hi {

@@ -288,8 +288,10 @@ impl Voxelizer {
         for (v, p) in positions_m.iter().enumerate() {
             let q = self.pos_m[v];
             let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2) + (p[2] - q[2]).powi(2);
-            // `!(d2 <= t2)` also moves a vertex that became NaN (it then touches no cell).
-            let m = !(d2 <= t2) || (threshold_m <= 0.0 && *p != q);
+            // A NaN distance (a vertex that became NaN) counts as moved: it then touches no cell.
+            let far = d2.partial_cmp(&t2) != Some(std::cmp::Ordering::Less)
+                && d2.partial_cmp(&t2) != Some(std::cmp::Ordering::Equal);
+            let m = far || (threshold_m <= 0.0 && *p != q);
             self.moved[v] = m;
             if m {
                 moved_vertices += 1;
