@@ -352,7 +352,7 @@ fn cavity_vtu(scene: &Scene) -> String {
     s
 }
 
-/// The non-solid cells of the flow field as a VTU of voxels (cell data `label`: the
+/// The non-solid cells of the flow field as a VTU of hexahedra (cell data `label`: the
 /// [`VoxelKind`] value, `velocity`: m/s).
 fn flow_vtu(scene: &Scene) -> String {
     let Some(flow) = scene.flow() else {
@@ -440,7 +440,7 @@ fn flow_vtu(scene: &Scene) -> String {
     }
     s.push_str("</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
     for _ in 0..cells.len() {
-        s.push_str("11\n");
+        s.push_str("12\n");
     }
     s.push_str("</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
     s

@@ -315,9 +315,11 @@ impl Atlas {
     }
 
     /// Positions and `dx/dp` of the vertices `ids` at `pressure_pa`: the cubic Hermite of
-    /// [`Self::positions_at`] and its derivative in pressure (clamped to the atlas's range; the
-    /// derivative is the end level's `dx/dp` beyond it). `positions_out[n]` and `dxdp_out[n]`
-    /// belong to vertex `ids[n]`.
+    /// [`Self::positions_at`] and its derivative in pressure, clamped at the top level. Below the
+    /// first level (suction) the positions continue along the first interval's secant, as the
+    /// hydraulics' tabulated P-V curve continues its first segment (`TabulatedCompliance`), so the
+    /// surface's volume follows the hydraulics' volume there too. `positions_out[n]` and
+    /// `dxdp_out[n]` belong to vertex `ids[n]`.
     pub fn replay_subset(
         &self,
         pressure_pa: f64,
@@ -338,6 +340,21 @@ impl Atlas {
             return Err(AtlasError::Argument(format!(
                 "replay_subset: vertex {bad} is not in the atlas ({n} vertices)"
             )));
+        }
+        let p0 = self.pressure_pa[0];
+        if pressure_pa < p0 {
+            let h = self.pressure_pa[1] - p0;
+            let dp = (pressure_pa - p0) as f32;
+            let (x0, x1) = (self.level_positions(0), self.level_positions(1));
+            for (m, &i) in ids.iter().enumerate() {
+                let i = i as usize;
+                for c in 0..3 {
+                    let slope = ((x1[i][c] - x0[i][c]) as f64 / h) as f32;
+                    positions_out[m][c] = x0[i][c] + dp * slope;
+                    dxdp_out[m][c] = slope;
+                }
+            }
+            return Ok(());
         }
         let (k, t) = self.segment(pressure_pa);
         let h = self.pressure_pa[k + 1] - self.pressure_pa[k];

@@ -1,7 +1,7 @@
 //! The fluid solver: incompressible Navier-Stokes on a MAC (staggered) grid, stable-fluids style.
 //!
-//! Each step: advection (RK2 backtrace; by default clamped MacCormack with the lagged-pressure
-//! reflection, see [`AdvectionScheme`] and docs/fluid-cases.md for the others), body forces,
+//! Each step: advection (RK2 backtrace; semi-Lagrangian by default, or one of the less
+//! dissipative [`AdvectionScheme`]s, see docs/fluid-cases.md), body forces,
 //! viscosity (explicit where stable, implicit otherwise), and a pressure projection by
 //! multigrid-preconditioned CG to a divergence tolerance, warm-started from the last pressure. Cells are
 //! labelled fluid, solid (no-slip wall), velocity (a moving solid: inflow/outflow port or moving wall)

@@ -366,6 +366,8 @@ pub struct Scene {
     candidates: Vec<(f64, BoundaryCell, f64)>,
     wall_velocity: Vec<[f32; 3]>,
     labels_dirty: bool,
+    /// The hydraulic pressure the surface was last replayed for, Pa.
+    deformed_at_pa: f64,
     topology_revision: u64,
     report: StepReport,
     /// Rankine vortices (issue: vortices and particles), present when the scene asks.
@@ -480,6 +482,7 @@ impl Scene {
             candidates: Vec::with_capacity(n),
             wall_velocity: vec![[0.0; 3]; n],
             labels_dirty: true,
+            deformed_at_pa: f64::NAN,
             topology_revision: 1,
             report: StepReport {
                 counters,
@@ -601,11 +604,15 @@ impl Scene {
         let t = Instant::now();
         let p = self.hydraulic_state.cavity_pressure_pa;
         let p = if p.is_finite() { p } else { 0.0 };
-        let moved = (p - self.surface.pressure_pa()).abs() > self.desc.skip.pressure_tolerance_pa
-            || self.surface.pressure_pa().is_nan();
+        let moved = (p - self.deformed_at_pa).abs() > self.desc.skip.pressure_tolerance_pa
+            || self.deformed_at_pa.is_nan();
         if moved {
             self.surface.replay(&self.atlas, p)?;
+            self.deformed_at_pa = p;
             self.report.surface_volume_m3 = self.surface.enclosed_volume_m3();
+            if p < self.atlas.pressure_pa[0] {
+                self.match_volume_below_the_atlas(p)?;
+            }
             self.report.counters.get_mut(Stage::Deformation).ran(ms(t));
         } else {
             self.report.counters.get_mut(Stage::Deformation).skipped();
@@ -721,6 +728,33 @@ impl Scene {
 
         self.finish(started);
         Ok(&self.report)
+    }
+
+    /// Below the atlas's first level (suction) the hydraulics continue the P-V curve's first
+    /// segment; the surface's volume is not linear in its extrapolated positions, so the replay
+    /// pressure is corrected by a few secant steps until the surface holds the hydraulics' volume
+    /// (within 0.01 %), one source of truth for what the renderer sees.
+    fn match_volume_below_the_atlas(&mut self, p: f64) -> Result<(), SceneError> {
+        let target = self.hydraulic_state.cavity_volume_m3;
+        if !(target.is_finite() && target > 0.0) {
+            return Ok(());
+        }
+        let (mut a, mut va) = (p, self.surface.enclosed_volume_m3());
+        let (mut b, mut vb) = (self.atlas.pressure_pa[0], self.atlas.cavity_volume_m3[0]);
+        for _ in 0..6 {
+            if (va - target).abs() <= 1e-4 * target || va == vb {
+                break;
+            }
+            let c = a + (target - va) * (b - a) / (vb - va);
+            if !c.is_finite() {
+                break;
+            }
+            self.surface.replay(&self.atlas, c)?;
+            (b, vb) = (a, va);
+            (a, va) = (c, self.surface.enclosed_volume_m3());
+        }
+        self.report.surface_volume_m3 = va;
+        Ok(())
     }
 
     fn finish(&mut self, started: Instant) {
