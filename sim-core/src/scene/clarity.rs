@@ -9,8 +9,6 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::particles::View;
-
 /// The `[particles.view]` table.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -112,5 +110,27 @@ impl ClarityTracker {
                 }
             }
         }
+    }
+}
+
+/// A view cone for the clarity figure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct View {
+    /// Apex (the scope's tip), m.
+    pub tip_m: [f64; 3],
+    /// Unit view direction.
+    pub dir: [f64; 3],
+    /// Cosine of the half opening angle.
+    pub cos_half_angle: f64,
+    /// How far the view reaches, m.
+    pub depth_m: f64,
+    /// Distances below this count as this (the lens's near limit), m.
+    pub near_m: f64,
+}
+
+impl View {
+    /// The cone's solid angle, sr.
+    pub fn solid_angle_sr(&self) -> f64 {
+        std::f64::consts::TAU * (1.0 - self.cos_half_angle)
     }
 }

@@ -14,7 +14,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use super::clarity::{ClarityTracker, ViewSpec};
+use super::clarity::{ClarityTracker, View, ViewSpec};
 use super::random::SplitMix64;
 use super::vortices::cross;
 use super::{Scene, VoxelKind};
@@ -1030,28 +1030,6 @@ fn relocate(p: [f32; 3], kind_at: &impl Fn([f32; 3]) -> VoxelKind) -> Option<[f3
         }
     }
     best.map(|b| b.0)
-}
-
-/// A view cone for the clarity figure.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct View {
-    /// Apex (the scope's tip), m.
-    pub tip_m: [f64; 3],
-    /// Unit view direction.
-    pub dir: [f64; 3],
-    /// Cosine of the half opening angle.
-    pub cos_half_angle: f64,
-    /// How far the view reaches, m.
-    pub depth_m: f64,
-    /// Distances below this count as this (the lens's near limit), m.
-    pub near_m: f64,
-}
-
-impl View {
-    /// The cone's solid angle, sr.
-    pub fn solid_angle_sr(&self) -> f64 {
-        std::f64::consts::TAU * (1.0 - self.cos_half_angle)
-    }
 }
 
 /// Result of [`time_to_traverse`].
