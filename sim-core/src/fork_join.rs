@@ -48,6 +48,8 @@ pub const WAIT_SLEEP: Duration = Duration::from_micros(20);
 
 /// Which fork-join runs the two halves (the home-made helper by default; the others are kept to
 /// measure against, `hydrometra fluid bench --fork-join`).
+/// Without the `harness` feature nothing selects a backend (the helper runs), so the type is unused.
+#[cfg_attr(not(feature = "harness"), allow(dead_code))]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backend {
     /// The spinning helper thread of this module.
