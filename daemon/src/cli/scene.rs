@@ -509,8 +509,8 @@ fn bench(a: &BenchArgs) -> Result<()> {
         let mut its = 0usize;
         let mut max_div = 0.0f64;
         let mut fluid_runs = 0usize;
-        let (mut rebuilds, mut topology_ms, mut advect_ms, mut project_ms) =
-            (0usize, 0.0, 0.0, 0.0);
+        let (mut rebuilds, mut substeps, mut topology_ms, mut advect_ms, mut project_ms) =
+            (0usize, 0usize, 0.0, 0.0, 0.0);
         for f in a.warmup..a.warmup + a.steps {
             let r = scene.step(
                 &SceneInputs {
@@ -524,6 +524,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
                 max_div = max_div.max(s.max_div_rel);
                 fluid_runs += 1;
                 rebuilds += usize::from(s.topology_rebuilt);
+                substeps += s.substeps;
                 topology_ms += s.topology_ms;
                 advect_ms += s.advect_ms;
                 project_ms += s.project_ms;
@@ -531,7 +532,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
         }
         let per_run = |x: f64| x / fluid_runs.max(1) as f64;
         eprintln!(
-            "{v} mm: {fluid_runs} fluid steps, {rebuilds} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
+            "{v} mm: {fluid_runs} fluid steps, {substeps} substeps, {rebuilds} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
             per_run(topology_ms), per_run(advect_ms), per_run(project_ms)
         );
         let r = scene.report();

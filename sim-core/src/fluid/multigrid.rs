@@ -486,6 +486,10 @@ pub(crate) struct Level {
     pub fluid: usize,
     /// Padded-index ranges `[start, end)` that cover every fluid cell.
     pub spans: Vec<[u32; 2]>,
+    /// The spans before the last [`Level::build_dense`] (`None`: the dense vectors were cleared
+    /// whole): every dense vector of the level and of the pressure solver is zero outside the
+    /// spans, so a relabelling zeroes these ranges instead of the box.
+    pub old_spans: Option<Vec<[u32; 2]>>,
     /// First span of the second half (by cells) when the level runs on two threads.
     pub split_span: usize,
     /// Whether the kernels of this level run on rayon (set by the solver from its threshold).
@@ -605,8 +609,10 @@ impl Level {
         self.sy = nx + 2;
         self.sz = (nx + 2) * (ny + 2);
         let len = self.sz * (nz + 2);
+        // Periodic halos are written outside the spans: those levels clear the whole box.
+        let sparse = self.mask.len() == len && !self.periodic.iter().any(|&p| p);
         let [inv0, inv1] = &mut self.inv;
-        for v in [
+        let vectors = [
             &mut self.ddiag,
             &mut self.mask,
             inv0,
@@ -614,9 +620,23 @@ impl Level {
             &mut self.x,
             &mut self.b,
             &mut self.r,
-        ] {
-            v.clear();
-            v.resize(len, 0.0);
+        ];
+        if sparse {
+            for v in vectors {
+                for &[s, e] in &self.spans {
+                    v[s as usize..e as usize].fill(0.0);
+                }
+            }
+            let mut old = self.old_spans.take().unwrap_or_default();
+            old.clear();
+            old.extend_from_slice(&self.spans);
+            self.old_spans = Some(old);
+        } else {
+            for v in vectors {
+                v.clear();
+                v.resize(len, 0.0);
+            }
+            self.old_spans = None;
         }
         self.spans.clear();
         self.row_spans.clear();

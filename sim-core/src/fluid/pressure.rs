@@ -143,14 +143,30 @@ impl PressureSolver {
             v.resize(n, 0.0);
         }
         self.regions.build(&self.mg.levels[0]);
-        let len = self.mg.levels[0].x.len();
-        for v in [&mut self.dq, &mut self.bd] {
-            v.clear();
-            v.resize(len, 0.0);
-        }
-        for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
-            v.clear();
-            v.resize(len, 0.0);
+        let l0 = &self.mg.levels[0];
+        let len = l0.x.len();
+        // Zero outside level 0's spans: only the previous spans need clearing.
+        match &l0.old_spans {
+            Some(old) if self.dq.len() == len => {
+                for &[s, e] in old {
+                    let r = s as usize..e as usize;
+                    self.dq[r.clone()].fill(0.0);
+                    self.bd[r.clone()].fill(0.0);
+                    self.dd[r.clone()].fill(0.0);
+                    self.dp[r.clone()].fill(0.0);
+                    self.dap[r].fill(0.0);
+                }
+            }
+            _ => {
+                for v in [&mut self.dq, &mut self.bd] {
+                    v.clear();
+                    v.resize(len, 0.0);
+                }
+                for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
+                    v.clear();
+                    v.resize(len, 0.0);
+                }
+            }
         }
     }
 

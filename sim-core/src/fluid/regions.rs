@@ -17,6 +17,9 @@ pub(crate) struct Regions {
     pub closed: Vec<bool>,
     /// Rows per region.
     pub size: Vec<u32>,
+    /// The rows of the closed regions, in row order (often a few stray cells beside an open
+    /// cavity: the mean removal then touches only them).
+    closed_rows: Vec<u32>,
     /// Scratch accumulators, one per region.
     sum: Vec<f64>,
     queue: Vec<u32>,
@@ -62,6 +65,11 @@ impl Regions {
         }
         self.sum.clear();
         self.sum.resize(self.closed.len(), 0.0);
+        self.closed_rows.clear();
+        let closed = &self.closed;
+        let rows = self.of_row.iter().enumerate();
+        let in_closed = rows.filter(|&(_, &id)| closed[id as usize]);
+        self.closed_rows.extend(in_closed.map(|(r, _)| r as u32));
     }
 
     /// Number of regions.
@@ -82,8 +90,8 @@ impl Regions {
             return 0.0;
         }
         self.sum.fill(0.0);
-        for (r, &x) in v.iter().enumerate() {
-            self.sum[self.of_row[r] as usize] += x;
+        for &r in &self.closed_rows {
+            self.sum[self.of_row[r as usize] as usize] += v[r as usize];
         }
         let mut worst = 0.0f64;
         let mut total = 0.0f64;
@@ -97,8 +105,8 @@ impl Regions {
             worst = worst.max(s.abs());
         }
         self.removed_total = total;
-        for (r, x) in v.iter_mut().enumerate() {
-            *x -= self.sum[self.of_row[r] as usize];
+        for &r in &self.closed_rows {
+            v[r as usize] -= self.sum[self.of_row[r as usize] as usize];
         }
         worst
     }
@@ -111,8 +119,9 @@ impl Regions {
             return 0.0;
         }
         self.sum.fill(0.0);
-        for (r, &p) in pad_of_row.iter().enumerate() {
-            self.sum[self.of_row[r] as usize] += v[p as usize].to_f64();
+        for &r in &self.closed_rows {
+            let p = pad_of_row[r as usize];
+            self.sum[self.of_row[r as usize] as usize] += v[p as usize].to_f64();
         }
         let mut worst = 0.0f64;
         let mut total = 0.0f64;
@@ -126,9 +135,9 @@ impl Regions {
             worst = worst.max(s.abs());
         }
         self.removed_total = total;
-        for (r, &p) in pad_of_row.iter().enumerate() {
-            let x = &mut v[p as usize];
-            *x = T::from_f64(x.to_f64() - self.sum[self.of_row[r] as usize]);
+        for &r in &self.closed_rows {
+            let x = &mut v[pad_of_row[r as usize] as usize];
+            *x = T::from_f64(x.to_f64() - self.sum[self.of_row[r as usize] as usize]);
         }
         worst
     }

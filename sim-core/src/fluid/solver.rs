@@ -202,6 +202,8 @@ pub struct FluidSolver {
     /// Padded (level 0) index of the upper cell of the first face of each active run
     /// (`FaceSet::runs`), for the pressure-gradient update.
     run_cells: [Vec<u32>; 3],
+    /// Open-cell x range of every cell row (scratch of the topology rebuild).
+    open_rows: Vec<[u32; 2]>,
     time_s: f64,
 }
 
@@ -235,6 +237,7 @@ impl FluidSolver {
             p_lag: Vec::new(),
             lagged_applied: false,
             run_cells: Default::default(),
+            open_rows: Vec::new(),
             time_s: 0.0,
         };
         // Measured on the benchmark cavity: 2 sweeps and a coarse scale of 0.6 (over twice
@@ -308,13 +311,17 @@ impl FluidSolver {
         std::array::from_fn(|a| o[a] + p[a] as f64 * h)
     }
 
-    /// Sets every face velocity from `field(component, position_m)` (initial conditions), then
-    /// re-applies boundary values. Does not project.
+    /// Sets every tracked face velocity from `field(component, position_m)` (initial conditions;
+    /// untracked faces stay zero), then re-applies boundary values. Does not project.
     pub fn set_velocity_field(&mut self, mut field: impl FnMut(usize, [f64; 3]) -> f64) {
         for c in 0..3 {
             for idx in 0..self.u[c].len() {
                 let x = self.face_position_m(c, idx);
-                self.u[c][idx] = field(c, x) as f32;
+                self.u[c][idx] = if self.faces[c].class[idx] == topology::OTHER {
+                    0.0
+                } else {
+                    field(c, x) as f32
+                };
             }
         }
         self.apply_fixed(true);
@@ -337,18 +344,30 @@ impl FluidSolver {
             _ => L_SOLID,
         }));
         l0.build_rows();
-        // Keep the pressure of cells that stay fluid for the warm start across relabelling.
-        self.pressure_pa.resize(l0.mask.len(), 0.0);
-        self.p_lag.resize(l0.mask.len(), 0.0);
-        for (p, &m) in self.pressure_pa.iter_mut().zip(&l0.mask) {
-            if m == 0.0 {
-                *p = 0.0;
+        // Keep the pressure of cells that stay fluid for the warm start across relabelling (it
+        // is zero outside the fluid cells, so only the previous spans can hold stale values).
+        let len = l0.mask.len();
+        let whole = self.pressure_pa.len() != len || l0.old_spans.is_none();
+        self.pressure_pa.resize(len, 0.0);
+        self.p_lag.resize(len, 0.0);
+        let ranges: &[[u32; 2]] = match &l0.old_spans {
+            Some(old) if !whole => old,
+            _ => &[[0, len as u32]],
+        };
+        for &[s, e] in ranges {
+            let r = s as usize..e as usize;
+            for (p, &m) in self.pressure_pa[r.clone()].iter_mut().zip(&l0.mask[r]) {
+                if m == 0.0 {
+                    *p = 0.0;
+                }
             }
         }
         mg.build_hierarchy();
         self.pressure.resize();
+
+        topology::open_row_ranges(&self.grid, &mut self.open_rows);
         for c in 0..3 {
-            self.faces[c].rebuild(&self.grid, &self.layout, c);
+            self.faces[c].rebuild(&self.grid, &self.layout, c, &self.open_rows);
             let n = self.faces[c].active.len();
             for v in [&mut self.compact[c], &mut self.ghost[c]] {
                 v.clear();
@@ -361,11 +380,10 @@ impl FluidSolver {
             });
             self.run_cells[c].clear();
             self.run_cells[c].extend(cells);
-            // Faces no longer tracked are zeroed so stale values never leak into samples.
-            for (idx, v) in self.u[c].iter_mut().enumerate() {
-                if self.faces[c].class[idx] == topology::OTHER {
-                    *v = 0.0;
-                }
+            // Faces no longer tracked are zeroed so stale values never leak into samples (the
+            // untracked faces hold zero: see `set_velocity_field`).
+            for &idx in &self.faces[c].dropped {
+                self.u[c][idx as usize] = 0.0;
             }
         }
         let [f0, f1, f2] = &self.faces;

@@ -80,6 +80,32 @@ pub(crate) struct FaceSet {
     /// their sources k at a time (same order). A fixed count per loop has no mispredicted exits,
     /// and within a layer no face reads another, so the order among groups is free.
     pub ext_groups: [[(Vec<u32>, Vec<u32>); 7]; 2],
+    /// The faces the last rebuild tracked (active, fixed and extrapolated) that this one does not:
+    /// the solver zeroes their velocities.
+    pub dropped: Vec<u32>,
+    /// Scratch: the faces tracked before this rebuild, and a layer's faces.
+    previous: Vec<u32>,
+    layer_scratch: Vec<u32>,
+}
+
+/// The x range `[first, end)` of the open (fluid or outflow) cells of every cell row `(j, k)`
+/// (index `j + ny k`; `[0, 0]` when the row has none): the only rows whose faces can be active or
+/// fixed, so a rebuild costs the fluid region, not the box.
+pub(crate) fn open_row_ranges(grid: &FluidGrid, out: &mut Vec<[u32; 2]>) {
+    let [nx, ny, nz] = grid.dims();
+    out.clear();
+    out.reserve(ny * nz);
+    for row in grid.labels().chunks_exact(nx) {
+        let open = |l: &CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
+        let range = match row.iter().position(open) {
+            Some(first) => {
+                let last = row.iter().rposition(open).unwrap_or(first); // ok: `first` is open
+                [first as u32, last as u32 + 1]
+            }
+            None => [0, 0],
+        };
+        out.push(range);
+    }
 }
 
 fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
@@ -159,14 +185,29 @@ pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
 }
 
 impl FaceSet {
-    /// Rebuilds this component's face set from the labels.
-    pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize) {
+    /// Rebuilds this component's face set from the labels, visiting only the faces of the cell
+    /// rows that hold open cells (`rows`, from [`open_row_ranges`]) and resetting only the faces
+    /// the last rebuild tracked: the class and compact arrays stay box-sized and all-OTHER/NONE
+    /// between the tracked faces.
+    pub fn rebuild(&mut self, grid: &FluidGrid, layout: &Layout, c: usize, rows: &[[u32; 2]]) {
         let nf = layout.face_count(c);
-        self.fdims = layout.fdims[c];
-        self.class.clear();
-        self.class.resize(nf, OTHER);
-        self.compact.clear();
-        self.compact.resize(nf, NONE);
+        let d = layout.fdims[c];
+        self.previous.clear();
+        self.dropped.clear();
+        if self.class.len() != nf || self.fdims != d {
+            self.fdims = d;
+            self.class.clear();
+            self.class.resize(nf, OTHER);
+            self.compact.clear();
+            self.compact.resize(nf, NONE);
+        } else {
+            let tracked = self.active.iter().chain(self.fixed.iter().map(|f| &f[0]));
+            for &idx in tracked.chain(&self.ext1).chain(&self.ext2) {
+                self.class[idx as usize] = OTHER;
+                self.compact[idx as usize] = NONE;
+                self.previous.push(idx);
+            }
+        }
         self.active.clear();
         self.fixed.clear();
         self.stencil.clear();
@@ -182,31 +223,73 @@ impl FaceSet {
         self.ext_start.clear();
         self.ext_src.clear();
 
-        for idx in 0..nf {
-            let f = layout.face_coords(c, idx);
-            let (lo, up) = face_cells(grid, c, f);
-            let (ll, li) = label_of(grid, lo);
-            let (ul, ui) = label_of(grid, up);
-            let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
-            let class = if ll.is_wall() || ul.is_wall() {
-                if open(ll) || open(ul) {
-                    FIXED
+        let [_, ny, nz] = grid.dims();
+        let periodic = layout.periodic;
+        // The cell row beside face row (j, k) on the lower side along `c` (None: outside).
+        let lower_row = |j: usize, k: usize| -> Option<usize> {
+            match c {
+                1 if j == 0 => periodic[1].then(|| (ny - 1) + ny * k),
+                1 => Some((j - 1) + ny * k),
+                2 if k == 0 => periodic[2].then(|| j + ny * (nz - 1)),
+                2 => Some(j + ny * (k - 1)),
+                _ => None,
+            }
+        };
+        for fk in 0..d[2] {
+            for fj in 0..d[1] {
+                // The face row's candidate x range: the open range of the cell rows beside it.
+                let mut lo = u32::MAX;
+                let mut hi = 0u32;
+                let own = (fj < ny && fk < nz).then(|| fj + ny * fk);
+                for row in [own, lower_row(fj, fk)].into_iter().flatten() {
+                    let [a, b] = rows[row];
+                    if a < b {
+                        lo = lo.min(a);
+                        hi = hi.max(b);
+                    }
+                }
+                if lo >= hi {
+                    continue;
+                }
+                let (lo, hi) = if c == 0 {
+                    if periodic[0] {
+                        (0, d[0])
+                    } else {
+                        // The upper face of the last open cell too.
+                        (lo as usize, (hi as usize + 1).min(d[0]))
+                    }
                 } else {
-                    OTHER
+                    (lo as usize, hi as usize)
+                };
+                let base = d[0] * (fj + d[1] * fk);
+                for i in lo..hi {
+                    let idx = base + i;
+                    let f = [i, fj, fk];
+                    let (lc, uc) = face_cells(grid, c, f);
+                    let (ll, li) = label_of(grid, lc);
+                    let (ul, ui) = label_of(grid, uc);
+                    let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
+                    let class = if ll.is_wall() || ul.is_wall() {
+                        if open(ll) || open(ul) {
+                            FIXED
+                        } else {
+                            OTHER
+                        }
+                    } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
+                        ACTIVE
+                    } else {
+                        OTHER
+                    };
+                    self.class[idx] = class;
+                    match class {
+                        FIXED => self.fixed.push([idx as u32, li, ui]),
+                        ACTIVE => {
+                            self.compact[idx] = self.active.len() as u32;
+                            self.active.push(idx as u32);
+                        }
+                        _ => {}
+                    }
                 }
-            } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
-                ACTIVE
-            } else {
-                OTHER
-            };
-            self.class[idx] = class;
-            match class {
-                FIXED => self.fixed.push([idx as u32, li, ui]),
-                ACTIVE => {
-                    self.compact[idx] = self.active.len() as u32;
-                    self.active.push(idx as u32);
-                }
-                _ => {}
             }
         }
 
@@ -337,41 +420,54 @@ impl FaceSet {
             .take_while(|f| f[1] != NONE || f[2] != NONE)
             .count();
 
-        // Extrapolation layers.
+        // Extrapolation layers: the OTHER faces next to a face of the layer inside, in index
+        // order (as a scan of the whole array would find them).
+        let mut layer_faces = std::mem::take(&mut self.layer_scratch);
         for (layer, from) in [(EXT1, ACTIVE), (EXT2, EXT1)] {
-            for idx in 0..nf {
-                if self.class[idx] != OTHER {
-                    continue;
-                }
-                let f = layout.face_coords(c, idx);
-                let near = (0..6).any(|slot| {
-                    face_neighbour(layout, c, f, slot / 2, if slot % 2 == 0 { -1 } else { 1 })
-                        .is_some_and(|g| self.class[layout.face_index(c, g)] == from)
-                });
-                if near {
-                    if self.ext_start.is_empty() {
-                        self.ext_start.push(0);
-                    }
-                    for slot in 0..6 {
-                        let dir = if slot % 2 == 0 { -1 } else { 1 };
-                        if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
-                            let gi = layout.face_index(c, g);
-                            let cl = self.class[gi];
-                            if cl == from || (from == ACTIVE && cl == FIXED) {
-                                self.ext_src.push(gi as u32);
-                            }
+            layer_faces.clear();
+            let inside = if layer == EXT1 {
+                &self.active
+            } else {
+                &self.ext1
+            };
+            for &idx in inside {
+                let f = layout.face_coords(c, idx as usize);
+                for slot in 0..6 {
+                    let dir = if slot % 2 == 0 { -1 } else { 1 };
+                    if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
+                        let gi = layout.face_index(c, g);
+                        if self.class[gi] == OTHER {
+                            self.class[gi] = layer;
+                            layer_faces.push(gi as u32);
                         }
-                    }
-                    self.ext_start.push(self.ext_src.len() as u32);
-                    self.class[idx] = layer;
-                    if layer == EXT1 {
-                        self.ext1.push(idx as u32);
-                    } else {
-                        self.ext2.push(idx as u32);
                     }
                 }
             }
+            layer_faces.sort_unstable();
+            for &idx in &layer_faces {
+                let f = layout.face_coords(c, idx as usize);
+                if self.ext_start.is_empty() {
+                    self.ext_start.push(0);
+                }
+                for slot in 0..6 {
+                    let dir = if slot % 2 == 0 { -1 } else { 1 };
+                    if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
+                        let gi = layout.face_index(c, g);
+                        let cl = self.class[gi];
+                        if cl == from || (from == ACTIVE && cl == FIXED) {
+                            self.ext_src.push(gi as u32);
+                        }
+                    }
+                }
+                self.ext_start.push(self.ext_src.len() as u32);
+            }
+            if layer == EXT1 {
+                std::mem::swap(&mut self.ext1, &mut layer_faces);
+            } else {
+                std::mem::swap(&mut self.ext2, &mut layer_faces);
+            }
         }
+        self.layer_scratch = layer_faces;
         for g in self.ext_groups.iter_mut().flatten() {
             g.0.clear();
             g.1.clear();
@@ -383,6 +479,152 @@ impl FaceSet {
             let g = &mut self.ext_groups[layer][s1 - s0];
             g.0.push(idx);
             g.1.extend_from_slice(&self.ext_src[s0..s1]);
+        }
+        for &idx in &self.previous {
+            if self.class[idx as usize] == OTHER {
+                self.dropped.push(idx);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fresh(grid: &FluidGrid, layout: &Layout, c: usize) -> FaceSet {
+        let mut rows = Vec::new();
+        open_row_ranges(grid, &mut rows);
+        let mut set = FaceSet::default();
+        set.rebuild(grid, layout, c, &rows);
+        set
+    }
+
+    fn tracked(set: &FaceSet) -> Vec<u32> {
+        let fixed = set.fixed.iter().map(|f| f[0]);
+        let mut all: Vec<u32> = set.active.iter().copied().chain(fixed).collect();
+        all.extend(set.ext1.iter().chain(&set.ext2));
+        all.sort_unstable();
+        all
+    }
+
+    /// The rebuild visits only the rows with open cells and resets only the faces it tracked
+    /// before: after any sequence of relabellings it must equal a build from scratch, field by
+    /// field, and report as dropped exactly the faces no longer tracked.
+    #[test]
+    fn a_rebuild_after_relabelling_equals_a_fresh_build() {
+        let labels = [
+            CellLabel::Fluid,
+            CellLabel::Solid,
+            CellLabel::Velocity,
+            CellLabel::Outflow,
+        ];
+        for periodic in [[false; 3], [true, false, true], [false, true, false]] {
+            let mut rng = fastrand::Rng::with_seed(11);
+            let dims = [9, 7, 6];
+            let mut grid = FluidGrid::new(dims, 1e-3, [0.0; 3], periodic).unwrap();
+            // Start mostly solid: a sparse fluid region, as in the uterine scene.
+            for k in 0..dims[2] {
+                for j in 0..dims[1] {
+                    for i in 0..dims[0] {
+                        let l = if rng.f32() < 0.6 {
+                            CellLabel::Solid
+                        } else {
+                            labels[rng.usize(..labels.len())]
+                        };
+                        grid.set_label([i, j, k], l).unwrap();
+                    }
+                }
+            }
+            let layout = Layout::new(dims, periodic);
+            let mut rows = Vec::new();
+            let mut sets: [FaceSet; 3] = Default::default();
+            for _ in 0..40 {
+                for _ in 0..rng.usize(1..12) {
+                    let cell = [
+                        rng.usize(..dims[0]),
+                        rng.usize(..dims[1]),
+                        rng.usize(..dims[2]),
+                    ];
+                    let l = labels[rng.usize(..labels.len())];
+                    grid.set_label(cell, l).unwrap();
+                }
+                open_row_ranges(&grid, &mut rows);
+                for (c, set) in sets.iter_mut().enumerate() {
+                    let before = tracked(set);
+                    set.rebuild(&grid, &layout, c, &rows);
+                    let want = fresh(&grid, &layout, c);
+                    assert_eq!(set.class, want.class, "class, component {c}, {periodic:?}");
+                    assert_eq!(set.compact, want.compact);
+                    assert_eq!(set.active, want.active);
+                    assert_eq!(set.fixed, want.fixed);
+                    assert_eq!(set.fixed_moving, want.fixed_moving);
+                    assert_eq!(set.stencil, want.stencil);
+                    assert_eq!(set.diag, want.diag);
+                    assert_eq!(set.nbr, want.nbr);
+                    assert_eq!(set.self_diag, want.self_diag);
+                    assert_eq!(set.runs, want.runs);
+                    assert_eq!(set.regular, want.regular);
+                    assert_eq!(set.ghosts, want.ghosts);
+                    assert_eq!(set.ext1, want.ext1);
+                    assert_eq!(set.ext2, want.ext2);
+                    assert_eq!(set.ext_start, want.ext_start);
+                    assert_eq!(set.ext_src, want.ext_src);
+                    for (a, b) in set
+                        .ext_groups
+                        .iter()
+                        .flatten()
+                        .zip(want.ext_groups.iter().flatten())
+                    {
+                        assert_eq!(a, b);
+                    }
+                    let now = tracked(set);
+                    let mut dropped = set.dropped.clone();
+                    dropped.sort_unstable();
+                    let expected: Vec<u32> = before
+                        .into_iter()
+                        .filter(|f| now.binary_search(f).is_err())
+                        .collect();
+                    assert_eq!(dropped, expected, "dropped faces, component {c}");
+                }
+            }
+        }
+    }
+
+    /// The scan a fresh build makes: every face of the array classified (the reference the
+    /// row-restricted classification must match).
+    #[test]
+    fn the_row_restricted_classification_matches_a_scan_of_every_face() {
+        for periodic in [[false; 3], [true, true, true]] {
+            let mut rng = fastrand::Rng::with_seed(3);
+            let dims = [6, 5, 4];
+            let mut grid = FluidGrid::new(dims, 1e-3, [0.0; 3], periodic).unwrap();
+            for n in 0..grid.cell_count() {
+                let cell = grid.coords(n);
+                let l = [
+                    CellLabel::Fluid,
+                    CellLabel::Solid,
+                    CellLabel::Outflow,
+                    CellLabel::Velocity,
+                ][rng.usize(..4)];
+                grid.set_label(cell, l).unwrap();
+            }
+            let layout = Layout::new(dims, periodic);
+            for c in 0..3 {
+                let set = fresh(&grid, &layout, c);
+                for idx in 0..layout.face_count(c) {
+                    let (lo, up) = face_cells(&grid, c, layout.face_coords(c, idx));
+                    let (ll, _) = label_of(&grid, lo);
+                    let (ul, _) = label_of(&grid, up);
+                    let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
+                    let want_active = !ll.is_wall()
+                        && !ul.is_wall()
+                        && (ll == CellLabel::Fluid || ul == CellLabel::Fluid);
+                    let want_fixed = (ll.is_wall() || ul.is_wall()) && (open(ll) || open(ul));
+                    assert_eq!(set.class[idx] == ACTIVE, want_active, "face {idx} c {c}");
+                    assert_eq!(set.class[idx] == FIXED, want_fixed, "face {idx} c {c}");
+                }
+            }
         }
     }
 }
