@@ -137,34 +137,35 @@ pub(crate) fn face_cells(
     (lower, upper)
 }
 
-/// Neighbour face of face `f` (component c) along axis `d`, direction `dir`.
-pub(crate) fn face_neighbour(
+/// Index of the neighbour face of face `idx` (coordinates `f`, component c) along axis `d`,
+/// direction `dir` (None beyond a non-periodic end; a periodic axis wraps).
+#[inline]
+pub(crate) fn neighbour_index(
     layout: &Layout,
     c: usize,
     f: [usize; 3],
+    idx: usize,
     d: usize,
     dir: i32,
-) -> Option<[usize; 3]> {
-    let n = layout.fdims[c][d];
-    let mut g = f;
+) -> Option<usize> {
+    let fd = layout.fdims[c];
+    let n = fd[d];
+    let stride = match d {
+        0 => 1,
+        1 => fd[0],
+        _ => fd[0] * fd[1],
+    };
     if dir < 0 {
         if f[d] == 0 {
-            if !layout.periodic[d] {
-                return None;
-            }
-            g[d] = n - 1;
+            layout.periodic[d].then(|| idx + (n - 1) * stride)
         } else {
-            g[d] -= 1;
+            Some(idx - stride)
         }
     } else if f[d] + 1 >= n {
-        if !layout.periodic[d] {
-            return None;
-        }
-        g[d] = 0;
+        layout.periodic[d].then(|| idx - (n - 1) * stride)
     } else {
-        g[d] += 1;
+        Some(idx + stride)
     }
-    Some(g)
 }
 
 /// Wall velocity component `c` of a pair of non-fluid cells (mean over `Velocity` cells).
@@ -302,20 +303,17 @@ impl FaceSet {
             for d in 0..3 {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
                     let slot = 2 * d + s;
-                    let g = face_neighbour(layout, c, f, d, dir);
                     let opposite = || {
-                        face_neighbour(layout, c, f, d, -dir)
-                            .map(|o| layout.face_index(c, o))
+                        neighbour_index(layout, c, f, idx, d, -dir)
                             .filter(|&o| matches!(self.class[o], ACTIVE | FIXED))
                             .map_or(NONE, |o| o as u32)
                     };
-                    let Some(g) = g else {
+                    let Some(gi) = neighbour_index(layout, c, f, idx, d, dir) else {
                         // Beyond a non-periodic tangential boundary: wall at rest.
                         diag += 1.0;
                         self.ghosts.push([n as u32, NONE, NONE, opposite()]);
                         continue;
                     };
-                    let gi = layout.face_index(c, g);
                     if d == c {
                         match self.class[gi] {
                             ACTIVE => st[slot] = self.compact[gi],
@@ -324,7 +322,7 @@ impl FaceSet {
                         }
                         continue;
                     }
-                    let (lo, up) = face_cells(grid, c, g);
+                    let (lo, up) = face_cells(grid, c, layout.face_coords(c, gi));
                     let (ll, li) = label_of(grid, lo);
                     let (ul, ui) = label_of(grid, up);
                     if ll.is_wall() && ul.is_wall() {
@@ -434,8 +432,8 @@ impl FaceSet {
                 let f = layout.face_coords(c, idx as usize);
                 for slot in 0..6 {
                     let dir = if slot % 2 == 0 { -1 } else { 1 };
-                    if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
-                        let gi = layout.face_index(c, g);
+                    let idx = idx as usize;
+                    if let Some(gi) = neighbour_index(layout, c, f, idx, slot / 2, dir) {
                         if self.class[gi] == OTHER {
                             self.class[gi] = layer;
                             layer_faces.push(gi as u32);
@@ -451,8 +449,8 @@ impl FaceSet {
                 }
                 for slot in 0..6 {
                     let dir = if slot % 2 == 0 { -1 } else { 1 };
-                    if let Some(g) = face_neighbour(layout, c, f, slot / 2, dir) {
-                        let gi = layout.face_index(c, g);
+                    let idx = idx as usize;
+                    if let Some(gi) = neighbour_index(layout, c, f, idx, slot / 2, dir) {
                         let cl = self.class[gi];
                         if cl == from || (from == ACTIVE && cl == FIXED) {
                             self.ext_src.push(gi as u32);
@@ -586,6 +584,32 @@ mod tests {
                         .filter(|f| now.binary_search(f).is_err())
                         .collect();
                     assert_eq!(dropped, expected, "dropped faces, component {c}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn neighbour_index_steps_one_face_and_wraps_on_periodic_axes() {
+        for periodic in [[false; 3], [true, true, true], [true, false, true]] {
+            let layout = Layout::new([4, 3, 5], periodic);
+            for c in 0..3 {
+                for idx in 0..layout.face_count(c) {
+                    let f = layout.face_coords(c, idx);
+                    for d in 0..3 {
+                        let n = layout.fdims[c][d] as i64;
+                        for dir in [-1i32, 1] {
+                            let g = f[d] as i64 + dir as i64;
+                            let want = if (0..n).contains(&g) || periodic[d] {
+                                let mut h = f;
+                                h[d] = g.rem_euclid(n) as usize;
+                                Some(layout.face_index(c, h))
+                            } else {
+                                None
+                            };
+                            assert_eq!(neighbour_index(&layout, c, f, idx, d, dir), want);
+                        }
+                    }
                 }
             }
         }
