@@ -6,7 +6,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use clap::Args;
-use hydrometra_ipc::status::{self, link_down_reason, link_state};
+use hydrometra_ipc::status::{self, link_down_reason, link_state, scene_stage, scene_state};
 use hydrometra_ipc::{alarms, hydraulic_flags, ServiceNames, Status};
 use hydrometra_sim::units::pa_to_mmhg;
 use iceoryx2::prelude::*;
@@ -122,7 +122,77 @@ pub fn status_json(s: &Status) -> serde_json::Value {
         "latency_samples": s.latency_samples,
         "statuses_dropped": s.statuses_dropped,
         "hydraulics": hydraulics_json(s),
+        "scene": scene_json(s),
     })
+}
+
+/// The scene's state and per-stage counters (keyed by stage name).
+fn scene_json(s: &Status) -> serde_json::Value {
+    let stages: serde_json::Map<String, serde_json::Value> = scene_stage::NAMES
+        .iter()
+        .enumerate()
+        .map(|(i, name)| {
+            let stage = serde_json::json!({
+                "runs": s.scene_stage_runs[i],
+                "skips": s.scene_stage_skips[i],
+                "p99_s": finite(s.scene_stage_p99_s[i]),
+            });
+            (name.to_string(), stage)
+        })
+        .collect();
+    serde_json::json!({
+        "state": s.scene_state,
+        "state_name": scene_state::name(s.scene_state),
+        "frames": s.scene_frames,
+        "step_p99_s": finite(s.scene_step_p99_s),
+        "view_clarity": finite(s.view_clarity),
+        "cavity_surface_volume_ml": s.cavity_surface_volume_m3 * 1e6,
+        "stages": stages,
+    })
+}
+
+/// The scene block of the human view: state, frames, clarity, and each stage's runs, skips and
+/// p99 (a stage that never ran shows "-").
+fn render_scene(w: &mut String, s: &Status) {
+    use std::fmt::Write as _;
+    let _ = writeln!(
+        w,
+        "SCENE         {}   frames {}   step p99 {}   view clarity {}   cavity surface {:5.2} ml",
+        scene_state::name(s.scene_state).to_uppercase(),
+        s.scene_frames,
+        ms(s.scene_step_p99_s),
+        if s.view_clarity.is_finite() {
+            format!("{:3.0} %", 100.0 * s.view_clarity)
+        } else {
+            "-".into()
+        },
+        s.cavity_surface_volume_m3 * 1e6
+    );
+    let _ = write!(w, "  stage           ");
+    for name in scene_stage::NAMES {
+        let _ = write!(w, "{name:>12}");
+    }
+    let _ = writeln!(w);
+    let rows: [(&str, &dyn Fn(usize) -> String); 3] = [
+        ("runs", &|i| s.scene_stage_runs[i].to_string()),
+        ("skips", &|i| s.scene_stage_skips[i].to_string()),
+        ("p99", &|i| {
+            let p = s.scene_stage_p99_s[i];
+            if s.scene_stage_runs[i] > 0 && p.is_finite() {
+                format!("{:.3} ms", p * 1e3)
+            } else {
+                "-".into()
+            }
+        }),
+    ];
+    for (label, cell) in rows {
+        let _ = write!(w, "  {label:<16}");
+        for i in 0..scene_stage::NAMES.len() {
+            let _ = write!(w, "{:>12}", cell(i));
+        }
+        let _ = writeln!(w);
+    }
+    let _ = writeln!(w);
 }
 
 fn hydraulics_json(s: &Status) -> serde_json::Value {
@@ -302,6 +372,9 @@ pub fn render(s: &Status, rate_hz: f64, note: &str) -> String {
             s.fluid_collected_m3 * 1e6
         );
         let _ = writeln!(w);
+    }
+    if s.scene_state != scene_state::NONE {
+        render_scene(w, s);
     }
     let names = alarms::names(s.alarm_bits);
     let _ = writeln!(
@@ -516,5 +589,33 @@ mod tests {
             view.contains("STALE") && view.contains("100.0 mmHg") && view.contains("SAFE STATE"),
             "{view}"
         );
+        assert!(!view.contains("SCENE"), "no scene block without a scene");
+    }
+
+    #[test]
+    fn the_scene_block_shows_state_clarity_and_every_stage() {
+        let mut s = Status {
+            scene_state: scene_state::RUNNING,
+            scene_frames: 1234,
+            view_clarity: 0.87,
+            cavity_surface_volume_m3: 4.5e-6,
+            ..Status::default()
+        };
+        s.scene_stage_runs[scene_stage::FLUID] = 1000;
+        s.scene_stage_skips[scene_stage::FLUID] = 234;
+        s.scene_stage_p99_s[scene_stage::FLUID] = 0.0021;
+        let view = render(&s, 1000.0, "");
+        assert!(
+            view.contains("RUNNING") && view.contains("1234") && view.contains("87 %"),
+            "{view}"
+        );
+        assert!(view.contains("2.100 ms") && view.contains("234"), "{view}");
+        for name in scene_stage::NAMES {
+            assert!(view.contains(name), "{name} missing:\n{view}");
+        }
+        let j = status_json(&s);
+        assert_eq!(j["scene"]["state_name"], "running");
+        assert_eq!(j["scene"]["stages"]["fluid"]["skips"], 234);
+        assert!((j["scene"]["cavity_surface_volume_ml"].as_f64().unwrap() - 4.5).abs() < 1e-9);
     }
 }
