@@ -338,6 +338,12 @@ impl HydraulicModel {
             }
         };
         let p = if p.is_finite() { p } else { p_n };
+        // The exact root obeys the maximum principle (between the lowest and highest source
+        // pressure, or p_n); where the curve is flat (a collapsed cavity) the root's volume
+        // tolerance admits pressures far outside it (the random-input test once got -80.8 mmHg,
+        // below its suction pressure): keep the pressure in the bracket, which changes the volume
+        // by rounding only.
+        let p = p.clamp(lo, hi);
 
         let flows = circuit.flows(p);
         let d_in = dt_s * flows.inflow_m3_per_s;
