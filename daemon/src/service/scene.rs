@@ -95,6 +95,8 @@ impl SceneFigures {
 pub struct SceneFeed {
     snapshot: Mutex<Option<FeedSnapshot>>,
     compliance: Mutex<Option<Box<dyn CavityCompliance>>>,
+    /// A scene the control plane asked for, taken by the scene thread between frames.
+    scene_request: Mutex<Option<SceneDesc>>,
     /// Figures for status.
     pub figures: SceneFigures,
     offers: AtomicU64,
@@ -112,6 +114,7 @@ impl Default for SceneFeed {
         Self {
             snapshot: Mutex::new(None),
             compliance: Mutex::new(None),
+            scene_request: Mutex::new(None),
             figures,
             offers: AtomicU64::new(0),
         }
@@ -140,6 +143,23 @@ impl SceneFeed {
     /// Called by the loop: the atlas's compliance once the scene has it (never waits).
     pub fn take_compliance(&self) -> Option<Box<dyn CavityCompliance>> {
         self.compliance.try_lock().ok().and_then(|mut c| c.take())
+    }
+
+    /// Called by the control plane: the scene thread switches to `desc` after its current frame
+    /// (or its current preparation). A newer request replaces one not yet taken.
+    pub fn request_scene(&self, desc: SceneDesc) {
+        match self.scene_request.lock() {
+            Ok(mut slot) => *slot = Some(desc),
+            Err(poisoned) => *poisoned.into_inner() = Some(desc),
+        }
+    }
+
+    /// Called by the scene thread between frames (never waits).
+    fn take_scene_request(&self) -> Option<SceneDesc> {
+        self.scene_request
+            .try_lock()
+            .ok()
+            .and_then(|mut r| r.take())
     }
 
     fn give_compliance(&self, c: Box<dyn CavityCompliance>) {
@@ -341,6 +361,16 @@ fn rig_inputs(s: &FeedSnapshot) -> RigInputs {
     }
 }
 
+/// Why a scene's frames ended.
+enum SceneEnd {
+    /// The daemon stops.
+    Stop,
+    /// The control plane asked for another scene.
+    Load(Box<SceneDesc>),
+}
+
+/// Runs the configured scene, then every scene the control plane asks for. A scene that fails
+/// to prepare leaves the state `failed` until the next request (status and hydraulics go on).
 fn run(
     settings: SceneSettings,
     feed: &SceneFeed,
@@ -354,6 +384,53 @@ fn run(
         rate_hz,
         names,
     } = settings;
+    let mut next = Some(desc);
+    // Topology revisions go on across scenes, so a renderer sees every switch as a change.
+    let mut revision_base = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        let Some(desc) = next.take().or_else(|| feed.take_scene_request()) else {
+            std::thread::sleep(Duration::from_millis(50));
+            continue;
+        };
+        feed.figures.set_state(scene_state::PREPARING);
+        let name = desc.name.clone();
+        match run_scene(
+            desc,
+            cache_dir.as_deref(),
+            rate_hz,
+            &names,
+            (feed, telemetry, stop, log),
+            &mut revision_base,
+        ) {
+            Ok(SceneEnd::Stop) => break,
+            Ok(SceneEnd::Load(desc)) => {
+                tracing::info!(from = %name, to = %desc.name, "switching the scene");
+                next = Some(*desc);
+            }
+            Err(e) => {
+                feed.figures.set_state(scene_state::FAILED);
+                tracing::error!(
+                    scene = %name,
+                    "scene stopped: {e:#}; status and hydraulics go on (load another scene with \
+                     `hydrometra control load-scene`)"
+                );
+            }
+        }
+    }
+    feed.figures.set_state(scene_state::NONE);
+    Ok(())
+}
+
+/// Prepares one scene and steps it until the daemon stops or another scene is asked for; its
+/// services live as long as this call.
+fn run_scene(
+    desc: SceneDesc,
+    cache_dir: Option<&std::path::Path>,
+    rate_hz: f64,
+    names: &ServiceNames,
+    (feed, telemetry, stop, log): (&SceneFeed, &Telemetry, &AtomicBool, &SceneLog),
+    revision_base: &mut u64,
+) -> anyhow::Result<SceneEnd> {
     let started = Instant::now();
     tracing::info!(
         scene = %desc.name,
@@ -371,7 +448,7 @@ fn run(
             v_m3 * 1e6
         );
     };
-    let (assets, source) = prepare::load_or_build(&desc, cache_dir.as_deref(), &mut progress)?;
+    let (assets, source) = prepare::load_or_build(&desc, cache_dir, &mut progress)?;
     match &source {
         prepare::AtlasSource::Built {
             cached,
@@ -392,7 +469,7 @@ fn run(
         (c.positions_m.len(), c.triangles.len())
     };
     let cells = scene.cells().cell_count();
-    let ports = ports(&names, vertices, triangles, cells)?;
+    let ports = ports(names, vertices, triangles, cells)?;
     tracing::info!(
         vertices,
         triangles,
@@ -412,7 +489,13 @@ fn run(
     let mut sim_time_s = 0.0;
     let start = Instant::now();
     let mut frame_index: u64 = 0;
-    while !stop.load(Ordering::Relaxed) {
+    let end = loop {
+        if stop.load(Ordering::Relaxed) {
+            break SceneEnd::Stop;
+        }
+        if let Some(desc) = feed.take_scene_request() {
+            break SceneEnd::Load(Box::new(desc));
+        }
         let scheduled = start + Duration::from_nanos(period_ns.saturating_mul(frame_index));
         let now = Instant::now();
         if now < scheduled {
@@ -482,7 +565,7 @@ fn run(
                         vertex_count: cavity.positions_m.len() as u32,
                         triangle_count: tris.len() as u32,
                         reserved0: 0,
-                        topology_revision: cavity.topology_revision,
+                        topology_revision: *revision_base + cavity.topology_revision,
                     };
                     sample.write_from_fn(|n| tris[n / 3][n % 3])
                 })
@@ -503,7 +586,7 @@ fn run(
                     vertex_count: pos.len() as u32,
                     status_sequence,
                     sim_time_s,
-                    topology_revision: cavity.topology_revision,
+                    topology_revision: *revision_base + cavity.topology_revision,
                     cavity_pressure_pa: cavity.pressure_pa,
                 };
                 sample.write_from_fn(|n| pos[n / 3][n % 3])
@@ -584,9 +667,9 @@ fn run(
         if count(sent, errors, "particles") {
             notify(&ports, events::PARTICLES, errors);
         }
-    }
-    feed.figures.set_state(scene_state::NONE);
-    Ok(())
+    };
+    *revision_base += scene.cavity().topology_revision;
+    Ok(end)
 }
 
 /// Counts a failed publication (logged the first times only); true when it was sent.
