@@ -241,3 +241,76 @@ fn a_client_without_a_daemon_fails_fast_and_says_so() {
         started.elapsed()
     );
 }
+
+/// The newest topology revision on `<prefix>/cavity/topology` (history 1), waiting for the
+/// service and a sample.
+fn topology_revision(prefix: &str, timeout: Duration) -> u64 {
+    use hydrometra_ipc::slice::{self, Topology};
+    let names = hydrometra_ipc::ServiceNames::new(prefix).expect("prefix");
+    let node = test_node();
+    let deadline = Instant::now() + timeout;
+    loop {
+        if let Ok(service) = slice::open::<Topology, _>(&node, &names) {
+            let subscriber = service.subscriber_builder().create().expect("subscriber");
+            let mut newest = None;
+            while Instant::now() < deadline {
+                while let Some(sample) = subscriber.receive().expect("receive") {
+                    newest = Some(sample.user_header().topology_revision);
+                }
+                if newest.is_some() {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(20));
+            }
+            if let Some(revision) = newest {
+                return revision;
+            }
+        }
+        assert!(Instant::now() < deadline, "no topology within {timeout:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+#[test]
+fn load_scene_switches_the_running_scene_through_preparing() {
+    use hydrometra_ipc::status::scene_state;
+    let prefix = unique_prefix("ctl-load-scene");
+    let daemon = Daemon::start(
+        &prefix,
+        &[
+            "--scene",
+            "default",
+            "--emulated",
+            "default",
+            "--status-rate-hz",
+            "100",
+        ],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    let runs =
+        |s: &Status| s.scene_state == scene_state::RUNNING || s.scene_state == scene_state::IDLE;
+    let before = last(
+        reader.until("the scene running", Duration::from_secs(120), |s| {
+            runs(s) && s.scene_frames > 30
+        }),
+    );
+    assert_eq!(topology_revision(&prefix, Duration::from_secs(10)), 1);
+
+    // The same built-in scene again: its atlas is cached, so it prepares in seconds.
+    let response = ok(&daemon.prefix, &["load-scene", "default"]);
+    let message = response["message"].as_str().unwrap_or_default();
+    assert!(message.contains("loading scene default"), "{message}");
+    let statuses = reader.until("the new scene running", Duration::from_secs(120), |s| {
+        runs(s) && s.scene_frames > 0 && s.scene_frames < before.scene_frames
+    });
+    assert!(
+        statuses
+            .iter()
+            .any(|s| s.scene_state == scene_state::PREPARING),
+        "status never showed preparing"
+    );
+    // The re-created topology service carries the next revision.
+    assert_eq!(topology_revision(&prefix, Duration::from_secs(10)), 2);
+    let log = daemon.log();
+    assert!(log.contains("switching the scene"), "{log}");
+}
