@@ -36,8 +36,10 @@ use super::sim::{SimInputs, Stage as LoopStage, Telemetry};
 const STAGES: usize = 7;
 /// Samples a publisher may hold on loan at once: one being written, one spare.
 const MAX_LOANED: usize = 2;
-/// Particles the particle service is sized for until the particle stage sets its own count.
-const PARTICLE_CAPACITY: usize = 4096;
+/// Most particles one frame publishes: the particle service is sized for the scene's budget up
+/// to this (32 B each; /dev/shm holds about 20 samples per publisher); a larger population is
+/// published as an evenly spaced subset.
+pub const PARTICLES_PUBLISHED_MAX: usize = 16_384;
 
 /// What the 1 kHz loop hands the scene: its newest inputs and hydraulic state.
 #[derive(Debug, Clone, Copy)]
@@ -320,6 +322,7 @@ fn ports(
     vertices: usize,
     triangles: usize,
     cells: usize,
+    particles: usize,
 ) -> anyhow::Result<Ports> {
     let node_name = NodeName::new("hydrometrad-scene").map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let node = NodeBuilder::new()
@@ -330,7 +333,7 @@ fn ports(
     let topology = publisher::<slice::Topology>(&node, names, 3 * triangles)?;
     let positions = publisher::<slice::Positions>(&node, names, 3 * vertices)?;
     let flow = publisher::<slice::Flow>(&node, names, flow_layout(cells).2)?;
-    let particles = publisher::<slice::Particles>(&node, names, PARTICLE_CAPACITY)?;
+    let particles = publisher::<slice::Particles>(&node, names, particles)?;
     let notifier = events::create(&node, names)
         .map_err(|e| anyhow::anyhow!("{}: {e:?}", names.full("events")))?
         .notifier_builder()
@@ -469,7 +472,12 @@ fn run_scene(
         (c.positions_m.len(), c.triangles.len())
     };
     let cells = scene.cells().cell_count();
-    let ports = ports(names, vertices, triangles, cells)?;
+    let max_particles = if scene.particles().is_some() {
+        scene.desc().particles.budget.min(PARTICLES_PUBLISHED_MAX)
+    } else {
+        0
+    };
+    let ports = ports(names, vertices, triangles, cells, max_particles)?;
     tracing::info!(
         vertices,
         triangles,
@@ -538,6 +546,11 @@ fn run_scene(
         let fluid_ran = report.counters.get(Stage::Fluid).ran_last;
         let surface_volume_m3 = report.surface_volume_m3;
         write_figures(&feed.figures, report, has_particles);
+        if let Some(clarity) = scene.particles().and_then(|p| p.clarity()) {
+            feed.figures
+                .view_clarity_bits
+                .store(clarity.to_bits(), Ordering::Relaxed);
+        }
         feed.figures
             .surface_volume_m3_bits
             .store(surface_volume_m3.to_bits(), Ordering::Relaxed);
@@ -647,20 +660,36 @@ fn run_scene(
             }
         }
 
-        // Particles: an empty frame until the particle stage (issue 14) fills them.
+        // Particles: every alive one, or an evenly spaced subset of PARTICLES_PUBLISHED_MAX
+        // (empty frames for a scene without the particle stage).
         let view_clarity = f64::from_bits(feed.figures.view_clarity_bits.load(Ordering::Relaxed));
+        let system = scene.particles().and_then(|p| p.system());
+        let alive = system.map_or(0, |s| s.len());
+        let published = alive.min(max_particles);
         let sent = ports
             .particles
-            .loan_slice_uninit(0)
+            .loan_slice_uninit(published)
             .map(|mut sample| {
                 *sample.user_header_mut() = ParticlesHeader {
                     schema_version: SCHEMA_VERSION,
-                    particle_count: 0,
+                    particle_count: published as u32,
                     status_sequence,
                     sim_time_s,
                     view_clarity,
                 };
-                sample.write_from_fn(|_| hydrometra_ipc::particles::Particle::default())
+                sample.write_from_fn(|i| match system {
+                    Some(s) => {
+                        let n = i * alive / published.max(1);
+                        let (p, v) = (s.position_m(n), s.velocity_m_per_s(n));
+                        hydrometra_ipc::particles::Particle {
+                            position_m: p.map(|x| x as f32),
+                            velocity_m_per_s: v.map(|x| x as f32),
+                            kind: s.class_of(n).kind as u32,
+                            age_s: s.age_s(n) as f32,
+                        }
+                    }
+                    None => hydrometra_ipc::particles::Particle::default(),
+                })
             })
             .map_err(|e| format!("{e:?}"))
             .and_then(|s| s.send().map_err(|e| format!("{e:?}")));
