@@ -1,7 +1,8 @@
 //! The control service end to end: emulated rig (built-in `default` scenario) -> hydrometrad ->
 //! `hydrometra control ...` (and the Python example written from docs/ipc.md). A new procedure
 //! resets the deficit in status and rotates the recording; a scene that does not exist is
-//! refused with `not_found` while the daemon goes on; record stop/start change what the recorder
+//! refused with `not_found` and malformed requests with `bad_request` while the daemon goes on;
+//! load-scene switches a running scene; record stop/start change what the recorder
 //! reports; a client without a daemon fails fast and says so. Every test has its own service
 //! prefix.
 
@@ -133,7 +134,7 @@ fn new_procedure_resets_the_deficit_in_status_and_rotates_the_recording() {
 }
 
 #[test]
-fn load_scene_of_an_unknown_name_is_refused_and_the_daemon_goes_on() {
+fn load_scene_of_an_unknown_name_and_malformed_requests_are_refused_and_the_daemon_goes_on() {
     let (daemon, reader, _rec) = start_recording_daemon("ctl-unknown-scene");
     let out = control(&daemon.prefix, &["load-scene", "no-such-scene"]);
     assert!(!out.status.success(), "an unknown scene was accepted");
@@ -151,6 +152,46 @@ fn load_scene_of_an_unknown_name_is_refused_and_the_daemon_goes_on() {
     let out = control(&daemon.prefix, &["load-scene", "/nonexistent/scene.toml"]);
     let v: Value = serde_json::from_slice(&out.stdout).expect("a JSON response");
     assert_eq!(v["result"], "not_found", "{v}");
+    // Malformed requests straight over iceoryx2: each gets `bad_request`, the daemon goes on.
+    {
+        use hydrometra_ipc::control::{self, command, result, ControlRequest};
+        let names = hydrometra_ipc::ServiceNames::new(&daemon.prefix).expect("prefix");
+        let node = test_node();
+        let client = control::open(&node, &names)
+            .expect("the control service")
+            .client_builder()
+            .create()
+            .expect("client");
+        let unknown = ControlRequest::new(99, "").expect("request");
+        let mut overlong = ControlRequest::new(command::LOAD_SCENE, "default").expect("request");
+        overlong.argument_len = 10_000;
+        let mut not_utf8 = ControlRequest::new(command::LOAD_SCENE, "ab").expect("request");
+        not_utf8.argument[0] = 0xff;
+        let extra = ControlRequest::new(command::NEW_PROCEDURE, "now").expect("request");
+        for (request, says) in [
+            (unknown, "unknown command 99"),
+            (overlong, "argument_len 10000"),
+            (not_utf8, "not UTF-8"),
+            (extra, "takes no argument"),
+        ] {
+            let pending = client.send_copy(request).expect("send");
+            let deadline = Instant::now() + control::RESPONSE_TIMEOUT;
+            let response = loop {
+                if let Some(r) = pending.receive().expect("receive") {
+                    break *r;
+                }
+                assert!(Instant::now() < deadline, "no response to {request:?}");
+                std::thread::sleep(Duration::from_millis(5));
+            };
+            assert_eq!(
+                response.result,
+                result::BAD_REQUEST,
+                "{}",
+                response.message()
+            );
+            assert!(response.message().contains(says), "{}", response.message());
+        }
+    }
     let seq = last(reader.until("a status", Duration::from_secs(2), |_| true)).sequence;
     reader.until("statuses go on", Duration::from_secs(2), |s| {
         s.sequence > seq + 50
