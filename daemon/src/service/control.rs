@@ -283,12 +283,15 @@ async fn handle(request: Request, context: &ControlContext) -> ControlResponse {
                 );
             };
             let (name, key) = (desc.name.clone(), desc.atlas_key());
+            // A scene being prepared finishes first (an atlas build cannot be interrupted).
+            let busy = feed.figures.state() == scene_state::PREPARING;
             feed.request_scene(desc);
-            // The scene thread takes it after its current frame (within one scene period).
-            let taken = until(Duration::from_millis(500), || {
-                feed.figures.state() == scene_state::PREPARING
-            })
-            .await;
+            // Otherwise the scene thread takes it after its current frame.
+            let taken = !busy
+                && until(Duration::from_millis(500), || {
+                    feed.figures.state() == scene_state::PREPARING
+                })
+                .await;
             let when = if taken {
                 "preparing now"
             } else {
