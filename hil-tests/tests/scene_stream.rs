@@ -262,3 +262,78 @@ fn flow_service_goes_quiet_with_both_valves_closed_and_the_field_at_rest() {
         of(&lines, "flow").len()
     );
 }
+
+/// A scene with the particle stage (the built-in `default` plus `[stages] particles = true` and
+/// bubbles with the inflow): the particles service carries them, with finite positions inside
+/// the cavity's neighbourhood, the bubble kind and non-negative ages, and status carries the
+/// view clarity.
+#[test]
+fn particles_of_a_scene_with_the_particle_stage_are_published() {
+    use hydrometra_ipc::particles::kind;
+    use hydrometra_ipc::slice::{self, Particles};
+    use std::time::Instant;
+    let dir = temp_dir("scene-particles");
+    let base =
+        std::fs::read_to_string(workspace_root().join("sim-core/src/scene/scenes/default.toml"))
+            .expect("the default scene");
+    let text = base.replace("particles = false", "particles = true")
+        + "\n[particles]\nbudget = 4096\n\n[particles.bubbles]\nper_ml = 50.0\n";
+    let scene = dir.join("particles.toml");
+    std::fs::write(&scene, text).expect("write the scene");
+    let scene = scene.to_str().expect("utf-8 temp path");
+    let prefix = unique_prefix("scene-particles");
+    let _daemon = Daemon::start(
+        &prefix,
+        &[
+            "--scene",
+            scene,
+            "--emulated",
+            "default",
+            "--status-rate-hz",
+            "100",
+        ],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    reader.until("the scene running", Duration::from_secs(120), |s| {
+        s.scene_state == scene_state::RUNNING
+    });
+    let names = hydrometra_ipc::ServiceNames::new(&prefix).expect("prefix");
+    let node = hydrometra_hil_tests::test_node();
+    let subscriber = slice::open::<Particles, _>(&node, &names)
+        .expect("the particles service")
+        .subscriber_builder()
+        .create()
+        .expect("subscriber");
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let (header, particles) = loop {
+        assert!(Instant::now() < deadline, "no particles within 60 s");
+        if let Some(sample) = subscriber.receive().expect("receive") {
+            let header = *sample.user_header();
+            if header.particle_count > 0 {
+                break (header, sample.payload().to_vec());
+            }
+        } else {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    };
+    assert_eq!(particles.len(), header.particle_count as usize);
+    assert!(header.particle_count <= 4096);
+    for p in &particles {
+        assert!(
+            p.position_m.iter().all(|x| x.is_finite() && x.abs() < 0.2),
+            "{p:?}"
+        );
+        assert!(p.velocity_m_per_s.iter().all(|v| v.is_finite()), "{p:?}");
+        assert_eq!(p.kind, kind::BUBBLE, "{p:?}");
+        assert!(p.age_s >= 0.0, "{p:?}");
+    }
+    assert!(
+        (0.0..=1.0).contains(&header.view_clarity),
+        "clarity {}",
+        header.view_clarity
+    );
+    let s = reader.until("a status with the clarity", Duration::from_secs(2), |s| {
+        s.view_clarity.is_finite()
+    });
+    assert!(s.iter().any(|s| (0.0..=1.0).contains(&s.view_clarity)));
+}

@@ -10,13 +10,13 @@ use crate::names::ServiceNames;
 
 /// A new [`crate::Status`] was published.
 pub const STATUS: EventId = EventId::new(1);
-/// A new cavity topology was published (reserved until the mesh stage lands).
+/// A new cavity topology was published.
 pub const MESH_TOPOLOGY: EventId = EventId::new(2);
-/// New cavity positions were published (reserved until the mesh stage lands).
+/// New cavity positions were published.
 pub const MESH_POSITIONS: EventId = EventId::new(3);
-/// A new flow field was published (reserved until the fluid stage lands).
+/// A new flow field was published.
 pub const FLOW_FIELD: EventId = EventId::new(4);
-/// New particles were published (reserved until the particle stage lands).
+/// New particles were published.
 pub const PARTICLES: EventId = EventId::new(5);
 /// The daemon is shutting down cleanly.
 pub const SHUTDOWN: EventId = EventId::new(15);

@@ -25,6 +25,7 @@
 #![warn(missing_docs)]
 
 pub mod alarms;
+pub mod control;
 pub mod events;
 pub mod field;
 pub mod hydraulic_flags;

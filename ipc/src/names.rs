@@ -123,14 +123,17 @@ pub mod suffix {
     pub const FLOW_FIELD: &str = "flow";
     /// Particles (blood, bubbles, fragments), publish-subscribe, slice of [`crate::particles::Particle`].
     pub const PARTICLES: &str = "particles";
+    /// The control service, request-response, [`crate::control`].
+    pub const CONTROL: &str = "control";
     /// Every suffix.
-    pub const ALL: [&str; 6] = [
+    pub const ALL: [&str; 7] = [
         STATUS,
         EVENTS,
         MESH_TOPOLOGY,
         MESH_POSITIONS,
         FLOW_FIELD,
         PARTICLES,
+        CONTROL,
     ];
 }
 

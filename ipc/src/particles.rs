@@ -1,4 +1,4 @@
-//! Particle service (specified, published once the particle stage lands).
+//! Particle service: the scene's blood, bubble and fragment particles, every scene frame.
 
 use iceoryx2::prelude::ZeroCopySend;
 

@@ -1,6 +1,7 @@
 //! `docs/ipc.md` is the contract renderer authors read: its layout tables must match the structs
 //! byte for byte (offset, size, type and field name, in order, and the total size).
 
+use hydrometra_ipc::control::{ControlRequest, ControlResponse};
 use hydrometra_ipc::field::FlowFieldHeader;
 use hydrometra_ipc::mesh::{MeshPositionsHeader, MeshTopologyHeader};
 use hydrometra_ipc::particles::{Particle, ParticlesHeader};
@@ -149,6 +150,26 @@ fn layouts() -> Vec<(String, usize, Vec<Row>)> {
             status_sequence: "u64",
             sim_time_s: "f64",
             view_clarity: "f64",
+        }),
+        layout!(ControlRequest {
+            schema_version: "u32",
+            command: "u32",
+            argument_len: "u32",
+            reserved0: "u32",
+            argument: "u8[256]",
+        }),
+        layout!(ControlResponse {
+            schema_version: "u32",
+            command: "u32",
+            result: "u32",
+            recording: "u32",
+            procedure_id: "u64",
+            recorded_messages: "u64",
+            recordings_finished: "u64",
+            message_len: "u32",
+            recording_path_len: "u32",
+            message: "u8[256]",
+            recording_path: "u8[256]",
         }),
     ]
 }

@@ -15,6 +15,9 @@ struct Cli {
 enum Command {
     /// Print the versions of the wire protocol and IPC schema this build speaks.
     Version,
+    /// Control a running hydrometrad: new procedure, load a scene, the recorder.
+    #[command(subcommand)]
+    Control(hydrometra_daemon::cli::control::ControlCommand),
     /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
     Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
     /// Hydraulic model tools (offline simulation of a scenario).
@@ -61,6 +64,7 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
+        Command::Control(cmd) => hydrometra_daemon::cli::control::run(cmd),
         Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
         Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),

@@ -1,4 +1,5 @@
 //! Subcommands of the `hydrometra` CLI, one module each.
+pub mod control;
 pub mod fluid;
 pub mod hydraulics;
 pub mod monitor;

@@ -3,7 +3,7 @@
 //! sim thread) and applies reset requests. See docs/hydraulics.md.
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
@@ -55,6 +55,40 @@ fn new_procedure() -> ProcedureInfo {
     }
 }
 
+/// The control plane's handle on the procedure: asks for a new one and reads the current one.
+/// The 1 kHz loop applies the request on its next tick and publishes its figures through
+/// atomics, so neither side ever waits for the other.
+#[derive(Debug, Default)]
+pub struct ProcedureControl {
+    /// Shared with the record thread, which sets it for a `<record>.reset` file.
+    reset: Arc<AtomicBool>,
+    procedure_id: AtomicU64,
+    deficit_m3_bits: AtomicU64,
+}
+
+impl ProcedureControl {
+    /// Asks the loop to start a new procedure on its next tick (deficit and alarms reset).
+    pub fn request_new_procedure(&self) {
+        self.reset.store(true, Ordering::Release);
+    }
+
+    /// Id of the current procedure (0 before the stage started).
+    pub fn procedure_id(&self) -> u64 {
+        self.procedure_id.load(Ordering::Acquire)
+    }
+
+    /// The current procedure's fluid deficit after the last tick, m³.
+    pub fn deficit_m3(&self) -> f64 {
+        f64::from_bits(self.deficit_m3_bits.load(Ordering::Relaxed))
+    }
+
+    fn publish(&self, procedure_id: u64, deficit_m3: f64) {
+        self.deficit_m3_bits
+            .store(deficit_m3.to_bits(), Ordering::Relaxed);
+        self.procedure_id.store(procedure_id, Ordering::Release);
+    }
+}
+
 /// What the stage is built from.
 pub struct HydraulicsSetup {
     /// Parameters (the config's, unless the case replaces them).
@@ -72,6 +106,8 @@ pub struct HydraulicsSetup {
     /// The scene's hand-over: the stage offers its state every tick and takes the atlas's
     /// compliance from it when the scene is ready.
     pub scene: Option<Arc<super::scene::SceneFeed>>,
+    /// The control plane's handle (new procedure on request).
+    pub control: Arc<ProcedureControl>,
 }
 
 /// The record writer thread and its channel.
@@ -141,6 +177,7 @@ pub struct HydraulicsStage {
     last_alarm_bits: u32,
     reset: Arc<AtomicBool>,
     scene: Option<Arc<super::scene::SceneFeed>>,
+    control: Arc<ProcedureControl>,
 }
 
 impl HydraulicsStage {
@@ -150,7 +187,7 @@ impl HydraulicsStage {
         let mut model =
             HydraulicModel::new(setup.params).context("invalid hydraulic parameters")?;
         let mut flags = hydraulic_flags::ACTIVE;
-        let reset = Arc::new(AtomicBool::new(false));
+        let reset = setup.control.reset.clone();
         let mut persister = None;
         match &setup.record {
             None => {
@@ -228,6 +265,9 @@ impl HydraulicsStage {
             }
         }
         let last_alarm_bits = model.state().deficit.alarm_bits();
+        setup
+            .control
+            .publish(model.procedure().id, model.state().deficit.deficit_m3);
         Ok(Self {
             model,
             case: setup.case,
@@ -240,6 +280,7 @@ impl HydraulicsStage {
             last_alarm_bits,
             reset,
             scene: setup.scene,
+            control: setup.control,
         })
     }
 
@@ -258,12 +299,22 @@ impl Stage for HydraulicsStage {
     }
 
     fn step(&mut self, inputs: &SimInputs, dt_s: f64) {
-        if self.reset.swap(false, Ordering::Relaxed) {
-            self.model.start_new_procedure(new_procedure());
+        if self.reset.swap(false, Ordering::Acquire) {
+            let ended = (
+                self.model.procedure().id,
+                self.model.state().deficit.deficit_m3,
+            );
+            let mut next = new_procedure();
+            // A new procedure always gets a new id (the recording rotates on it), even when
+            // asked for within the millisecond the last one started.
+            next.id = next.id.max(ended.0 + 1);
+            self.model.start_new_procedure(next);
             self.flags &= !hydraulic_flags::RESTORED;
             tracing::info!(
                 procedure = self.model.procedure().id,
-                "new procedure started"
+                ended_procedure = ended.0,
+                ended_deficit_ml = ended.1 * 1e6,
+                "new procedure started; the deficit is reset"
             );
             self.send_record();
         }
@@ -283,6 +334,10 @@ impl Stage for HydraulicsStage {
             perforation: self.case.perforated_at(case_t),
         };
         let bits = self.model.step(&h, dt_s).deficit.alarm_bits();
+        self.control.publish(
+            self.model.procedure().id,
+            self.model.state().deficit.deficit_m3,
+        );
         if let Some(feed) = &self.scene {
             feed.offer(inputs, self.model.state(), h.perforation);
         }

@@ -1,7 +1,14 @@
 //! hydrometrad: configuration, the rig input, the fixed-rate simulation loop, the publisher
 //! thread and the supervisor that ties them together (signals, systemd, periodic logs).
+//!
+//! Two sides: the real-time threads (rig I/O, the 1 kHz loop, the publisher, the scene thread)
+//! are dedicated OS threads that never wait on anything else; the control plane (signals,
+//! supervision, the control service's handlers) runs on a current-thread tokio runtime on the
+//! main thread at normal priority, and reaches the real-time side only through atomics,
+//! `try_lock` slots and channels the real-time side polls.
 
 pub mod config;
+pub mod control;
 pub mod hydraulics;
 pub mod latency;
 pub mod notify;
@@ -32,7 +39,7 @@ use sim::{LoopSettings, SimLoop, Telemetry};
 
 /// Capacity of the sim -> publisher channel: 64 ms of statuses at 1 kHz before statuses drop.
 const STATUS_CHANNEL_CAPACITY: usize = 64;
-/// How often the supervisor checks signals, the duration and the watchdog.
+/// How often the supervisor checks the threads, the duration and the watchdog.
 const SUPERVISOR_PERIOD: Duration = Duration::from_millis(20);
 /// How often the supervisor removes resources of dead iceoryx2 nodes (crashed renderers). Done
 /// here, not in the publisher, because it walks the file system and would delay publication.
@@ -177,6 +184,7 @@ pub fn build_stages(
     config: &Config,
     scenario: Option<&Scenario>,
     scene: Option<(&hydrometra_sim::scene::SceneDesc, Arc<scene::SceneFeed>)>,
+    procedure: Arc<hydraulics::ProcedureControl>,
 ) -> anyhow::Result<Vec<Box<dyn sim::Stage>>> {
     let h = &config.hydraulics;
     // A replay reproduces the recorded procedure: the recorded configuration's scenario case and
@@ -220,6 +228,7 @@ pub fn build_stages(
         save_interval: Duration::from_millis(h.save_interval_ms),
         new_procedure: h.new_procedure || replayed.is_some(),
         scene: feed.clone(),
+        control: procedure,
     })?;
     let mut stages: Vec<Box<dyn sim::Stage>> = vec![Box::new(stage)];
     if let Some(feed) = feed {
@@ -325,12 +334,23 @@ fn start_recorder(
 /// Runs the daemon until SIGINT/SIGTERM or `duration` elapses; returns the run's figures.
 pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSummary> {
     let names = ServiceNames::new(&config.ipc.service_prefix)?;
+    // The control plane's runtime: one thread (this one), so no worker thread inherits the
+    // real-time policy applied below; `spawn_blocking` threads start later, at normal priority.
+    let runtime = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the control plane's tokio runtime")?;
     let stop = Arc::new(AtomicBool::new(false));
-    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        // A second signal while shutting down exits at once (exit code 1).
-        signal_hook::flag::register_conditional_shutdown(signal, 1, stop.clone())
-            .context("cannot install signal handlers")?;
-        signal_hook::flag::register(signal, stop.clone())
+    let signals = {
+        let _entered = runtime.enter();
+        use tokio::signal::unix::{signal, SignalKind};
+        let interrupt = signal(SignalKind::interrupt()).context("cannot handle SIGINT")?;
+        let terminate = signal(SignalKind::terminate()).context("cannot handle SIGTERM")?;
+        (interrupt, terminate)
+    };
+    for sig in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        // A second signal while shutting down (`stop` set by the first) exits at once (code 1).
+        signal_hook::flag::register_conditional_shutdown(sig, 1, stop.clone())
             .context("cannot install signal handlers")?;
     }
     let systemd = notify::Systemd::from_env();
@@ -339,17 +359,19 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let scenario = emulated_scenario(config)?;
     let desc = scene_desc(config)?;
     let feed = Arc::new(scene::SceneFeed::default());
+    let procedure = Arc::new(hydraulics::ProcedureControl::default());
     let stages = build_stages(
         config,
         scenario.as_ref(),
         desc.as_ref().map(|d| (d, feed.clone())),
+        procedure.clone(),
     )?;
     // Real-time scheduling is set on the main thread before any other thread starts, so the rig
     // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
     let priority = config.sim_loop.realtime_priority;
     // The recorder runs at normal priority: it starts before the real-time policy is applied.
     let (recorder, taps) = match start_recorder(config)? {
-        Some((handle, taps)) => (Some(handle), Some(taps)),
+        Some((handle, taps)) => (Some(Arc::new(handle)), Some(taps)),
         None => (None, None),
     };
     realtime::apply("main", priority);
@@ -416,6 +438,29 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         None => None,
     };
 
+    // Every real-time thread is started: the control plane (this thread and what it starts)
+    // runs at normal priority from here on.
+    if priority > 0 {
+        if let Err(e) = realtime::set_current_thread_normal() {
+            tracing::warn!("main: {e}");
+        }
+    }
+    let (jobs_tx, jobs_rx) = tokio::sync::mpsc::channel(control::JOB_QUEUE);
+    let control_thread = control::ControlThread::spawn(names.clone(), jobs_tx);
+    let control_thread = match control_thread {
+        Ok(t) => Some(t),
+        Err(e) => {
+            // Status and the scene go on; only remote control is missing.
+            tracing::error!("no control service: {e:#}");
+            None
+        }
+    };
+    let context = Arc::new(control::ControlContext {
+        procedure,
+        scene: scene_thread.as_ref().map(|_| feed.clone()),
+        recorder: recorder.clone(),
+    });
+
     tracing::info!(
         tick_rate_hz = config.sim_loop.tick_rate_hz,
         status_rate_hz = config.sim_loop.status_rate_hz,
@@ -424,81 +469,58 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     );
     systemd.ready(&format!("publishing on {}", names.prefix()));
 
-    let janitor = janitor_node();
-    let mut last_cleanup = Instant::now();
-    let log_interval = Duration::from_secs_f64(config.sim_loop.log_interval_s);
-    let mut next_log = Instant::now() + log_interval;
-    let mut last_watchdog = Instant::now();
-    let mut watchdog_marks = (0u64, 0u64);
-    let mut link_reason = LinkReasonLog::default();
-    while !stop.load(Ordering::Relaxed) {
-        std::thread::sleep(SUPERVISOR_PERIOD);
-        link_reason.update(&rig.source());
-        if duration.is_some_and(|d| started.elapsed() >= d) {
-            break;
-        }
-        if sim.is_finished() {
-            tracing::error!("simulation thread ended unexpectedly");
-            break;
-        }
-        if let Some(interval) = systemd.watchdog_interval() {
-            if last_watchdog.elapsed() >= interval {
-                // Only a daemon that still ticks and publishes feeds the watchdog.
-                let marks = (
-                    telemetry.ticks.load(Ordering::Relaxed),
-                    telemetry.statuses_published.load(Ordering::Relaxed),
-                );
-                if marks.0 > watchdog_marks.0 && marks.1 > watchdog_marks.1 {
-                    systemd.watchdog();
-                    watchdog_marks = marks;
-                } else {
-                    tracing::warn!(
-                        "no progress since the last watchdog ping; not feeding the watchdog"
-                    );
+    let mut supervisor = Supervisor {
+        janitor: janitor_node(),
+        last_cleanup: Instant::now(),
+        log_interval: Duration::from_secs_f64(config.sim_loop.log_interval_s),
+        next_log: Instant::now() + Duration::from_secs_f64(config.sim_loop.log_interval_s),
+        last_watchdog: Instant::now(),
+        watchdog_marks: (0, 0),
+        link_reason: LinkReasonLog::default(),
+        systemd: &systemd,
+        telemetry: &telemetry,
+        rig: &rig,
+        sim: &sim,
+        feed: &feed,
+        scene_thread: scene_thread.as_ref(),
+        control_thread: control_thread.as_ref(),
+        started,
+        duration,
+    };
+    runtime.block_on(async {
+        let (mut interrupt, mut terminate) = signals;
+        let handlers = tokio::spawn(control::serve(jobs_rx, context));
+        let mut tick = tokio::time::interval(SUPERVISOR_PERIOD);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        loop {
+            tokio::select! {
+                _ = interrupt.recv() => {
+                    tracing::info!("SIGINT");
+                    break;
                 }
-                last_watchdog = Instant::now();
-            }
-        }
-        if last_cleanup.elapsed() >= DEAD_NODE_CLEANUP_INTERVAL {
-            last_cleanup = Instant::now();
-            if let Some(cleaned) = janitor.as_ref().map(|n| n.try_cleanup_dead_nodes()) {
-                if cleaned.cleanups > 0 {
-                    tracing::info!(
-                        removed = cleaned.cleanups,
-                        "removed resources of dead iceoryx2 nodes"
-                    );
+                _ = terminate.recv() => {
+                    tracing::info!("SIGTERM");
+                    break;
+                }
+                _ = tick.tick() => {
+                    if !supervisor.tick() {
+                        break;
+                    }
                 }
             }
         }
-        if Instant::now() >= next_log {
-            next_log += log_interval;
-            let s = summary(&telemetry, started.elapsed());
-            let view = rig.source().view();
-            tracing::info!(
-                link = ?view.link_state,
-                frames = view.counters.frames,
-                crc_errors = view.counters.crc_errors,
-                reconnects = view.counters.reconnects,
-                "rig link"
-            );
-            log_summary("running", &s);
-            let scene_line = scene_status_line(&feed, scene_thread.as_ref());
-            if let Some(line) = &scene_line {
-                tracing::info!("{line}");
-            }
-            systemd.status(&format!(
-                "link {:?}; latency p99 {} ms; deadline misses {}{}",
-                view.link_state,
-                ms(s.latency.p99_s),
-                s.deadline_misses,
-                scene_line.map(|l| format!("; {l}")).unwrap_or_default()
-            ));
-        }
-    }
+        stop.store(true, Ordering::Relaxed);
+        handlers.abort();
+    });
+    drop(supervisor);
 
     tracing::info!("shutting down");
-    drop(janitor);
     systemd.stopping();
+    if let Some(t) = control_thread {
+        t.shutdown();
+    }
+    // The handlers are gone with the runtime; the recorder handle is ours alone again.
+    drop(runtime);
     scene_stop.store(true, Ordering::Relaxed);
     if let Some(t) = scene_thread {
         t.join(&feed);
@@ -510,7 +532,13 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     publisher.join();
     rig.shutdown();
     if let Some(recorder) = recorder {
-        let r = recorder.shutdown();
+        let r = match Arc::try_unwrap(recorder) {
+            Ok(handle) => handle.shutdown(),
+            Err(shared) => {
+                // Not expected: the last holder's drop finishes the file.
+                shared.status()
+            }
+        };
         tracing::info!(
             files = r.files_finished,
             rx_dropped = r.rx_dropped,
@@ -521,4 +549,98 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     let s = summary(&telemetry, started.elapsed());
     log_summary("stopped", &s);
     Ok(s)
+}
+
+/// The periodic checks of the control plane: the threads, the duration, the systemd watchdog,
+/// dead renderers' resources and the periodic log line.
+struct Supervisor<'a> {
+    janitor: Option<iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>>,
+    last_cleanup: Instant,
+    log_interval: Duration,
+    next_log: Instant,
+    last_watchdog: Instant,
+    watchdog_marks: (u64, u64),
+    link_reason: LinkReasonLog,
+    systemd: &'a notify::Systemd,
+    telemetry: &'a Telemetry,
+    rig: &'a rig_connection::RigConnection,
+    sim: &'a std::thread::JoinHandle<()>,
+    feed: &'a scene::SceneFeed,
+    scene_thread: Option<&'a scene::SceneThread>,
+    control_thread: Option<&'a control::ControlThread>,
+    started: Instant,
+    duration: Option<Duration>,
+}
+
+impl Supervisor<'_> {
+    /// One round of checks; false when the daemon must stop.
+    fn tick(&mut self) -> bool {
+        self.link_reason.update(&self.rig.source());
+        if self.duration.is_some_and(|d| self.started.elapsed() >= d) {
+            return false;
+        }
+        if self.sim.is_finished() {
+            tracing::error!("simulation thread ended unexpectedly");
+            return false;
+        }
+        if self.control_thread.is_some_and(|t| t.is_finished()) {
+            tracing::error!("control thread ended unexpectedly; remote control is gone");
+            self.control_thread = None;
+        }
+        let telemetry = self.telemetry;
+        if let Some(interval) = self.systemd.watchdog_interval() {
+            if self.last_watchdog.elapsed() >= interval {
+                // Only a daemon that still ticks and publishes feeds the watchdog.
+                let marks = (
+                    telemetry.ticks.load(Ordering::Relaxed),
+                    telemetry.statuses_published.load(Ordering::Relaxed),
+                );
+                if marks.0 > self.watchdog_marks.0 && marks.1 > self.watchdog_marks.1 {
+                    self.systemd.watchdog();
+                    self.watchdog_marks = marks;
+                } else {
+                    tracing::warn!(
+                        "no progress since the last watchdog ping; not feeding the watchdog"
+                    );
+                }
+                self.last_watchdog = Instant::now();
+            }
+        }
+        if self.last_cleanup.elapsed() >= DEAD_NODE_CLEANUP_INTERVAL {
+            self.last_cleanup = Instant::now();
+            if let Some(cleaned) = self.janitor.as_ref().map(|n| n.try_cleanup_dead_nodes()) {
+                if cleaned.cleanups > 0 {
+                    tracing::info!(
+                        removed = cleaned.cleanups,
+                        "removed resources of dead iceoryx2 nodes"
+                    );
+                }
+            }
+        }
+        if Instant::now() >= self.next_log {
+            self.next_log += self.log_interval;
+            let s = summary(telemetry, self.started.elapsed());
+            let view = self.rig.source().view();
+            tracing::info!(
+                link = ?view.link_state,
+                frames = view.counters.frames,
+                crc_errors = view.counters.crc_errors,
+                reconnects = view.counters.reconnects,
+                "rig link"
+            );
+            log_summary("running", &s);
+            let scene_line = scene_status_line(self.feed, self.scene_thread);
+            if let Some(line) = &scene_line {
+                tracing::info!("{line}");
+            }
+            self.systemd.status(&format!(
+                "link {:?}; latency p99 {} ms; deadline misses {}{}",
+                view.link_state,
+                ms(s.latency.p99_s),
+                s.deadline_misses,
+                scene_line.map(|l| format!("; {l}")).unwrap_or_default()
+            ));
+        }
+        true
+    }
 }

@@ -36,8 +36,10 @@ use super::sim::{SimInputs, Stage as LoopStage, Telemetry};
 const STAGES: usize = 7;
 /// Samples a publisher may hold on loan at once: one being written, one spare.
 const MAX_LOANED: usize = 2;
-/// Particles the particle service is sized for until the particle stage sets its own count.
-const PARTICLE_CAPACITY: usize = 4096;
+/// Most particles one frame publishes: the particle service is sized for the scene's budget up
+/// to this (32 B each; /dev/shm holds about 20 samples per publisher); a larger population is
+/// published as an evenly spaced subset.
+pub const PARTICLES_PUBLISHED_MAX: usize = 16_384;
 
 /// What the 1 kHz loop hands the scene: its newest inputs and hydraulic state.
 #[derive(Debug, Clone, Copy)]
@@ -95,6 +97,8 @@ impl SceneFigures {
 pub struct SceneFeed {
     snapshot: Mutex<Option<FeedSnapshot>>,
     compliance: Mutex<Option<Box<dyn CavityCompliance>>>,
+    /// A scene the control plane asked for, taken by the scene thread between frames.
+    scene_request: Mutex<Option<SceneDesc>>,
     /// Figures for status.
     pub figures: SceneFigures,
     offers: AtomicU64,
@@ -112,6 +116,7 @@ impl Default for SceneFeed {
         Self {
             snapshot: Mutex::new(None),
             compliance: Mutex::new(None),
+            scene_request: Mutex::new(None),
             figures,
             offers: AtomicU64::new(0),
         }
@@ -140,6 +145,23 @@ impl SceneFeed {
     /// Called by the loop: the atlas's compliance once the scene has it (never waits).
     pub fn take_compliance(&self) -> Option<Box<dyn CavityCompliance>> {
         self.compliance.try_lock().ok().and_then(|mut c| c.take())
+    }
+
+    /// Called by the control plane: the scene thread switches to `desc` after its current frame
+    /// (or its current preparation). A newer request replaces one not yet taken.
+    pub fn request_scene(&self, desc: SceneDesc) {
+        match self.scene_request.lock() {
+            Ok(mut slot) => *slot = Some(desc),
+            Err(poisoned) => *poisoned.into_inner() = Some(desc),
+        }
+    }
+
+    /// Called by the scene thread between frames (never waits).
+    fn take_scene_request(&self) -> Option<SceneDesc> {
+        self.scene_request
+            .try_lock()
+            .ok()
+            .and_then(|mut r| r.take())
     }
 
     fn give_compliance(&self, c: Box<dyn CavityCompliance>) {
@@ -300,6 +322,7 @@ fn ports(
     vertices: usize,
     triangles: usize,
     cells: usize,
+    particles: usize,
 ) -> anyhow::Result<Ports> {
     let node_name = NodeName::new("hydrometrad-scene").map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let node = NodeBuilder::new()
@@ -310,7 +333,7 @@ fn ports(
     let topology = publisher::<slice::Topology>(&node, names, 3 * triangles)?;
     let positions = publisher::<slice::Positions>(&node, names, 3 * vertices)?;
     let flow = publisher::<slice::Flow>(&node, names, flow_layout(cells).2)?;
-    let particles = publisher::<slice::Particles>(&node, names, PARTICLE_CAPACITY)?;
+    let particles = publisher::<slice::Particles>(&node, names, particles)?;
     let notifier = events::create(&node, names)
         .map_err(|e| anyhow::anyhow!("{}: {e:?}", names.full("events")))?
         .notifier_builder()
@@ -341,6 +364,16 @@ fn rig_inputs(s: &FeedSnapshot) -> RigInputs {
     }
 }
 
+/// Why a scene's frames ended.
+enum SceneEnd {
+    /// The daemon stops.
+    Stop,
+    /// The control plane asked for another scene.
+    Load(Box<SceneDesc>),
+}
+
+/// Runs the configured scene, then every scene the control plane asks for. A scene that fails
+/// to prepare leaves the state `failed` until the next request (status and hydraulics go on).
 fn run(
     settings: SceneSettings,
     feed: &SceneFeed,
@@ -354,6 +387,53 @@ fn run(
         rate_hz,
         names,
     } = settings;
+    let mut next = Some(desc);
+    // Topology revisions go on across scenes, so a renderer sees every switch as a change.
+    let mut revision_base = 0u64;
+    while !stop.load(Ordering::Relaxed) {
+        let Some(desc) = next.take().or_else(|| feed.take_scene_request()) else {
+            std::thread::sleep(Duration::from_millis(50));
+            continue;
+        };
+        feed.figures.set_state(scene_state::PREPARING);
+        let name = desc.name.clone();
+        match run_scene(
+            desc,
+            cache_dir.as_deref(),
+            rate_hz,
+            &names,
+            (feed, telemetry, stop, log),
+            &mut revision_base,
+        ) {
+            Ok(SceneEnd::Stop) => break,
+            Ok(SceneEnd::Load(desc)) => {
+                tracing::info!(from = %name, to = %desc.name, "switching the scene");
+                next = Some(*desc);
+            }
+            Err(e) => {
+                feed.figures.set_state(scene_state::FAILED);
+                tracing::error!(
+                    scene = %name,
+                    "scene stopped: {e:#}; status and hydraulics go on (load another scene with \
+                     `hydrometra control load-scene`)"
+                );
+            }
+        }
+    }
+    feed.figures.set_state(scene_state::NONE);
+    Ok(())
+}
+
+/// Prepares one scene and steps it until the daemon stops or another scene is asked for; its
+/// services live as long as this call.
+fn run_scene(
+    desc: SceneDesc,
+    cache_dir: Option<&std::path::Path>,
+    rate_hz: f64,
+    names: &ServiceNames,
+    (feed, telemetry, stop, log): (&SceneFeed, &Telemetry, &AtomicBool, &SceneLog),
+    revision_base: &mut u64,
+) -> anyhow::Result<SceneEnd> {
     let started = Instant::now();
     tracing::info!(
         scene = %desc.name,
@@ -371,7 +451,7 @@ fn run(
             v_m3 * 1e6
         );
     };
-    let (assets, source) = prepare::load_or_build(&desc, cache_dir.as_deref(), &mut progress)?;
+    let (assets, source) = prepare::load_or_build(&desc, cache_dir, &mut progress)?;
     match &source {
         prepare::AtlasSource::Built {
             cached,
@@ -392,7 +472,12 @@ fn run(
         (c.positions_m.len(), c.triangles.len())
     };
     let cells = scene.cells().cell_count();
-    let ports = ports(&names, vertices, triangles, cells)?;
+    let max_particles = if scene.particles().is_some() {
+        scene.desc().particles.budget.min(PARTICLES_PUBLISHED_MAX)
+    } else {
+        0
+    };
+    let ports = ports(names, vertices, triangles, cells, max_particles)?;
     tracing::info!(
         vertices,
         triangles,
@@ -412,7 +497,13 @@ fn run(
     let mut sim_time_s = 0.0;
     let start = Instant::now();
     let mut frame_index: u64 = 0;
-    while !stop.load(Ordering::Relaxed) {
+    let end = loop {
+        if stop.load(Ordering::Relaxed) {
+            break SceneEnd::Stop;
+        }
+        if let Some(desc) = feed.take_scene_request() {
+            break SceneEnd::Load(Box::new(desc));
+        }
         let scheduled = start + Duration::from_nanos(period_ns.saturating_mul(frame_index));
         let now = Instant::now();
         if now < scheduled {
@@ -455,6 +546,11 @@ fn run(
         let fluid_ran = report.counters.get(Stage::Fluid).ran_last;
         let surface_volume_m3 = report.surface_volume_m3;
         write_figures(&feed.figures, report, has_particles);
+        if let Some(clarity) = scene.particles().and_then(|p| p.clarity()) {
+            feed.figures
+                .view_clarity_bits
+                .store(clarity.to_bits(), Ordering::Relaxed);
+        }
         feed.figures
             .surface_volume_m3_bits
             .store(surface_volume_m3.to_bits(), Ordering::Relaxed);
@@ -482,7 +578,7 @@ fn run(
                         vertex_count: cavity.positions_m.len() as u32,
                         triangle_count: tris.len() as u32,
                         reserved0: 0,
-                        topology_revision: cavity.topology_revision,
+                        topology_revision: *revision_base + cavity.topology_revision,
                     };
                     sample.write_from_fn(|n| tris[n / 3][n % 3])
                 })
@@ -503,7 +599,7 @@ fn run(
                     vertex_count: pos.len() as u32,
                     status_sequence,
                     sim_time_s,
-                    topology_revision: cavity.topology_revision,
+                    topology_revision: *revision_base + cavity.topology_revision,
                     cavity_pressure_pa: cavity.pressure_pa,
                 };
                 sample.write_from_fn(|n| pos[n / 3][n % 3])
@@ -564,29 +660,45 @@ fn run(
             }
         }
 
-        // Particles: an empty frame until the particle stage (issue 14) fills them.
+        // Particles: every alive one, or an evenly spaced subset of PARTICLES_PUBLISHED_MAX
+        // (empty frames for a scene without the particle stage).
         let view_clarity = f64::from_bits(feed.figures.view_clarity_bits.load(Ordering::Relaxed));
+        let system = scene.particles().and_then(|p| p.system());
+        let alive = system.map_or(0, |s| s.len());
+        let published = alive.min(max_particles);
         let sent = ports
             .particles
-            .loan_slice_uninit(0)
+            .loan_slice_uninit(published)
             .map(|mut sample| {
                 *sample.user_header_mut() = ParticlesHeader {
                     schema_version: SCHEMA_VERSION,
-                    particle_count: 0,
+                    particle_count: published as u32,
                     status_sequence,
                     sim_time_s,
                     view_clarity,
                 };
-                sample.write_from_fn(|_| hydrometra_ipc::particles::Particle::default())
+                sample.write_from_fn(|i| match system {
+                    Some(s) => {
+                        let n = i * alive / published.max(1);
+                        let (p, v) = (s.position_m(n), s.velocity_m_per_s(n));
+                        hydrometra_ipc::particles::Particle {
+                            position_m: p.map(|x| x as f32),
+                            velocity_m_per_s: v.map(|x| x as f32),
+                            kind: s.class_of(n).kind as u32,
+                            age_s: s.age_s(n) as f32,
+                        }
+                    }
+                    None => hydrometra_ipc::particles::Particle::default(),
+                })
             })
             .map_err(|e| format!("{e:?}"))
             .and_then(|s| s.send().map_err(|e| format!("{e:?}")));
         if count(sent, errors, "particles") {
             notify(&ports, events::PARTICLES, errors);
         }
-    }
-    feed.figures.set_state(scene_state::NONE);
-    Ok(())
+    };
+    *revision_base += scene.cavity().topology_revision;
+    Ok(end)
 }
 
 /// Counts a failed publication (logged the first times only); true when it was sent.

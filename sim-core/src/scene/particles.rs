@@ -599,6 +599,17 @@ impl ParticleSystem {
         let p = self.pos[n];
         std::array::from_fn(|a| self.origin[a] + p[a] as f64 * self.h)
     }
+    /// Velocity of particle `n`, m/s: the fluid's at its position (as of the last step) plus
+    /// its slip.
+    pub fn velocity_m_per_s(&self, n: usize) -> [f64; 3] {
+        let u = Self::sample(&self.field, self.dims, self.pos[n]);
+        let slip = self.slip[n];
+        std::array::from_fn(|a| f64::from(u[a] + slip[a]) * self.h)
+    }
+    /// Time since particle `n` was emitted, s.
+    pub fn age_s(&self, n: usize) -> f64 {
+        (self.time_s - f64::from(self.birth_s[n])).max(0.0)
+    }
     /// Class of particle `n`.
     pub fn class_of(&self, n: usize) -> ParticleClass {
         self.classes[self.class[n] as usize]
