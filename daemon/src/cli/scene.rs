@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use hydrometra_sim::scene::particles::Particles;
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
     Stage, VoxelKind,
@@ -201,7 +202,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "frame,time_s,pressure_mmhg,cavity_volume_ml,surface_volume_ml,grid_fluid_volume_ml,fluid_cells,\
          inflow_ml_min,outflow_ml_min,losses_ml_min,dvdt_ml_min,fluid_inflow_ml_min,fluid_outflow_ml_min,\
          fluid_wall_ml_min,fluid_open_ml_min,wall_flux_scale,deficit_ml,step_ms,replay_ms,voxelize_ms,ports_ms,fluid_ms,\
-         fluid_ran,projection_iterations,max_div_rel\n",
+         fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity\n",
     );
     let mut pvd = String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
     let ml_min = |q: f64| q * 6e7;
@@ -228,9 +229,14 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         let (its, div) = r
             .fluid
             .map_or((0, f64::NAN), |s| (s.projection_iterations, s.max_div_rel));
+        // Particles alive and the view's clarity (empty without the stage or a scope pose).
+        let (alive, clarity) = scene.particles().map_or((0, None), |p| {
+            (p.system().map_or(0, |s| s.len()), p.clarity())
+        });
+        let clarity = clarity.map_or(String::new(), |c| format!("{c:.4}"));
         let _ = writeln!(
             csv,
-            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e}",
+            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e},{alive},{clarity}",
             r.time_s,
             pa_to_mmhg(r.cavity_pressure_pa),
             m3_to_ml(r.cavity_volume_m3),
@@ -268,6 +274,17 @@ fn run_offline(a: &RunArgs) -> Result<()> {
                 pvd,
                 "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"0\" file=\"{cavity}\"/>\n<DataSet timestep=\"{t:.4}\" group=\"\" part=\"1\" file=\"{flow}\"/>"
             );
+            // The particles, when the scene has the stage: a file every series frame (no
+            // points before any is released), so the series stays aligned in ParaView.
+            if let Some(p) = scene.particles() {
+                let particles = format!("vtu/{name}_particles.vtu");
+                std::fs::write(a.out.join(&particles), p.vtu_string())
+                    .with_context(|| format!("writing {particles}"))?;
+                let _ = writeln!(
+                    pvd,
+                    "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"2\" file=\"{particles}\"/>"
+                );
+            }
             written += 1;
         }
     }
@@ -284,6 +301,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "grid_dims": scene.cells().dims,
         "voxel_mm": scene.desc().fluid.voxel_mm,
         "stages": stage_json(&r.counters),
+        "particles": scene.particles().map(particles_json),
     });
     std::fs::write(
         a.out.join("summary.json"),
@@ -296,6 +314,29 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+/// The particle counters per kind (blood, bubble, fragment) and the clarity figures.
+fn particles_json(p: &Particles) -> serde_json::Value {
+    let c = p.system().map(|s| s.counts()).unwrap_or_default();
+    let t = p.tracker();
+    let alive: Vec<u64> = (0..3)
+        .map(|k| c.emitted[k].saturating_sub(c.outflow[k] + c.open[k] + c.lost[k]))
+        .collect();
+    serde_json::json!({
+        "kinds": ["blood", "bubble", "fragment"],
+        "alive": alive,
+        "emitted": c.emitted,
+        "left_by_outflow": c.outflow,
+        "left_by_open_os": c.open,
+        "lost": c.lost,
+        "dropped_over_budget": c.dropped,
+        "rejected_not_in_fluid": c.rejected,
+        "clarity": p.clarity(),
+        "min_clarity": t.min_clarity,
+        "time_to_clear_s": t.time_to_clear_s,
+        "last_obscured_s": t.last_obscured_s,
+    })
 }
 
 fn stage_json(c: &hydrometra_sim::scene::Counters) -> serde_json::Value {
