@@ -15,7 +15,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::clarity::{ClarityTracker, View, ViewSpec};
-use super::random::SplitMix64;
+use super::random::SeededRng;
 use super::vortices::cross;
 use super::{Scene, VoxelKind};
 use crate::fluid::{CellLabel, FluidGrid, FluidSolver};
@@ -1181,7 +1181,7 @@ struct Source {
 pub struct Particles {
     spec: ParticleSpec,
     system: Option<ParticleSystem>,
-    rng: Option<SplitMix64>,
+    rng: Option<SeededRng>,
     sources: Vec<Source>,
     fragments_done: Vec<bool>,
     bubble_owed: f64,
@@ -1312,7 +1312,7 @@ impl Particles {
                 owed: 0.0,
             });
         }
-        self.rng = Some(SplitMix64::new(spec.seed));
+        self.rng = Some(SeededRng::new(spec.seed));
         self.emit_points = Vec::with_capacity(64);
         self.system = Some(sys);
         Some(())
