@@ -98,13 +98,10 @@ fn particles(c: &mut Criterion) {
                 diameter_m: 5e-5,
             })
             .expect("class");
-        let mut k = 0u64;
+        let mut rng = fastrand::Rng::with_seed(0);
         let mut refill = |sys: &mut ParticleSystem| {
             while sys.len() < count {
-                k = k
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
-                let n = fluid[(k >> 33) as usize % fluid.len()];
+                let n = fluid[rng.usize(..fluid.len())];
                 let c = s.grid().cell_centre_m(s.grid().coords(n));
                 sys.emit(&kinds, cls, c);
             }

@@ -211,13 +211,8 @@ fn rough_cavity(voxel_m: f64, method: ProjectionMethod) -> FluidSolver {
         ..water()
     };
     let mut s = FluidSolver::new(grid, params).unwrap();
-    let mut state = 12345u64;
-    s.set_velocity_field(move |_, _| {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        ((state >> 33) as f64 / (1u64 << 31) as f64) - 0.5
-    });
+    let mut rng = fastrand::Rng::with_seed(12345);
+    s.set_velocity_field(move |_, _| rng.f64() - 0.5);
     s
 }
 

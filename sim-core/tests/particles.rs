@@ -27,18 +27,6 @@ fn tracer(sys: &mut ParticleSystem) -> u8 {
     .unwrap()
 }
 
-/// A small deterministic generator for the tests.
-struct Lcg(u64);
-impl Lcg {
-    fn unit(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 #[test]
 fn rankine_profile_inside_and_outside_the_core_matches_the_closed_form() {
     let r_core = 2e-3;
@@ -362,7 +350,7 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
         let n = 16;
         let h = 1e-3;
         let mut s = solver([n, n, n], h);
-        let mut rng = Lcg(42 + count as u64);
+        let mut rng = fastrand::Rng::with_seed(42 + count as u64);
         let mut kinds = vec![VoxelKind::Fluid; n * n * n];
         let mut sys = ParticleSystem::new(s.grid(), count, 4, [0.0, -1.0, 0.0]);
         let cls = tracer(&mut sys);
@@ -374,7 +362,7 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
             // New walls (random cells, some under particles) and a new random field of up to
             // 3 cells per step.
             for k in kinds.iter_mut() {
-                *k = if rng.unit() < 0.25 {
+                *k = if rng.f64() < 0.25 {
                     VoxelKind::Wall
                 } else {
                     VoxelKind::Fluid
@@ -385,10 +373,10 @@ fn no_particle_ends_inside_a_wall_after_1e5_random_steps() {
                 walled += (kinds[p[0] + n * (p[1] + n * p[2])] != VoxelKind::Fluid) as usize;
             }
             let amp = 0.18;
-            let mut r2 = Lcg(rng.0 ^ 7);
-            s.set_velocity_field(|_, _| amp * (2.0 * r2.unit() - 1.0));
+            let mut r2 = rng.fork();
+            s.set_velocity_field(|_, _| amp * (2.0 * r2.f64() - 1.0));
             while sys.len() < count {
-                let p = [0, 1, 2].map(|_| rng.unit() * n as f64 * h);
+                let p = [0, 1, 2].map(|_| rng.f64() * n as f64 * h);
                 sys.emit(&kinds, cls, p);
             }
             for _ in 0..5 {
@@ -449,16 +437,16 @@ fn blood_particles_are_conserved_except_through_the_outlets() {
         }
         let mut sys = ParticleSystem::new(s.grid(), 20_000, 8, [0.0, -1.0, 0.0]);
         let cls = tracer(&mut sys);
-        let mut rng = Lcg(3);
+        let mut rng = fastrand::Rng::with_seed(3);
         for _ in 0..120 {
             if open {
                 s.step(1.0 / 60.0).unwrap();
             }
             for _ in 0..40 {
                 let p = [
-                    0.004 + 0.002 * rng.unit(),
-                    0.002 + 0.006 * rng.unit(),
-                    0.002 + 0.006 * rng.unit(),
+                    0.004 + 0.002 * rng.f64(),
+                    0.002 + 0.006 * rng.f64(),
+                    0.002 + 0.006 * rng.f64(),
                 ];
                 sys.emit(&kinds, cls, p);
             }
@@ -562,7 +550,7 @@ fn time_to_clear(u_in: f32) -> Option<f64> {
         .unwrap();
     let view = ViewSpec::default().cone([0.002, 0.006, 0.006], [1.0, 0.0, 0.0]);
     let mut tracker = ClarityTracker::new(0.9);
-    let mut rng = Lcg(9);
+    let mut rng = fastrand::Rng::with_seed(9);
     let dt = 1.0 / 60.0;
     for step in 0..600 {
         let t = step as f64 * dt;
@@ -570,9 +558,9 @@ fn time_to_clear(u_in: f32) -> Option<f64> {
         if t < 1.0 {
             for _ in 0..60 {
                 let p = [
-                    0.008 + 0.002 * rng.unit(),
-                    0.004 + 0.004 * rng.unit(),
-                    0.004 + 0.004 * rng.unit(),
+                    0.008 + 0.002 * rng.f64(),
+                    0.004 + 0.004 * rng.f64(),
+                    0.004 + 0.004 * rng.f64(),
                 ];
                 sys.emit(&kinds, cls, p);
             }

@@ -1,7 +1,8 @@
 //! The coupled scene on a real (coarse) uterus and its FEM atlas: the fluxes the fluid sees equal
 //! the hydraulics' every step, stages skip when their inputs do not change and say so in their
-//! counters, the resting slit idles the fluid, runs are deterministic, and steady steps allocate
-//! nothing.
+//! counters, the resting slit idles the fluid, runs are deterministic, steady steps allocate
+//! nothing, and a bleed obscures the scope's view until the flow carries it out (the sweep over
+//! the outflow opening is ignored: not monotone yet, see its doc comment).
 //!
 //! The atlas (8k-tet default anatomy, 7 levels to 150 mmHg) is built once per test run and cached
 //! under the target directory (`CARGO_TARGET_TMPDIR`), shared by the test processes.
@@ -267,4 +268,132 @@ fn steady_steps_do_not_allocate() {
         "{} allocations in 60 steady steps",
         after - before
     );
+}
+
+/// What a one-second bleed in front of the scope did with the outflow valve at `valve_out`.
+#[derive(Debug)]
+#[allow(
+    dead_code,
+    reason = "the context fields are read through Debug in the messages"
+)]
+struct BleedOutcome {
+    valve_out: f64,
+    /// From the end of the bleed to the first clear view, s.
+    time_to_clear_s: Option<f64>,
+    min_clarity: f64,
+    /// Clarity 3 s after the bleed ended.
+    clarity_3s: f64,
+    /// Blood particles emitted, left through the outflow holes, through the open os, alive.
+    blood: [u64; 4],
+    /// Cavity pressure and the hydraulics' outflow when the bleed ended, mmHg and ml/min.
+    pressure_mmhg: f64,
+    outflow_ml_min: f64,
+}
+
+/// The coarse default uterus distended by the pump (100 mmHg, inflow open) with the outflow
+/// valve at `valve_out`; from 2 s a one-second bleed of 2 ml/min on the wall the scope looks at
+/// (the fundus); followed until the view is clear again or 20 s after the bleed.
+fn bleed_then_clear(valve_out: f64) -> BleedOutcome {
+    let (mut desc, assets) = coarse(1.2);
+    desc.stages.particles = true;
+    let probe = Scene::new(desc.clone(), assets.clone()).unwrap();
+    let scope = scope_in_cavity(&probe);
+    drop(probe);
+    let d = scope.view_direction;
+    let m = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    // 25 mm ahead of the tip: beyond the fundal wall, so the source snaps onto the wall there.
+    let at: [f64; 3] = std::array::from_fn(|a| (scope.tip_position_m[a] + 0.025 * d[a] / m) * 1e3);
+    let (onset, duration) = (2.0, 1.0);
+    desc.particles.blood.sources = vec![hydrometra_sim::scene::particles::BleedingSourceSpec {
+        position_mm: at,
+        rate_ml_min: 2.0,
+        onset_s: onset,
+        duration_s: duration,
+        ..Default::default()
+    }];
+    let mut scene = Scene::new(desc, assets).unwrap();
+    let rig = inputs(1.0, valve_out, 100.0, scope);
+    let bleed_end = onset + duration;
+    let (mut pressure_mmhg, mut outflow_ml_min, mut clarity_3s) = (f64::NAN, f64::NAN, f64::NAN);
+    let frames = ((bleed_end + 20.0) / DT).round() as usize;
+    for f in 0..frames {
+        scene.step(&own(rig), DT).unwrap();
+        let t = scene.report().time_s;
+        if (t - bleed_end).abs() < 0.5 * DT {
+            let h = scene.hydraulic_state();
+            pressure_mmhg = hydrometra_sim::units::pa_to_mmhg(h.cavity_pressure_pa);
+            outflow_ml_min = h.flows.outflow_m3_per_s * 6e7;
+        }
+        let p = scene.particles().unwrap();
+        if (t - bleed_end - 3.0).abs() < 0.5 * DT {
+            clarity_3s = p.clarity().unwrap();
+        }
+        if p.tracker().time_to_clear_s.is_some() && t > bleed_end + 3.0 {
+            break;
+        }
+        assert!(f + 1 < frames || p.tracker().time_to_clear_s.is_none());
+    }
+    let p = scene.particles().unwrap();
+    let c = p.system().unwrap().counts();
+    let alive = c.emitted[0] - c.outflow[0] - c.open[0] - c.lost[0];
+    BleedOutcome {
+        valve_out,
+        time_to_clear_s: p.tracker().time_to_clear_s,
+        min_clarity: p.tracker().min_clarity.unwrap(),
+        clarity_3s,
+        blood: [c.emitted[0], c.outflow[0], c.open[0], alive],
+        pressure_mmhg,
+        outflow_ml_min,
+    }
+}
+
+#[test]
+fn a_bleed_in_the_scene_obscures_the_view_until_the_flow_carries_it_out_of_the_outflow_holes() {
+    let r = bleed_then_clear(0.5);
+    eprintln!("{r:?}");
+    // 2 ml/min for 1 s at 0.01 ul per particle: 3333 particles, all placed in the fluid.
+    assert_eq!(r.blood[0], 3333, "{r:?}");
+    assert!(r.min_clarity < 0.5, "the bleed obscured the view: {r:?}");
+    assert!(r.time_to_clear_s.is_some(), "the view cleared: {r:?}");
+    // Most of the blood leaves through the scope's outflow holes (the sheath closes the canal:
+    // none through the os); every particle is accounted for.
+    assert!(r.blood[1] > r.blood[0] / 2, "{r:?}");
+    assert_eq!(r.blood[1] + r.blood[2] + r.blood[3], r.blood[0], "{r:?}");
+}
+
+/// The acceptance (the view clears faster with the outflow open wider, monotone in a
+/// sweep) on the real scene. It does not hold yet, so the test is ignored rather than loosened:
+/// with the pump at 100 mmHg a wider outflow lowers the cavity pressure (89, 78, 50 mmHg at 0.25,
+/// 0.5, 1.0), the fundus in front of the scope keeps fewer fluid cells (4, 1, 0 within 6 mm of
+/// the source at 1.2 mm; 47, 35, 6 at 0.6 mm) and blood released there stays in stagnant one-cell
+/// channels in the view (cell speeds under 1 mm/s): time to clear 5.0, 1.5, 7.8 s at 1.2 mm.
+/// Holding the cavity at ~80 mmHg (pump regulated) the widest outflow (443 ml/min through) still
+/// left 60 % of the blood stagnant in the view after 9 s while 0.5 (126 ml/min) cleared in 1.5 s
+/// (docs/particles.md, "View clarity").
+#[test]
+#[ignore = "not monotone in the scene yet (see the doc comment); run: cargo nextest run -p hydrometra-sim --test scene --run-ignored only -E 'test(the_view_clears)'"]
+fn the_view_clears_faster_after_a_bleed_with_the_outflow_open_wider() {
+    let runs: Vec<BleedOutcome> = [0.25, 0.5, 1.0].map(bleed_then_clear).into();
+    for r in &runs {
+        eprintln!("{r:?}");
+    }
+    for r in &runs {
+        // 2 ml/min for 1 s at 0.01 ul per particle: 3333 particles.
+        assert!(
+            r.blood[0] > 3000,
+            "the bleed was emitted into the fluid: {r:?}"
+        );
+        assert!(r.min_clarity < 0.5, "the bleed obscured the view: {r:?}");
+    }
+    let times: Vec<f64> = runs
+        .iter()
+        .map(|r| r.time_to_clear_s.unwrap_or(f64::INFINITY))
+        .collect();
+    assert!(times[2].is_finite(), "the widest outflow cleared: {runs:?}");
+    for w in times.windows(2) {
+        assert!(
+            w[1] < w[0],
+            "time to clear monotone in the outflow: {times:?}"
+        );
+    }
 }

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use hydrometra_sim::scene::particles::Particles;
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
     Stage, VoxelKind,
@@ -93,9 +94,33 @@ pub struct BenchArgs {
     /// Scene rate, Hz.
     #[arg(long, default_value_t = 60.0)]
     rate_hz: f64,
+    /// Vortices of the "with vortices" column (the paper: up to 100); 0 leaves them out. They
+    /// follow no flow-rate rule here: all of them from the first step.
+    #[arg(long, default_value_t = 100)]
+    vortices: usize,
+    /// Vortex mode: `overlay` (display only: measured in the same run, the fluid state is
+    /// untouched) or `injected` (into the solver's state: a second run per voxel size).
+    #[arg(long, value_enum, default_value_t = BenchVortexMode::Overlay)]
+    vortex_mode: BenchVortexMode,
+    /// Steps at fully open valves before the time to traverse is taken (the flow settles).
+    #[arg(long, default_value_t = 120)]
+    traverse_settle_steps: usize,
+    /// Longest time a tracer is followed for the time to traverse, s.
+    #[arg(long, default_value_t = 10.0)]
+    traverse_max_s: f64,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+}
+
+/// `scene bench --vortex-mode`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BenchVortexMode {
+    /// Display-only overlay.
+    Overlay,
+    /// Injected into the solver's state.
+    Injected,
 }
 
 /// Runs a `scene` subcommand.
@@ -201,7 +226,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "frame,time_s,pressure_mmhg,cavity_volume_ml,surface_volume_ml,grid_fluid_volume_ml,fluid_cells,\
          inflow_ml_min,outflow_ml_min,losses_ml_min,dvdt_ml_min,fluid_inflow_ml_min,fluid_outflow_ml_min,\
          fluid_wall_ml_min,fluid_open_ml_min,wall_flux_scale,deficit_ml,step_ms,replay_ms,voxelize_ms,ports_ms,fluid_ms,\
-         fluid_ran,projection_iterations,max_div_rel\n",
+         fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity\n",
     );
     let mut pvd = String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
     let ml_min = |q: f64| q * 6e7;
@@ -228,9 +253,14 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         let (its, div) = r
             .fluid
             .map_or((0, f64::NAN), |s| (s.projection_iterations, s.max_div_rel));
+        // Particles alive and the view's clarity (empty without the stage or a scope pose).
+        let (alive, clarity) = scene.particles().map_or((0, None), |p| {
+            (p.system().map_or(0, |s| s.len()), p.clarity())
+        });
+        let clarity = clarity.map_or(String::new(), |c| format!("{c:.4}"));
         let _ = writeln!(
             csv,
-            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e}",
+            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e},{alive},{clarity}",
             r.time_s,
             pa_to_mmhg(r.cavity_pressure_pa),
             m3_to_ml(r.cavity_volume_m3),
@@ -268,6 +298,17 @@ fn run_offline(a: &RunArgs) -> Result<()> {
                 pvd,
                 "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"0\" file=\"{cavity}\"/>\n<DataSet timestep=\"{t:.4}\" group=\"\" part=\"1\" file=\"{flow}\"/>"
             );
+            // The particles, when the scene has the stage: a file every series frame (no
+            // points before any is released), so the series stays aligned in ParaView.
+            if let Some(p) = scene.particles() {
+                let particles = format!("vtu/{name}_particles.vtu");
+                std::fs::write(a.out.join(&particles), p.vtu_string())
+                    .with_context(|| format!("writing {particles}"))?;
+                let _ = writeln!(
+                    pvd,
+                    "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"2\" file=\"{particles}\"/>"
+                );
+            }
             written += 1;
         }
     }
@@ -284,6 +325,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "grid_dims": scene.cells().dims,
         "voxel_mm": scene.desc().fluid.voxel_mm,
         "stages": stage_json(&r.counters),
+        "particles": scene.particles().map(particles_json),
     });
     std::fs::write(
         a.out.join("summary.json"),
@@ -296,6 +338,29 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         a.out.display()
     );
     Ok(())
+}
+
+/// The particle counters per kind (blood, bubble, fragment) and the clarity figures.
+fn particles_json(p: &Particles) -> serde_json::Value {
+    let c = p.system().map(|s| s.counts()).unwrap_or_default();
+    let t = p.tracker();
+    let alive: Vec<u64> = (0..3)
+        .map(|k| c.emitted[k].saturating_sub(c.outflow[k] + c.open[k] + c.lost[k]))
+        .collect();
+    serde_json::json!({
+        "kinds": ["blood", "bubble", "fragment"],
+        "alive": alive,
+        "emitted": c.emitted,
+        "left_by_outflow": c.outflow,
+        "left_by_open_os": c.open,
+        "lost": c.lost,
+        "dropped_over_budget": c.dropped,
+        "rejected_not_in_fluid": c.rejected,
+        "clarity": p.clarity(),
+        "min_clarity": t.min_clarity,
+        "time_to_clear_s": t.time_to_clear_s,
+        "last_obscured_s": t.last_obscured_s,
+    })
 }
 
 fn stage_json(c: &hydrometra_sim::scene::Counters) -> serde_json::Value {
@@ -456,6 +521,16 @@ struct BenchRow {
     fluid_ms_p99: f64,
     projection_iterations_mean: f64,
     max_div_rel: f64,
+    /// Vortices alive at the end of the "with vortices" run (0: not run).
+    vortices: usize,
+    vortex_mode: BenchVortexMode,
+    /// The vortex stage alone, ms per step of the "with vortices" run.
+    vortex_stage_ms_mean: f64,
+    /// Fluid stage plus vortex stage, ms per step of the "with vortices" run (the paper's
+    /// "CPU time with vortices").
+    fluid_with_vortices_ms_mean: f64,
+    /// `fluid_with_vortices_ms_mean` over `fluid_ms_mean`, minus 1, in %.
+    vortex_overhead_percent: f64,
     voxelize_full_ms: f64,
     voxelize_incremental_ms_mean: f64,
     voxelize_incremental_ms_p99: f64,
@@ -466,9 +541,126 @@ struct BenchRow {
     grid_fluid_volume_ml: f64,
     surface_volume_ml: f64,
     volume_error_percent: f64,
+    /// Time to traverse at fully open valves: tracers released next to the inflow port.
+    traverse_released: usize,
+    /// Tracers that reached the outflow holes within `--traverse-max-s`.
+    traverse_reached: usize,
+    /// First arrival at the outflow holes, s (the paper's "time to traverse").
+    traverse_first_s: Option<f64>,
+    /// Half of the tracers arrived, s.
+    traverse_median_s: Option<f64>,
+}
+
+/// What one timed run of the operating point measured.
+struct Timed {
+    scene: Scene,
+    start: hydrometra_sim::scene::Counters,
+    projection_iterations: usize,
+    max_div_rel: f64,
+    fluid_runs: usize,
+}
+
+impl Timed {
+    /// Mean run time of stage `s` over the timed steps, ms (0 if it never ran).
+    fn stage_mean_ms(&self, s: Stage) -> f64 {
+        let (now, then) = (self.scene.report().counters.get(s), self.start.get(s));
+        let runs = now.runs - then.runs;
+        if runs == 0 {
+            0.0
+        } else {
+            (now.total_ms - then.total_ms) / runs as f64
+        }
+    }
+}
+
+/// The bench's operating point at frame `f`: the default scenario's scope in the cavity, inflow
+/// open, outflow `valve_out`, the pump at `pump_mmhg` (+-5 %); the scope sways slowly so
+/// voxelization and ports run.
+fn operating_point(f: usize, dt: f64, pump_mmhg: f64, valve_out: f64) -> RigInputs {
+    let t = f as f64 * dt;
+    let sway = 1.5e-3 * (0.7 * t).sin();
+    RigInputs {
+        valve_in_opening: 1.0,
+        valve_out_opening: valve_out,
+        pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+        scope: ScopePose {
+            // In the corpus of the default uterus (drivers/scenarios/default.toml, t = 45 s).
+            tip_position_m: [sway, 0.0129, 0.0426],
+            view_direction: [0.0, 0.5, 0.866],
+            valid: true,
+        },
+        perforation: false,
+    }
+}
+
+/// Warms up and times the operating point (outflow half open) on a new scene.
+fn timed_run(desc: SceneDesc, assets: &SceneAssets, a: &BenchArgs) -> Result<Timed> {
+    let dt = 1.0 / a.rate_hz;
+    let mut scene = Scene::new(desc, assets.clone())?;
+    let inputs = |f: usize| SceneInputs {
+        rig: operating_point(f, dt, a.pump_mmhg, 0.5),
+        hydraulics: HydraulicsInput::Own,
+    };
+    for f in 0..a.warmup {
+        scene.step(&inputs(f), dt)?;
+    }
+    let start = scene.report().counters.clone();
+    let (mut its, mut max_div, mut fluid_runs) = (0usize, 0.0f64, 0usize);
+    let (mut rebuilds, mut substeps, mut topology_ms, mut advect_ms, mut project_ms) =
+        (0usize, 0usize, 0.0, 0.0, 0.0);
+    for f in a.warmup..a.warmup + a.steps {
+        let r = scene.step(&inputs(f), dt)?;
+        if let Some(s) = r.fluid {
+            its += s.projection_iterations;
+            max_div = max_div.max(s.max_div_rel);
+            fluid_runs += 1;
+            rebuilds += usize::from(s.topology_rebuilt);
+            substeps += s.substeps;
+            topology_ms += s.topology_ms;
+            advect_ms += s.advect_ms;
+            project_ms += s.project_ms;
+        }
+    }
+    let per_run = |x: f64| x / fluid_runs.max(1) as f64;
+    eprintln!(
+        "{} mm{}: {fluid_runs} fluid steps, {substeps} substeps, {rebuilds} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
+        scene.desc().fluid.voxel_mm,
+        if scene.vortices().is_some() { " with vortices" } else { "" },
+        per_run(topology_ms),
+        per_run(advect_ms),
+        per_run(project_ms)
+    );
+    Ok(Timed {
+        scene,
+        start,
+        projection_iterations: its,
+        max_div_rel: max_div,
+        fluid_runs,
+    })
+}
+
+/// `desc` with `n` vortices in `mode`, all of them from the first step.
+fn with_vortices(mut desc: SceneDesc, n: usize, mode: BenchVortexMode) -> Result<SceneDesc> {
+    desc.stages.vortices = true;
+    let v = &mut desc.vortices;
+    v.max_count = n;
+    v.threshold_ml_min = 0.0;
+    v.full_flow_ml_min = 1e-6;
+    v.mode = match mode {
+        BenchVortexMode::Overlay => hydrometra_sim::scene::vortices::VortexMode::Overlay,
+        BenchVortexMode::Injected => hydrometra_sim::scene::vortices::VortexMode::Injected,
+    };
+    desc.validate()?;
+    Ok(desc)
 }
 
 fn bench(a: &BenchArgs) -> Result<()> {
+    if !(a.traverse_max_s.is_finite() && a.traverse_max_s > 0.0) {
+        bail!(
+            "--traverse-max-s {}: expected a duration > 0",
+            a.traverse_max_s
+        );
+    }
     let base = SceneDesc::load(&a.scene.scene)?;
     let (assets, _) = assets(&base, &a.scene)?;
     let dt = 1.0 / a.rate_hz;
@@ -476,77 +668,58 @@ fn bench(a: &BenchArgs) -> Result<()> {
     for &v in &a.voxels_mm {
         let mut desc = base.clone();
         desc.fluid.voxel_mm = v;
+        desc.stages.vortices = false;
         desc.validate()?;
-        let mut scene = Scene::new(desc, assets.clone())?;
-        // The default scenario's operating point: scope in the cavity, inflow open, outflow half
-        // open, the pump at --pump-mmhg; the scope sweeps slowly so voxelization and ports run.
-        let at = |f: usize| {
-            let t = f as f64 * dt;
-            let sway = 1.5e-3 * (0.7 * t).sin();
-            RigInputs {
-                valve_in_opening: 1.0,
-                valve_out_opening: 0.5,
-                pump_set_pressure_pa: mmhg_to_pa(a.pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
-                scope: ScopePose {
-                    // In the corpus of the default uterus (drivers/scenarios/default.toml, t = 45 s).
-                    tip_position_m: [sway, 0.0129, 0.0426],
-                    view_direction: [0.0, 0.5, 0.866],
-                    valid: true,
-                },
-                perforation: false,
-            }
+        // Overlay vortices leave the solver's state alone: the run with them times the fluid
+        // step without them too (like for like, the same steps). Injected ones change the
+        // state: a baseline run without and a second run with them.
+        let overlay = a.vortices > 0 && a.vortex_mode == BenchVortexMode::Overlay;
+        let mut run = if overlay {
+            timed_run(
+                with_vortices(desc.clone(), a.vortices, a.vortex_mode)?,
+                &assets,
+                a,
+            )?
+        } else {
+            timed_run(desc.clone(), &assets, a)?
         };
-        for f in 0..a.warmup {
-            scene.step(
-                &SceneInputs {
-                    rig: at(f),
-                    hydraulics: HydraulicsInput::Own,
-                },
-                dt,
-            )?;
+        let injected = if a.vortices > 0 && !overlay {
+            Some(timed_run(
+                with_vortices(desc.clone(), a.vortices, a.vortex_mode)?,
+                &assets,
+                a,
+            )?)
+        } else {
+            None
+        };
+        let with = injected.as_ref().unwrap_or(&run);
+        let vortices = with
+            .scene
+            .vortices()
+            .and_then(|x| x.field())
+            .map_or(0, |f| f.vortices().len());
+        if vortices != a.vortices {
+            tracing::warn!(
+                "{v} mm: {vortices} vortices alive at the end of the run, {} asked for",
+                a.vortices
+            );
         }
-        let start = scene.report().counters.clone();
-        let mut its = 0usize;
-        let mut max_div = 0.0f64;
-        let mut fluid_runs = 0usize;
-        let (mut rebuilds, mut substeps, mut topology_ms, mut advect_ms, mut project_ms) =
-            (0usize, 0usize, 0.0, 0.0, 0.0);
-        for f in a.warmup..a.warmup + a.steps {
-            let r = scene.step(
-                &SceneInputs {
-                    rig: at(f),
-                    hydraulics: HydraulicsInput::Own,
-                },
-                dt,
-            )?;
-            if let Some(s) = r.fluid {
-                its += s.projection_iterations;
-                max_div = max_div.max(s.max_div_rel);
-                fluid_runs += 1;
-                rebuilds += usize::from(s.topology_rebuilt);
-                substeps += s.substeps;
-                topology_ms += s.topology_ms;
-                advect_ms += s.advect_ms;
-                project_ms += s.project_ms;
-            }
-        }
-        let per_run = |x: f64| x / fluid_runs.max(1) as f64;
-        eprintln!(
-            "{v} mm: {fluid_runs} fluid steps, {substeps} substeps, {rebuilds} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
-            per_run(topology_ms), per_run(advect_ms), per_run(project_ms)
-        );
+        // The fluid stage followed by the vortex stage, per run, in the run with vortices (at
+        // the operating point both run every step).
+        let vortex_stage = with.stage_mean_ms(Stage::Vortices);
+        let fluid_with = with.stage_mean_ms(Stage::Fluid) + vortex_stage;
+        let fluid_without = run.stage_mean_ms(Stage::Fluid);
+        let overhead = if a.vortices > 0 && fluid_without > 0.0 {
+            100.0 * (fluid_with / fluid_without - 1.0)
+        } else {
+            f64::NAN
+        };
+        drop(injected);
+
+        let scene = &run.scene;
         let r = scene.report();
         let c = &r.counters;
-        let delta_mean = |s: Stage| {
-            let (now, then) = (c.get(s), start.get(s));
-            let runs = now.runs - then.runs;
-            if runs == 0 {
-                0.0
-            } else {
-                (now.total_ms - then.total_ms) / runs as f64
-            }
-        };
-        let step_mean = (c.step.total_ms - start.step.total_ms) / a.steps as f64;
+        let step_mean = (c.step.total_ms - run.start.step.total_ms) / a.steps as f64;
         // A full voxelization, timed alone.
         let mut vox = scene.voxelizer().clone();
         let t = Instant::now();
@@ -557,49 +730,95 @@ fn bench(a: &BenchArgs) -> Result<()> {
         let full_ms = t.elapsed().as_secs_f64() * 1e3 / reps as f64;
         let grid_ml = m3_to_ml(r.grid_fluid_volume_m3);
         let surf_ml = m3_to_ml(r.surface_volume_m3);
-        rows.push(BenchRow {
+        let mut row = BenchRow {
             voxel_mm: v,
             box_cells: scene.cells().cell_count(),
             fluid_cells: r.fluid_cells,
-            fluid_ms_mean: delta_mean(Stage::Fluid),
+            fluid_ms_mean: run.stage_mean_ms(Stage::Fluid),
             fluid_ms_p99: c.get(Stage::Fluid).p99_ms(),
-            projection_iterations_mean: its as f64 / fluid_runs.max(1) as f64,
-            max_div_rel: max_div,
+            projection_iterations_mean: run.projection_iterations as f64
+                / run.fluid_runs.max(1) as f64,
+            max_div_rel: run.max_div_rel,
+            vortices,
+            vortex_mode: a.vortex_mode,
+            vortex_stage_ms_mean: vortex_stage,
+            fluid_with_vortices_ms_mean: fluid_with,
+            vortex_overhead_percent: overhead,
             voxelize_full_ms: full_ms,
-            voxelize_incremental_ms_mean: delta_mean(Stage::Voxelize),
+            voxelize_incremental_ms_mean: run.stage_mean_ms(Stage::Voxelize),
             voxelize_incremental_ms_p99: c.get(Stage::Voxelize).p99_ms(),
-            replay_us_mean: 1e3 * delta_mean(Stage::Deformation),
+            replay_us_mean: 1e3 * run.stage_mean_ms(Stage::Deformation),
             replay_us_p99: 1e3 * c.get(Stage::Deformation).p99_ms(),
             step_ms_mean: step_mean,
             step_ms_p99: c.step.p99_ms(),
             grid_fluid_volume_ml: grid_ml,
             surface_volume_ml: surf_ml,
             volume_error_percent: 100.0 * (grid_ml / surf_ml - 1.0),
-        });
+            traverse_released: 0,
+            traverse_reached: 0,
+            traverse_first_s: None,
+            traverse_median_s: None,
+        };
+        // Time to traverse: both valves fully open until the flow settles, then tracers from
+        // the inflow port in the frozen flow, 1 ms steps (under a voxel per substep up to
+        // about 10 m/s at 0.6 mm).
+        let settle_from = a.warmup + a.steps;
+        for f in settle_from..settle_from + a.traverse_settle_steps {
+            let mut rig = operating_point(f, dt, a.pump_mmhg, 1.0);
+            rig.scope.tip_position_m[0] = 0.0;
+            run.scene.step(
+                &SceneInputs {
+                    rig,
+                    hydraulics: HydraulicsInput::Own,
+                },
+                dt,
+            )?;
+        }
+        if let Some(t) = Particles::time_to_traverse(&run.scene, 1e-3, a.traverse_max_s) {
+            row.traverse_released = t.released;
+            row.traverse_reached = t.reached;
+            row.traverse_first_s = t.first_s;
+            row.traverse_median_s = t.median_s;
+        }
+        rows.push(row);
     }
     if a.json {
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
     println!(
-        "scene {}, {} warm-up + {} timed steps at {} Hz, pump {} mmHg, rayon threads {}",
+        "scene {}, {} warm-up + {} timed steps at {} Hz, pump {} mmHg, rayon threads {}; \
+         with vortices: {} ({:?}{}); time to traverse: valves fully open after {} steps, tracers \
+         from the inflow port, first arrival / half arrived (of released), at most {} s",
         base.name,
         a.warmup,
         a.steps,
         a.rate_hz,
         a.pump_mmhg,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        a.vortices,
+        a.vortex_mode,
+        if a.vortex_mode == BenchVortexMode::Overlay {
+            ", the same run; step ms includes them"
+        } else {
+            ", a second run"
+        },
+        a.traverse_settle_steps,
+        a.traverse_max_s
     );
-    println!("| voxel mm | box cells | fluid cells | fluid ms mean / p99 | CG its | max div h/U | voxelize full ms | voxelize incr. ms mean / p99 | replay us mean / p99 | step ms mean / p99 | grid vol ml | surface vol ml | vol err % |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    let opt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.2}"));
+    println!("| voxel mm | box cells | fluid cells | fluid ms mean / p99 | fluid + {} vortices ms (+%) | CG its | max div h/U | voxelize full ms | voxelize incr. ms mean / p99 | replay us mean / p99 | step ms mean / p99 | grid vol ml | surface vol ml | vol err % | time to traverse s |", a.vortices);
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
         println!(
-            "| {} | {} | {} | {:.3} / {:.3} | {:.1} | {:.1e} | {:.3} | {:.3} / {:.3} | {:.1} / {:.1} | {:.3} / {:.3} | {:.3} | {:.3} | {:+.1} |",
+            "| {} | {} | {} | {:.3} / {:.3} | {:.3} ({:+.0} %) | {:.1} | {:.1e} | {:.3} | {:.3} / {:.3} | {:.1} / {:.1} | {:.3} / {:.3} | {:.3} | {:.3} | {:+.1} | {} / {} ({}/{}) |",
             r.voxel_mm, r.box_cells, r.fluid_cells, r.fluid_ms_mean, r.fluid_ms_p99,
+            r.fluid_with_vortices_ms_mean, r.vortex_overhead_percent,
             r.projection_iterations_mean, r.max_div_rel, r.voxelize_full_ms,
             r.voxelize_incremental_ms_mean, r.voxelize_incremental_ms_p99, r.replay_us_mean,
             r.replay_us_p99, r.step_ms_mean, r.step_ms_p99, r.grid_fluid_volume_ml,
-            r.surface_volume_ml, r.volume_error_percent
+            r.surface_volume_ml, r.volume_error_percent, opt(r.traverse_first_s),
+            opt(r.traverse_median_s), r.traverse_reached, r.traverse_released
         );
     }
     Ok(())

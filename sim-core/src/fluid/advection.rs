@@ -1361,18 +1361,10 @@ pub(crate) mod avx2 {
 mod tests {
     use super::*;
 
-    /// A deterministic pseudo-random sequence in [0, 1).
-    fn lcg(state: &mut u64) -> f32 {
-        *state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (*state >> 40) as f32 / (1u64 << 24) as f32
-    }
-
     /// Face values of the three components, uniform in [-0.5, 0.5).
-    fn random_faces(layout: &Layout, st: &mut u64) -> Vec<Vec<f32>> {
+    fn random_faces(layout: &Layout, rng: &mut fastrand::Rng) -> Vec<Vec<f32>> {
         (0..3)
-            .map(|c| (0..layout.face_count(c)).map(|_| lcg(st) - 0.5).collect())
+            .map(|c| (0..layout.face_count(c)).map(|_| rng.f32() - 0.5).collect())
             .collect()
     }
 
@@ -1382,19 +1374,19 @@ mod tests {
             let dims = [5, 4, 6];
             let layout = Layout::new(dims, periodic);
             let geo = Geometry::new(dims, &layout);
-            let mut st = 7u64;
-            let fields = random_faces(&layout, &mut st);
+            let mut rng = fastrand::Rng::with_seed(7);
+            let fields = random_faces(&layout, &mut rng);
             let cells = dims.iter().product::<usize>();
             let centred3: Vec<[f32; 3]> = (0..cells)
-                .map(|_| [lcg(&mut st), lcg(&mut st), lcg(&mut st)])
+                .map(|_| [rng.f32(), rng.f32(), rng.f32()])
                 .collect();
             let centred: Vec<V4> = centred3.iter().map(|v| v4::new(v[0], v[1], v[2])).collect();
             for _ in 0..2000 {
                 // Points inside, on sample positions, and far outside the grid.
                 let p: [f32; 3] = std::array::from_fn(|a| {
-                    let r = lcg(&mut st);
+                    let r = rng.f32();
                     if r < 0.1 {
-                        (lcg(&mut st) * 4.0).floor() * 0.5
+                        (rng.f32() * 4.0).floor() * 0.5
                     } else {
                         (r - 0.5) * 3.0 * dims[a] as f32
                     }
@@ -1430,7 +1422,7 @@ mod tests {
             eprintln!("SKIP avx2_trace_matches_the_scalar_trace_where_available: no AVX2+FMA");
             return;
         }
-        let mut st = 11u64;
+        let mut rng = fastrand::Rng::with_seed(11);
         let mut checked = 0usize;
         for dims in [[7, 4, 6], [11, 1, 3]] {
             for periodic in [
@@ -1441,16 +1433,16 @@ mod tests {
             ] {
                 let layout = Layout::new(dims, periodic);
                 let geo = Geometry::new(dims, &layout);
-                let fields = random_faces(&layout, &mut st);
+                let fields = random_faces(&layout, &mut rng);
                 let cells = dims.iter().product::<usize>();
                 let centred: Vec<V4> = (0..cells)
-                    .map(|_| v4::new(lcg(&mut st) - 0.5, lcg(&mut st) - 0.5, lcg(&mut st) - 0.5))
+                    .map(|_| v4::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5))
                     .collect();
                 // About 3/4 of the faces active: runs of every length, some of one face.
                 let active: Vec<Vec<u32>> = (0..3)
                     .map(|c| {
                         (0..layout.face_count(c) as u32)
-                            .filter(|_| lcg(&mut st) < 0.75)
+                            .filter(|_| rng.f32() < 0.75)
                             .collect()
                     })
                     .collect();
@@ -1493,11 +1485,11 @@ mod tests {
     /// The centred velocity (AVX2 rows and scalar tails) against the face means, cell by cell.
     #[test]
     fn centred_velocity_is_the_mean_of_the_faces_around_each_cell() {
-        let mut st = 5u64;
+        let mut rng = fastrand::Rng::with_seed(5);
         for dims in [[13, 3, 2], [8, 2, 3], [21, 1, 1]] {
             for periodic in [[false; 3], [true, true, true], [true, false, false]] {
                 let layout = Layout::new(dims, periodic);
-                let fields = random_faces(&layout, &mut st);
+                let fields = random_faces(&layout, &mut rng);
                 let mut out = vec![v4::zero(); dims.iter().product()];
                 for parallel in [false, true] {
                     let u = [&fields[0][..], &fields[1][..], &fields[2][..]];

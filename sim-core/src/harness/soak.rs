@@ -29,17 +29,6 @@ pub struct SoakReport {
     pub wall_s: f64,
 }
 
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        (self.0 >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Runs the soak for `steps` steps.
 pub fn run_soak(
     steps: usize,
@@ -49,7 +38,7 @@ pub fn run_soak(
     let t0 = std::time::Instant::now();
     let (n, h) = (8usize, 1e-3);
     let u_port = 0.5f32;
-    let mut rng = Lcg(seed);
+    let mut rng = fastrand::Rng::with_seed(seed);
     let grid = FluidGrid::new([n; 3], h, [0.0; 3], [false; 3])?;
     let params = FluidParams {
         advection: scheme,
@@ -72,10 +61,10 @@ pub fn run_soak(
     let mut inflow = u_port;
     for step in 0..steps {
         if step % 37 == 0 {
-            inflow = u_port * [0.0, 1.0, -1.0, 0.3][(rng.next() * 4.0) as usize % 4];
+            inflow = u_port * [0.0, 1.0, -1.0, 0.3][rng.usize(..4)];
             let g = s.grid_mut();
             g.fill_box(inlet.0, inlet.1, CellLabel::Velocity, [inflow, 0.0, 0.0]);
-            let label = if rng.next() < 0.7 {
+            let label = if rng.f64() < 0.7 {
                 CellLabel::Outflow
             } else {
                 CellLabel::Solid
@@ -83,11 +72,11 @@ pub fn run_soak(
             g.fill_box(outlet.0, outlet.1, label, [0.0; 3]);
         }
         if step % 53 == 0 {
-            let c: [f64; 3] = std::array::from_fn(|_| 0.0015 + rng.next() * 0.005);
-            let e: [f64; 3] = std::array::from_fn(|_| rng.next() * 0.003);
+            let c: [f64; 3] = std::array::from_fn(|_| 0.0015 + rng.f64() * 0.005);
+            let e: [f64; 3] = std::array::from_fn(|_| rng.f64() * 0.003);
             let lo = [c[0] - e[0], c[1] - e[1], c[2] - e[2]];
             let hi = [c[0] + e[0], c[1] + e[1], c[2] + e[2]];
-            let label = if rng.next() < 0.5 {
+            let label = if rng.f64() < 0.5 {
                 CellLabel::Solid
             } else {
                 CellLabel::Fluid
@@ -97,13 +86,13 @@ pub fn run_soak(
             g.fill_box(inlet.0, inlet.1, CellLabel::Velocity, [inflow, 0.0, 0.0]);
         }
         if step % 1000 == 0 {
-            let nu = if rng.next() < 0.3 { 1e-3 } else { 1e-6 };
+            let nu = if rng.f64() < 0.3 { 1e-3 } else { 1e-6 };
             s.set_params(FluidParams {
                 viscosity_m2_s: nu,
                 ..params.clone()
             })?;
         }
-        let cfl = 0.1 + rng.next() * 49.9;
+        let cfl = 0.1 + rng.f64() * 49.9;
         let st = s.step(cfl * h / u_port as f64)?;
         let speed = s.max_speed_m_s();
         let energy = s.kinetic_energy_j();

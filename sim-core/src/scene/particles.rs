@@ -15,7 +15,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::clarity::{ClarityTracker, View, ViewSpec};
-use super::random::SplitMix64;
+use super::random::SeededRng;
 use super::vortices::cross;
 use super::{Scene, VoxelKind};
 use crate::fluid::{CellLabel, FluidGrid, FluidSolver};
@@ -863,51 +863,120 @@ impl ParticleSystem {
         (-tau / view.solid_angle_sr()).exp()
     }
 
+    /// Velocity of particle `n`, m/s: the fluid's (the cell-centred field of the last step, plus
+    /// the vortex overlay, sampled at the particle) plus its slip. Zero before the first step
+    /// that moved particles.
+    pub fn velocity_m_s(&self, n: usize) -> [f64; 3] {
+        let v = Self::sample(&self.field, self.dims, self.pos[n]);
+        let w = self.slip[n];
+        std::array::from_fn(|a| (v[a] + w[a]) as f64 * self.h)
+    }
+
     /// The particles as a VTK PolyData document (`.vtp`, ASCII): points (m), one vertex cell
-    /// each, point data `kind` (0 blood, 1 bubble, 2 fragment), `diameter_m`, `age_s`.
+    /// each, point data `kind` (0 blood, 1 bubble, 2 fragment), `diameter_m`, `age_s` and
+    /// `velocity` (m/s, [`ParticleSystem::velocity_m_s`]).
     pub fn vtp_string(&self) -> String {
-        let n = self.pos.len();
-        let mut s = String::with_capacity(96 * n + 1024);
-        s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"PolyData\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<PolyData>\n");
-        let _ = writeln!(
-            s,
-            "<Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"{n}\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">"
-        );
-        s.push_str("<PointData Scalars=\"kind\">\n<DataArray type=\"UInt8\" Name=\"kind\" format=\"ascii\">\n");
-        for &c in &self.class {
-            let _ = writeln!(s, "{}", self.classes[c as usize].kind as u8);
-        }
-        s.push_str(
-            "</DataArray>\n<DataArray type=\"Float32\" Name=\"diameter_m\" format=\"ascii\">\n",
-        );
-        for &c in &self.class {
-            let _ = writeln!(s, "{:e}", self.classes[c as usize].diameter_m as f32);
-        }
-        s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"age_s\" format=\"ascii\">\n");
-        for &b in &self.birth_s {
-            let _ = writeln!(s, "{:e}", self.time_s as f32 - b);
-        }
-        s.push_str("</DataArray>\n</PointData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-        for i in 0..n {
-            let p = self.position_m(i);
-            let _ = writeln!(s, "{:e} {:e} {:e}", p[0] as f32, p[1] as f32, p[2] as f32);
-        }
-        s.push_str("</DataArray>\n</Points>\n<Verts>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-        for i in 0..n {
-            let _ = writeln!(s, "{i}");
-        }
-        s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-        for i in 0..n {
-            let _ = writeln!(s, "{}", i + 1);
-        }
-        s.push_str("</DataArray>\n</Verts>\n</Piece>\n</PolyData>\n</VTKFile>\n");
-        s
+        particles_xml(Some(self), VtkFlavour::PolyData)
+    }
+
+    /// The same particles and point data as a VTK UnstructuredGrid of vertex cells (`.vtu`,
+    /// ASCII): ParaView shows it as the `.vtp`, and readers that know only unstructured grids
+    /// (meshio) read it too.
+    pub fn vtu_string(&self) -> String {
+        particles_xml(Some(self), VtkFlavour::UnstructuredGrid)
     }
 
     /// Writes [`ParticleSystem::vtp_string`] to `path`.
     pub fn write_vtp(&self, path: &Path) -> std::io::Result<()> {
         std::fs::write(path, self.vtp_string())
     }
+}
+
+/// Which VTK XML dataset the particles are written as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum VtkFlavour {
+    /// PolyData with one vertex cell per particle (`.vtp`).
+    PolyData,
+    /// UnstructuredGrid with one `VTK_VERTEX` cell per particle (`.vtu`).
+    UnstructuredGrid,
+}
+
+/// The particles of `sys` (none: an empty document) as VTK XML, ASCII.
+pub fn particles_xml(sys: Option<&ParticleSystem>, flavour: VtkFlavour) -> String {
+    let n = sys.map_or(0, ParticleSystem::len);
+    let poly = flavour == VtkFlavour::PolyData;
+    let (root, cells_tag) = if poly {
+        ("PolyData", "Verts")
+    } else {
+        ("UnstructuredGrid", "Cells")
+    };
+    let mut s = String::with_capacity(160 * n + 1024);
+    let _ = writeln!(
+        s,
+        "<?xml version=\"1.0\"?>\n<VTKFile type=\"{root}\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<{root}>"
+    );
+    if poly {
+        let _ = writeln!(
+            s,
+            "<Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"{n}\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">"
+        );
+    } else {
+        let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">");
+    }
+    s.push_str("<PointData Scalars=\"kind\" Vectors=\"velocity\">\n<DataArray type=\"UInt8\" Name=\"kind\" format=\"ascii\">\n");
+    if let Some(sys) = sys {
+        for &c in &sys.class {
+            let _ = writeln!(s, "{}", sys.classes[c as usize].kind as u8);
+        }
+    }
+    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"diameter_m\" format=\"ascii\">\n");
+    if let Some(sys) = sys {
+        for &c in &sys.class {
+            let _ = writeln!(s, "{:e}", sys.classes[c as usize].diameter_m as f32);
+        }
+    }
+    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"age_s\" format=\"ascii\">\n");
+    if let Some(sys) = sys {
+        for &b in &sys.birth_s {
+            let _ = writeln!(s, "{:e}", sys.time_s as f32 - b);
+        }
+    }
+    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"velocity\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+    if let Some(sys) = sys {
+        for i in 0..n {
+            let v = sys.velocity_m_s(i);
+            let _ = writeln!(s, "{:e} {:e} {:e}", v[0] as f32, v[1] as f32, v[2] as f32);
+        }
+    }
+    s.push_str("</DataArray>\n</PointData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
+    if let Some(sys) = sys {
+        for i in 0..n {
+            let p = sys.position_m(i);
+            let _ = writeln!(s, "{:e} {:e} {:e}", p[0] as f32, p[1] as f32, p[2] as f32);
+        }
+    }
+    let _ = writeln!(
+        s,
+        "</DataArray>\n</Points>\n<{cells_tag}>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+    );
+    for i in 0..n {
+        let _ = writeln!(s, "{i}");
+    }
+    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
+    for i in 0..n {
+        let _ = writeln!(s, "{}", i + 1);
+    }
+    s.push_str("</DataArray>\n");
+    if !poly {
+        // VTK_VERTEX.
+        s.push_str("<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
+        for _ in 0..n {
+            s.push_str("1\n");
+        }
+        s.push_str("</DataArray>\n");
+    }
+    let _ = writeln!(s, "</{cells_tag}>\n</Piece>\n</{root}>\n</VTKFile>");
+    s
 }
 
 const KEEP: u8 = 0;
@@ -1123,7 +1192,7 @@ struct Source {
 pub struct Particles {
     spec: ParticleSpec,
     system: Option<ParticleSystem>,
-    rng: Option<SplitMix64>,
+    rng: Option<SeededRng>,
     sources: Vec<Source>,
     fragments_done: Vec<bool>,
     bubble_owed: f64,
@@ -1159,12 +1228,14 @@ impl Particles {
     pub fn tracker(&self) -> &ClarityTracker {
         &self.tracker
     }
-    /// The particles as VTK PolyData (empty document before the first step).
+    /// The particles as VTK PolyData (a document with no points before the first step).
     pub fn vtp_string(&self) -> String {
-        match &self.system {
-            Some(s) => s.vtp_string(),
-            None => String::new(),
-        }
+        particles_xml(self.system.as_ref(), VtkFlavour::PolyData)
+    }
+    /// The particles as a VTK UnstructuredGrid of vertex cells (no points before the first
+    /// step); what `hydrometra scene run` writes into its ParaView series.
+    pub fn vtu_string(&self) -> String {
+        particles_xml(self.system.as_ref(), VtkFlavour::UnstructuredGrid)
     }
 
     fn init(&mut self, scene: &Scene) -> Option<()> {
@@ -1252,7 +1323,7 @@ impl Particles {
                 owed: 0.0,
             });
         }
-        self.rng = Some(SplitMix64::new(spec.seed));
+        self.rng = Some(SeededRng::new(spec.seed));
         self.emit_points = Vec::with_capacity(64);
         self.system = Some(sys);
         Some(())

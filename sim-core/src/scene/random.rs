@@ -1,38 +1,34 @@
-//! A small seeded generator (SplitMix64) for the vortex and particle stages: reproducible runs,
-//! no allocation, no global state.
+//! The seeded generator of the vortex and particle stages: the workspace's one choice, `fastrand`
+//! (wyrand), seeded per stage for reproducible runs; no allocation, no global state. The helpers
+//! are the few distributions the stages draw from.
 
-/// SplitMix64 (Steele, Lea, Flood 2014): 64-bit state, passes BigCrush.
+/// A seeded `fastrand::Rng` with the stages' distributions.
 #[derive(Debug, Clone)]
-pub struct SplitMix64(u64);
+pub struct SeededRng(fastrand::Rng);
 
-impl SplitMix64 {
+impl SeededRng {
     /// A generator from a seed.
     pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-    /// The next 64 random bits.
-    #[inline]
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+        Self(fastrand::Rng::with_seed(seed))
     }
     /// Uniform in [0, 1).
     #[inline]
     pub fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+        self.0.f64()
     }
     /// Uniform in [lo, hi).
     #[inline]
     pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
         lo + (hi - lo) * self.unit()
     }
-    /// Uniform below `n` (> 0).
+    /// Uniform below `n` (0 when `n` is 0).
     #[inline]
     pub fn below(&mut self, n: usize) -> usize {
-        ((self.unit() * n as f64) as usize).min(n.saturating_sub(1))
+        if n == 0 {
+            0
+        } else {
+            self.0.usize(..n)
+        }
     }
     /// A uniformly distributed unit vector.
     pub fn direction(&mut self) -> [f64; 3] {

@@ -18,7 +18,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::random::SplitMix64;
+use super::random::SeededRng;
 use super::Scene;
 use crate::fluid::{CellLabel, FluidSolver};
 
@@ -273,7 +273,7 @@ pub struct VortexStats {
 #[derive(Debug, Clone)]
 pub struct VortexField {
     spec: VortexSpec,
-    rng: SplitMix64,
+    rng: SeededRng,
     vortices: Vec<Vortex>,
     dims: [usize; 3],
     h: f64,
@@ -317,7 +317,7 @@ impl VortexField {
             })
             .collect();
         Ok(Self {
-            rng: SplitMix64::new(spec.seed),
+            rng: SeededRng::new(spec.seed),
             vortices: Vec::with_capacity(spec.max_count),
             boxes: Vec::with_capacity(spec.max_count),
             core_radius_m: spec.core_radius_m(h),
