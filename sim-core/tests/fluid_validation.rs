@@ -148,6 +148,56 @@ fn fluid_at_rest_stays_at_rest_under_gravity_with_hydrostatic_pressure() {
     );
 }
 
+/// Open to an outflow layer on top, away from the origin (the hydrostatic potential is large
+/// there), with an obstacle: at rest under gravity with every scheme, 0 Pa at the outflow. The lagged
+/// reflection reflects only the pressure that does not balance the body force, the outflow cells'
+/// share included.
+#[test]
+fn fluid_at_rest_under_gravity_below_an_outflow_stays_at_rest_with_every_scheme() {
+    let (h, n, g) = (1e-3, 8, 9.81);
+    for scheme in AdvectionScheme::ALL {
+        let origin = [0.2, -0.1, 0.05];
+        let mut grid = FluidGrid::new([n, n, n], h, origin, [false; 3]).unwrap();
+        let at = |c: [f64; 3]| std::array::from_fn(|a| origin[a] + c[a] * h);
+        grid.fill_box(
+            at([0.0, 0.0, 7.0]),
+            at([8.0, 8.0, 8.0]),
+            CellLabel::Outflow,
+            [0.0; 3],
+        );
+        grid.fill_box(
+            at([3.0, 3.0, 0.0]),
+            at([5.0, 5.0, 4.0]),
+            CellLabel::Solid,
+            [0.0; 3],
+        );
+        let params = FluidParams {
+            body_force_m_s2: [0.0, 0.0, -g],
+            advection: scheme,
+            ..water()
+        };
+        let mut s = FluidSolver::new(grid, params).unwrap();
+        let dt = 1e-2;
+        for _ in 0..100 {
+            assert!(s.step(dt).unwrap().projection_converged);
+        }
+        assert!(
+            s.max_speed_m_s() < 1e-5 * g * dt,
+            "{scheme:?}: max speed {}",
+            s.max_speed_m_s()
+        );
+        // p = rho g (z_outflow - z): one cell and five cells below the outflow cells' centres.
+        for (k, depth) in [(6, 1.0), (2, 5.0)] {
+            let p = s.cell_pressure_pa([1, 1, k]).unwrap();
+            let exact = 1000.0 * g * h * depth;
+            assert!(
+                (p - exact).abs() < 1e-4 * exact,
+                "{scheme:?}: p = {p} at k = {k}, exact {exact}"
+            );
+        }
+    }
+}
+
 #[test]
 fn fluid_at_rest_without_forces_stays_exactly_at_rest() {
     let grid = FluidGrid::new([8, 8, 8], 1e-3, [0.0; 3], [false; 3]).unwrap();

@@ -494,7 +494,8 @@ fn merge(runs: &[BenchRow]) -> BenchRow {
 
 fn validate(a: ValidateArgs) -> Result<()> {
     use hydrometra_sim::harness::validation::{
-        abc_flow, ethier_steinman_with, lid_cavity_re1000, square_duct, taylor_green, CavityExtrema,
+        abc_flow, ethier_steinman_with, lid_cavity_re1000, square_duct, taylor_green,
+        taylor_green_3d, CavityExtrema,
     };
     let schemes: Vec<AdvectionScheme> = if a.advection.is_empty() {
         AdvectionScheme::ALL.to_vec()
@@ -514,6 +515,7 @@ fn validate(a: ValidateArgs) -> Result<()> {
         &[16, 32, 64]
     };
     let abc_n: &[usize] = if a.fine { &[16, 32, 64] } else { &[16, 32] };
+    let tg3_n: &[usize] = if a.fine { &[16, 32, 64] } else { &[16, 32] };
     let cavity_n: &[usize] = if a.fine { &[32, 64, 128] } else { &[32, 64] };
     let es_n: &[usize] = if a.fine { &[8, 16, 32] } else { &[8, 16] };
     let mut extrema = Vec::new();
@@ -523,6 +525,9 @@ fn validate(a: ValidateArgs) -> Result<()> {
         }
         for &n in abc_n {
             rows.push(abc_flow(n, scheme)?);
+        }
+        for &n in tg3_n {
+            rows.push(taylor_green_3d(n, scheme)?);
         }
         for &n in cavity_n {
             let (r, e) = lid_cavity_re1000(n, scheme)?;

@@ -23,8 +23,6 @@ use super::sample::Layout;
 #[serde(rename_all = "snake_case")]
 pub enum AdvectionScheme {
     /// Semi-Lagrangian with an RK2 (midpoint) backtrace: unconditionally stable, dissipative.
-    /// The default (see `MacCormackLaggedReflection` for why not that one yet).
-    #[default]
     SemiLagrangian,
     /// MacCormack on top of the RK2 semi-Lagrangian step, clamped: less dissipative, two traces.
     #[serde(rename = "maccormack")]
@@ -40,15 +38,15 @@ pub enum AdvectionScheme {
     /// project. Four traces and a second projection per step.
     #[serde(rename = "maccormack_reflection")]
     MacCormackReflection,
-    /// Clamped MacCormack of `u - dt/2 grad p / rho`, `p` being the last projection's pressure:
-    /// advection-reflection's reflection with the intermediate projection's gradient replaced by
-    /// the lagged one (the lagged pressure gradient of the predictor of Bell, Colella and Glaz
-    /// 1989). Two traces and one projection, as MacCormack. Only in substeps up to CFL
+    /// Clamped MacCormack of `u - dt/2 grad (p - phi) / rho`, `p` being the last projection's
+    /// pressure and `phi = rho g.x` the hydrostatic potential of the body force (along the
+    /// non-periodic axes): advection-reflection's reflection with the intermediate projection's
+    /// gradient replaced by the lagged one (the lagged pressure gradient of the predictor of Bell,
+    /// Colella and Glaz 1989), traced through the divergence-free velocity before the reflection.
+    /// Two traces and one projection, as MacCormack. Only in substeps up to CFL
     /// [`LAGGED_REFLECTION_MAX_CFL`](super::LAGGED_REFLECTION_MAX_CFL); above, plain MacCormack.
-    /// The least dissipative scheme at MacCormack's cost, but not the default: fluid at rest under
-    /// gravity does not stay at rest with it (`fluid_at_rest_stays_at_rest_under_gravity...` in
-    /// `sim-core/tests/fluid_validation.rs` reaches 0.02 m/s), and above CFL 1, where the scene
-    /// runs, it is plain MacCormack.
+    /// The default: the least dissipative scheme at MacCormack's cost (BENCHMARKS.md, issue 17).
+    #[default]
     #[serde(rename = "maccormack_lagged_reflection")]
     MacCormackLaggedReflection,
 }

@@ -195,10 +195,20 @@ pub struct FluidSolver {
     /// probes; the box does not change with the labels, so the pressure of a cell that stays fluid
     /// survives a relabelling.
     pressure_pa: Vec<f64>,
-    /// Half the pressure before the step (Pa, level 0's padded box) for the lagged reflection.
+    /// The reflected pressure of the lagged reflection (Pa, level 0's padded box, zero off the
+    /// fluid cells): half the pressure before the step less half the hydrostatic potential
+    /// ([`FluidSolver::hydrostatic_coefficients`]), `R = (p - phi) / 2`.
     p_lag: Vec<f64>,
+    /// Active faces between a fluid and an outflow cell: (component, full face index, +1 if the
+    /// outflow cell is the face's upper cell else -1, the outflow cell). There the reflected
+    /// pressure of the outflow cell is `-phi / 2` (its pressure is 0), and the projection's
+    /// pressure `+phi / 2`, so their sum keeps the outflow at 0 Pa.
+    outflow_faces: Vec<(u8, u32, f32, [u32; 3])>,
     /// Whether this substep subtracted the lagged gradient (`pressure_pa + p_lag` after it).
     lagged_applied: bool,
+    /// Whether `pressure_pa` is a step's pressure (false before the first step and after
+    /// [`FluidSolver::project_now`], whose pressure is no step's): only then is it reflected.
+    pressure_from_step: bool,
     /// Padded (level 0) index of the upper cell of the first face of each active run
     /// (`FaceSet::runs`), for the pressure-gradient update.
     run_cells: [Vec<u32>; 3],
@@ -235,7 +245,9 @@ impl FluidSolver {
             pressure: PressureSolver::default(),
             pressure_pa: Vec::new(),
             p_lag: Vec::new(),
+            outflow_faces: Vec::new(),
             lagged_applied: false,
+            pressure_from_step: false,
             run_cells: Default::default(),
             open_rows: Vec::new(),
             time_s: 0.0,
@@ -364,8 +376,8 @@ impl FluidSolver {
         }
         mg.build_hierarchy();
         self.pressure.resize();
-
         topology::open_row_ranges(&self.grid, &mut self.open_rows);
+        self.outflow_faces.clear();
         for c in 0..3 {
             self.faces[c].rebuild(&self.grid, &self.layout, c, &self.open_rows);
             let n = self.faces[c].active.len();
@@ -380,6 +392,20 @@ impl FluidSolver {
             });
             self.run_cells[c].clear();
             self.run_cells[c].extend(cells);
+            for &idx in &self.faces[c].active {
+                let f = self.layout.face_coords(c, idx as usize);
+                let (lo, up) = topology::face_cells(&self.grid, c, f);
+                let outflow = |cell: Option<[usize; 3]>| {
+                    cell.filter(|&x| self.grid.label(x) == Some(CellLabel::Outflow))
+                };
+                let (cell, sign) = match (outflow(lo), outflow(up)) {
+                    (_, Some(x)) => (x, 1.0),
+                    (Some(x), None) => (x, -1.0),
+                    (None, None) => continue,
+                };
+                self.outflow_faces
+                    .push((c as u8, idx, sign, cell.map(|v| v as u32)));
+            }
             // Faces no longer tracked are zeroed so stale values never leak into samples (the
             // untracked faces hold zero: see `set_velocity_field`).
             for &idx in &self.faces[c].dropped {
@@ -649,12 +675,21 @@ impl FluidSolver {
         stats.diffuse_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
+        if self.lagged_applied {
+            // The projection's pressure of the outflow cells is +phi / 2 (a Dirichlet value).
+            self.outflow_potential_gradient(dt, 1.0);
+        }
         self.project(dt, stats);
         if self.lagged_applied {
-            for (p, &l) in self.pressure_pa.iter_mut().zip(&self.p_lag) {
-                *p += l;
+            // Both are zero off the fluid cells: the spans cover them.
+            for &[s, e] in &self.pressure.mg.levels[0].spans {
+                let r = s as usize..e as usize;
+                for (p, &l) in self.pressure_pa[r.clone()].iter_mut().zip(&self.p_lag[r]) {
+                    *p += l;
+                }
             }
         }
+        self.pressure_from_step = true;
         stats.project_ms += t.elapsed().as_secs_f64() * 1e3;
         self.time_s += dt;
     }
@@ -746,21 +781,84 @@ impl FluidSolver {
         advection::scatter(&self.plan, &self.adv, &mut self.u);
     }
 
-    /// The reflection of [`AdvectionScheme::MacCormackLaggedReflection`]: half the last
-    /// pressure (kept in `p_lag` and left in `pressure_pa` as the projection's warm start)
-    /// times dt / rho, its gradient subtracted from the face velocities. After the projection,
-    /// `pressure_pa + p_lag` is the pressure.
+    /// `rho g_a h` per axis (Pa per cell) of the body force along the non-periodic axes: the
+    /// hydrostatic potential `phi = rho g.x` of cell (i, j, k) is the sum of `coef_a (i_a + 1/2)`
+    /// (any constant would do). A periodic axis has no hydrostatic balance (the force drives a
+    /// flow there), so its component is left out; `None` without such a force.
+    fn hydrostatic_coefficients(&self) -> Option<[f64; 3]> {
+        let (rho, h) = (self.params.density_kg_m3, self.grid.spacing_m());
+        let periodic = self.grid.periodic();
+        let f = self.params.body_force_m_s2;
+        let coef: [f64; 3] =
+            std::array::from_fn(|a| if periodic[a] { 0.0 } else { rho * f[a] * h });
+        coef.iter().any(|&c| c != 0.0).then_some(coef)
+    }
+
+    /// The reflection of [`AdvectionScheme::MacCormackLaggedReflection`]: the reflected pressure
+    /// `R = (p - phi) / 2` (`p` the last pressure, `phi` the hydrostatic potential of the body
+    /// force, see [`FluidSolver::hydrostatic_coefficients`]) kept in `p_lag`, its gradient times
+    /// dt / rho subtracted from the face velocities; `p - R` is left in `pressure_pa` as the
+    /// projection's warm start, and after the projection `pressure_pa + p_lag` is the pressure.
+    /// Only the part of the pressure that does not balance the body force is reflected: at
+    /// hydrostatic rest nothing is, so nothing is advected.
     fn lagged_reflection(&mut self, dt: f64) {
         let to_q = dt / (self.params.density_kg_m3 * self.grid.spacing_m());
-        for (l, p) in self.p_lag.iter_mut().zip(&mut self.pressure_pa) {
-            *l = 0.5 * *p;
-            *p = *l;
+        // The pressure is zero off the fluid cells: the spans cover them.
+        for &[s, e] in &self.pressure.mg.levels[0].spans {
+            let r = s as usize..e as usize;
+            for (l, p) in self.p_lag[r.clone()]
+                .iter_mut()
+                .zip(&mut self.pressure_pa[r])
+            {
+                *l = 0.5 * *p;
+                *p = *l;
+            }
         }
-        self.pressure_to_dq(to_q);
+        if let Some(coef) = self.hydrostatic_coefficients() {
+            let l0 = &self.pressure.mg.levels[0];
+            for &[j, k, i0, i1] in &l0.row_spans {
+                let (j, k, i0, i1) = (j as usize, k as usize, i0 as usize, i1 as usize);
+                let base = coef[1] * (j as f64 + 0.5) + coef[2] * (k as f64 + 0.5);
+                let p0 = l0.pad(i0, j, k);
+                for i in i0..i1 {
+                    let idx = p0 + (i - i0);
+                    let half_phi = 0.5 * (base + coef[0] * (i as f64 + 0.5)) * l0.mask[idx] as f64;
+                    self.p_lag[idx] -= half_phi;
+                    self.pressure_pa[idx] += half_phi;
+                }
+            }
+        }
+        let p_lag = &self.p_lag;
+        let ps = &mut self.pressure;
+        for_spans(&ps.mg.levels[0], &mut ps.dq, |spans, dq, off| {
+            for &[s, e] in spans {
+                let (s, e) = (s as usize, e as usize);
+                for (q, &p) in dq[s - off..e - off].iter_mut().zip(&p_lag[s..e]) {
+                    *q = p * to_q;
+                }
+            }
+            0.0
+        });
         if self.grid.periodic().iter().any(|&p| p) {
             self.pressure.mg.levels[0].halo(&mut self.pressure.dq);
         }
         self.subtract_gradient();
+        // The outflow cells' reflected pressure is -phi / 2 (`dq` holds 0 there).
+        self.outflow_potential_gradient(dt, -1.0);
+    }
+
+    /// `u -= dt / rho grad(sign phi / 2)` on the faces between fluid and outflow cells, `phi / 2`
+    /// taken on the outflow cell only (zero on the fluid cell); nothing without a hydrostatic
+    /// potential.
+    fn outflow_potential_gradient(&mut self, dt: f64, sign: f64) {
+        let Some(coef) = self.hydrostatic_coefficients() else {
+            return;
+        };
+        let to_q = dt / (self.params.density_kg_m3 * self.grid.spacing_m());
+        for &(c, idx, side, cell) in &self.outflow_faces {
+            let phi: f64 = (0..3).map(|a| coef[a] * (cell[a] as f64 + 0.5)).sum();
+            self.u[c as usize][idx as usize] -= (side as f64 * sign * 0.5 * phi * to_q) as f32;
+        }
     }
 
     /// The solver's scaled pressure `dq = to_q pressure_pa` on the fluid spans of level 0.
@@ -787,13 +885,21 @@ impl FluidSolver {
         // The lagged reflection only up to CFL 1: above, the lagged gradient carried many cells
         // turned into rotational velocity and pumped energy into the stress soak (max speed 76x
         // the port's over 10^6 steps at CFL up to 50); there the step is plain MacCormack.
+        // And only a step's pressure: before the first step there is none (zero would reflect
+        // the whole hydrostatic potential, and the viscous step would leave a trace of it).
         self.lagged_applied = scheme == AdvectionScheme::MacCormackLaggedReflection
+            && self.pressure_from_step
             && self.max_speed_m_s() * dt <= LAGGED_REFLECTION_MAX_CFL * h;
-        if self.lagged_applied {
-            self.lagged_reflection(dt);
-        }
         self.extrapolate();
         self.update_centred();
+        // The traces follow the (divergence-free) velocity before the reflection, as the second
+        // half step of advection-reflection follows the projected one: through the reflected
+        // field, whose divergence is dt/2 lap(p) / rho, the advection would change the energy by
+        // -dt^2 |grad p|^2 / rho^2 per step (to leading order), all the reflection saves.
+        if self.lagged_applied {
+            self.lagged_reflection(dt);
+            self.extrapolate();
+        }
         if scheme != AdvectionScheme::MacCormackReflection {
             self.advect_passes(dt / h, parallel, scheme);
             stats.advect_ms += t.elapsed().as_secs_f64() * 1e3;
@@ -1123,6 +1229,7 @@ impl FluidSolver {
         }
         self.apply_fixed(true);
         self.project(dt_s, &mut stats);
+        self.pressure_from_step = false;
         self.extrapolate();
         stats
     }
