@@ -366,16 +366,16 @@ impl PressureSolver {
             }
             0.0
         });
-        // `z = M r`, and `r.z` (from the V-cycle's last pass unless a closed region's mean changes z).
+        // `z = M r`, and `r.z` from the V-cycle's last pass. Removing a closed region's mean m
+        // from z leaves `r.z` as it is: r is mean-free in every closed region (its mean is
+        // removed before each preconditioning), so the change `-m sum r` vanishes.
         let precondition = |mg: &mut Multigrid, regions: &mut Regions, initialised: bool| {
             let rz = mg.vcycle(initialised);
             let l0 = &mut mg.levels[0];
             if regions.any_closed() {
                 regions.remove_closed_means_dense(&mut l0.x, &l0.pad_of_row);
-                run(l0, SpanOp::Dot { a: &l0.b, b: &l0.x })
-            } else {
-                rz
             }
+            rz
         };
         let mut rz = precondition(mg, regions, false);
         let l0 = &mg.levels[0];
@@ -420,10 +420,13 @@ impl PressureSolver {
                 // In f32 the rounding of `r -= alpha A p` accumulates a region mean no pressure
                 // can remove, on which CG would stagnate: keep r in the range of A.
                 regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
-                rmax = l0
-                    .pad_of_row
-                    .iter()
-                    .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()));
+                rmax = if regions.all_closed() {
+                    regions.closed_max_abs as f32
+                } else {
+                    l0.pad_of_row
+                        .iter()
+                        .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
+                };
             }
             if rmax <= tol {
                 outcome.converged = true;

@@ -26,6 +26,8 @@ pub(crate) struct Regions {
     /// Sum over the closed regions of `|sum of v|` removed by the last `remove_closed_means*`
     /// (for the divergence right-hand side `h div u`, times `h^2` it is the flux removed, m^3/s).
     pub removed_total: f64,
+    /// Largest `|v|` over the rows of closed regions after the last `remove_closed_means*`.
+    pub closed_max_abs: f64,
 }
 
 impl Regions {
@@ -82,6 +84,12 @@ impl Regions {
         self.closed.iter().any(|&c| c)
     }
 
+    /// True if every row lies in a closed region (a cavity whose ports are all prescribed
+    /// velocities): then [`Regions::closed_max_abs`] is the largest value of the whole vector.
+    pub fn all_closed(&self) -> bool {
+        !self.of_row.is_empty() && self.closed_rows.len() == self.of_row.len()
+    }
+
     /// Subtracts its region's mean from every row of a closed region. Returns the largest absolute
     /// mean removed.
     pub fn remove_closed_means(&mut self, v: &mut [f64]) -> f64 {
@@ -135,10 +143,13 @@ impl Regions {
             worst = worst.max(s.abs());
         }
         self.removed_total = total;
+        let mut max_abs = 0.0f64;
         for &r in &self.closed_rows {
             let x = &mut v[pad_of_row[r as usize] as usize];
             *x = T::from_f64(x.to_f64() - self.sum[self.of_row[r as usize] as usize]);
+            max_abs = max_abs.max(x.to_f64().abs());
         }
+        self.closed_max_abs = max_abs;
         worst
     }
 }

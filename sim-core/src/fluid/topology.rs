@@ -86,6 +86,7 @@ pub(crate) struct FaceSet {
     /// Scratch: the faces tracked before this rebuild, and a layer's faces.
     previous: Vec<u32>,
     layer_scratch: Vec<u32>,
+    fixed_scratch: Vec<[u32; 3]>,
 }
 
 /// The x range `[first, end)` of the open (fluid or outflow) cells of every cell row `(j, k)`
@@ -410,8 +411,14 @@ impl FaceSet {
                 }
             }
         }
-        self.fixed
-            .sort_unstable_by_key(|f| f[1] == NONE && f[2] == NONE);
+        // A stable partition (one pass each way), not a sort: only the two groups matter.
+        let still = |f: &[u32; 3]| f[1] == NONE && f[2] == NONE;
+        let mut parted = std::mem::take(&mut self.fixed_scratch);
+        parted.clear();
+        parted.extend(self.fixed.iter().filter(|f| !still(f)));
+        parted.extend(self.fixed.iter().filter(|f| still(f)));
+        std::mem::swap(&mut self.fixed, &mut parted);
+        self.fixed_scratch = parted;
         self.fixed_moving = self
             .fixed
             .iter()
