@@ -21,6 +21,9 @@ pub struct DebriefSettings {
     pub pump_band_pa: f64,
     /// A control is at rest again after changing by less than a fifth of its band for this long, s.
     pub settle_s: f64,
+    /// The view is clear at or above this view clarity, obscured below (the particles stage's
+    /// `view.clear_threshold`).
+    pub clear_view_clarity: f64,
 }
 
 impl Default for DebriefSettings {
@@ -30,6 +33,7 @@ impl Default for DebriefSettings {
             valve_band: 0.05,
             pump_band_pa: hydrometra_sim::units::mmhg_to_pa(5.0),
             settle_s: 0.5,
+            clear_view_clarity: hydrometra_sim::scene::clarity::ViewSpec::default().clear_threshold,
         }
     }
 }
@@ -65,6 +69,8 @@ pub struct ViewMetrics {
     pub fraction_obscured: Option<f64>,
     /// Why they are missing, if they are.
     pub unavailable: Option<String>,
+    /// The view counts as clear at or above this clarity.
+    pub clear_view_clarity: f64,
 }
 
 /// The fluid-handling metrics of one recording (`metrics.json`).
@@ -205,15 +211,7 @@ pub fn metrics(rec: &Recording, settings: &DebriefSettings) -> Result<Metrics, S
         },
         scope_path_length_m: 0.0,
         time_in_safe_state_s: 0.0,
-        view: ViewMetrics {
-            time_to_first_clear_view_s: None,
-            fraction_obscured: None,
-            unavailable: Some(
-                "the status of this recording (docs/ipc.md schema v1) carries no view-clarity \
-                 figure"
-                    .into(),
-            ),
-        },
+        view: view_metrics(st, settings.clear_view_clarity),
         truncated: rec.truncated.is_some(),
     };
     let mut valve_in = AdjustmentCounter::new(settings.valve_band, settings.settle_s);
@@ -285,6 +283,54 @@ pub fn metrics(rec: &Recording, settings: &DebriefSettings) -> Result<Metrics, S
     m.valve_out_adjustments = valve_out.count;
     m.pump_adjustments = pump.count;
     Ok(m)
+}
+
+/// The view metrics from the statuses' `view_clarity` (NaN while no scene with a particle stage
+/// runs): the time from the first status to the first clear one, and the fraction of the time with
+/// a clarity figure during which the view was obscured (each status holds until the next).
+fn view_metrics(st: &[(u64, Status)], clear: f64) -> ViewMetrics {
+    let Some((t_first, _)) = st.first() else {
+        return ViewMetrics {
+            time_to_first_clear_view_s: None,
+            fraction_obscured: None,
+            unavailable: Some("no status".into()),
+            clear_view_clarity: clear,
+        };
+    };
+    let secs = |t: u64| t.saturating_sub(*t_first) as f64 * 1e-9;
+    if !st.iter().any(|(_, s)| s.view_clarity.is_finite()) {
+        return ViewMetrics {
+            time_to_first_clear_view_s: None,
+            fraction_obscured: None,
+            unavailable: Some(
+                "no status of this recording carries a view-clarity figure (the scene ran \
+                 without a particle stage, or no scene ran)"
+                    .into(),
+            ),
+            clear_view_clarity: clear,
+        };
+    }
+    let first_clear = st
+        .iter()
+        .find(|(_, s)| s.view_clarity >= clear)
+        .map(|(t, _)| secs(*t));
+    let (mut with_figure_s, mut obscured_s) = (0.0, 0.0);
+    for w in st.windows(2) {
+        let ((ta, a), (tb, _)) = (&w[0], &w[1]);
+        if a.view_clarity.is_finite() {
+            let dt = secs(*tb) - secs(*ta);
+            with_figure_s += dt;
+            if a.view_clarity < clear {
+                obscured_s += dt;
+            }
+        }
+    }
+    ViewMetrics {
+        time_to_first_clear_view_s: first_clear,
+        fraction_obscured: (with_figure_s > 0.0).then(|| obscured_s / with_figure_s),
+        unavailable: None,
+        clear_view_clarity: clear,
+    }
 }
 
 /// Writes `metrics.json`, `report.md` and the SVG plots into `out`.
@@ -374,10 +420,11 @@ pub fn write_report(rec: &Recording, m: &Metrics, out: &Path) -> anyhow::Result<
         ),
         (
             "time to first clear view",
-            m.view
-                .time_to_first_clear_view_s
-                .map(|t| format!("{t:.1} s"))
-                .unwrap_or_else(|| "unavailable".into()),
+            match (m.view.time_to_first_clear_view_s, &m.view.unavailable) {
+                (Some(t), _) => format!("{t:.1} s"),
+                (None, None) => "never clear".into(),
+                (None, Some(_)) => "unavailable".into(),
+            },
         ),
         (
             "fraction of time with the view obscured",
@@ -415,6 +462,10 @@ pub fn write_report(rec: &Recording, m: &Metrics, out: &Path) -> anyhow::Result<
     for (file, caption) in plots::FILES {
         let _ = writeln!(md, "### {caption}\n\n![{caption}]({file})\n");
     }
+    if m.view.unavailable.is_none() {
+        let (file, caption) = plots::CLARITY;
+        let _ = writeln!(md, "### {caption}\n\n![{caption}]({file})\n");
+    }
     std::fs::write(out.join("report.md"), md)
         .with_context(|| format!("cannot write {}", out.join("report.md").display()))?;
     Ok(())
@@ -431,6 +482,8 @@ mod plots {
         ("deficit.svg", "Fluid deficit against its limits"),
         ("alarms.svg", "Alarm timeline"),
     ];
+    /// Written when the recording has view-clarity figures.
+    pub const CLARITY: (&str, &str) = ("clarity.svg", "View clarity");
 
     type Series = (&'static str, RGBColor, Vec<(f64, f64)>);
 
@@ -550,6 +603,23 @@ mod plots {
                 ("limit", RED, vec![(0.0, limit), (t_max, limit)]),
             ],
         )?;
+        if m.view.unavailable.is_none() {
+            let clear = m.view.clear_view_clarity;
+            let clarity: Vec<(f64, f64)> = pick(&|s| s.view_clarity)
+                .into_iter()
+                .filter(|p| p.1.is_finite())
+                .collect();
+            chart(
+                &out.join(CLARITY.0),
+                CLARITY.1,
+                "clarity (1 = clear)",
+                t_max,
+                &[
+                    ("view clarity", BLUE, clarity),
+                    ("clear from", GREEN, vec![(0.0, clear), (t_max, clear)]),
+                ],
+            )?;
+        }
         alarm_timeline(&out.join(FILES[3].0), rec, t_max)
     }
 
@@ -652,5 +722,61 @@ mod tests {
             push(&mut c, 0.001 * i as f64);
         }
         assert_eq!(c.count, 3);
+    }
+
+    /// A clarity series whose answers follow by hand: no figure for the first second, then
+    /// 0.5 (obscured), 0.95 (clear), 0.3, 0.95, 0.95 at one status per second.
+    #[test]
+    fn view_metrics_from_a_clarity_series_derived_by_hand() {
+        let series = [f64::NAN, 0.5, 0.95, 0.3, 0.95, 0.95];
+        let st: Vec<(u64, Status)> = series
+            .iter()
+            .enumerate()
+            .map(|(i, &c)| {
+                let s = Status {
+                    view_clarity: c,
+                    ..Status::default()
+                };
+                (5_000_000_000 + i as u64 * 1_000_000_000, s)
+            })
+            .collect();
+        let v = view_metrics(&st, 0.9);
+        assert_eq!(v.unavailable, None);
+        // First clear status at t = 2 s; clarity figures from 1 to 5 s (4 s), obscured over
+        // [1, 2) and [3, 4): half of it.
+        assert!((v.time_to_first_clear_view_s.unwrap() - 2.0).abs() < 1e-12);
+        assert!((v.fraction_obscured.unwrap() - 0.5).abs() < 1e-12);
+        // Never clear: available, no time.
+        let dark: Vec<(u64, Status)> = st
+            .iter()
+            .map(|(t, s)| {
+                (
+                    *t,
+                    Status {
+                        view_clarity: 0.2,
+                        ..*s
+                    },
+                )
+            })
+            .collect();
+        let v = view_metrics(&dark, 0.9);
+        assert_eq!(v.time_to_first_clear_view_s, None);
+        assert_eq!(v.fraction_obscured, Some(1.0));
+        assert!(v.unavailable.is_none());
+        // No figure at all (no particle stage): unavailable, with the reason.
+        let none: Vec<(u64, Status)> = st
+            .iter()
+            .map(|(t, s)| {
+                (
+                    *t,
+                    Status {
+                        view_clarity: f64::NAN,
+                        ..*s
+                    },
+                )
+            })
+            .collect();
+        let v = view_metrics(&none, 0.9);
+        assert!(v.unavailable.unwrap().contains("particle stage"));
     }
 }
