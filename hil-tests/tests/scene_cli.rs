@@ -6,6 +6,24 @@
 
 use hydrometra_hil_tests::{hydrometra, shared_atlas_cache, temp_dir};
 
+/// Runs the Python `script` (meshio, numpy) on the output directory `out`; fails the test with
+/// its output unless it succeeds; returns its standard output.
+fn read_back(script: &str, out: &std::path::Path, what: &str) -> String {
+    let o = std::process::Command::new("python3")
+        .arg("-c")
+        .arg(script)
+        .arg(out)
+        .output()
+        .expect("python3 with meshio and numpy (.ci/requirements.txt)");
+    let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{what} did not read back: {stdout}\n{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    stdout
+}
+
 #[test]
 fn scene_run_writes_a_paraview_series_meshio_reads() {
     let cache = shared_atlas_cache("default");
@@ -73,18 +91,7 @@ for r in late:
 assert {1, 2, 5} <= labels, labels
 print(len(cav), sorted(labels), "%.4f" % (vols[-1] * 1e6))
 "#;
-    let o = std::process::Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .arg(&out)
-        .output()
-        .expect("python3 with meshio and numpy (.ci/requirements.txt)");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "the series did not read back: {stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    read_back(script, &out, "the series");
     let _ = std::fs::remove_dir_all(&out);
 }
 
@@ -189,18 +196,7 @@ clar = [float(r["clarity"]) for r in rows if r["clarity"] != ""]
 assert clar and all(0.0 <= c <= 1.0 for c in clar), clar[:5]
 print(counts[-1], summary)
 "#;
-    let o = std::process::Command::new("python3")
-        .arg("-c")
-        .arg(script)
-        .arg(&out)
-        .output()
-        .expect("python3 with meshio and numpy (.ci/requirements.txt)");
-    let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "the particles did not read back: {stdout}\n{}",
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let stdout = read_back(script, &out, "the particles");
     eprintln!("{stdout}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -209,14 +209,15 @@ pub fn periodic_effective_viscosity(
     Ok((-(e - e0) / (2.0 * z_int), ok))
 }
 
-/// 3D Taylor-Green vortex `(sin x cos y cos z, -cos x sin y cos z, 0)` in a periodic `2 pi` box of
-/// `n^3` cells (`n` cells per period), `u0 = 1`, `nu = 0.01` (Re = 100 on the unit length), CFL 0.5
-/// to t = 5 (the vortex stretches into smaller scales); the error figure is `nu_eff / nu` from
-/// [`periodic_effective_viscosity`] (1 is exact).
-pub fn taylor_green_3d(n: usize, scheme: AdvectionScheme) -> Result<ValidationResult, FluidError> {
-    let t0 = Instant::now();
-    let nu = 0.01;
-    let h = 2.0 * PI / n as f64;
+/// A fully periodic cube of `n^3` cells of edge `h` (density 1, viscosity `nu`), its faces set from
+/// `field(component, position)` and projected once; with whether that projection converged.
+fn periodic_cube(
+    n: usize,
+    h: f64,
+    nu: f64,
+    scheme: AdvectionScheme,
+    field: impl FnMut(usize, [f64; 3]) -> f64,
+) -> Result<(FluidSolver, bool), FluidError> {
     let grid = FluidGrid::new([n; 3], h, [0.0; 3], [true; 3])?;
     let params = FluidParams {
         density_kg_m3: 1.0,
@@ -225,15 +226,24 @@ pub fn taylor_green_3d(n: usize, scheme: AdvectionScheme) -> Result<ValidationRe
         ..Default::default()
     };
     let mut s = FluidSolver::new(grid, params)?;
-    s.set_velocity_field(|c, x| {
-        let [x, y, z] = x;
-        match c {
-            0 => x.sin() * y.cos() * z.cos(),
-            1 => -x.cos() * y.sin() * z.cos(),
-            _ => 0.0,
-        }
-    });
-    let mut ok = s.project_now(1.0).projection_converged;
+    s.set_velocity_field(field);
+    let ok = s.project_now(1.0).projection_converged;
+    Ok((s, ok))
+}
+
+/// 3D Taylor-Green vortex `(sin x cos y cos z, -cos x sin y cos z, 0)` in a periodic `2 pi` box of
+/// `n^3` cells (`n` cells per period), `u0 = 1`, `nu = 0.01` (Re = 100 on the unit length), CFL 0.5
+/// to t = 5 (the vortex stretches into smaller scales); the error figure is `nu_eff / nu` from
+/// [`periodic_effective_viscosity`] (1 is exact).
+pub fn taylor_green_3d(n: usize, scheme: AdvectionScheme) -> Result<ValidationResult, FluidError> {
+    let t0 = Instant::now();
+    let nu = 0.01;
+    let h = 2.0 * PI / n as f64;
+    let (mut s, mut ok) = periodic_cube(n, h, nu, scheme, |c, [x, y, z]| match c {
+        0 => x.sin() * y.cos() * z.cos(),
+        1 => -x.cos() * y.sin() * z.cos(),
+        _ => 0.0,
+    })?;
     let t_end = 5.0;
     let steps = (t_end / (0.5 * h / s.max_speed_m_s())).ceil() as usize;
     let (nu_eff, ok_run) = periodic_effective_viscosity(&mut s, t_end / steps as f64, t_end)?;
@@ -358,24 +368,16 @@ pub fn abc_flow(n: usize, scheme: AdvectionScheme) -> Result<ValidationResult, F
     let (l, nu) = (1.0, 0.01);
     let h = l / n as f64;
     let k = 2.0 * PI / l;
-    let grid = FluidGrid::new([n; 3], h, [0.0; 3], [true; 3])?;
-    let params = FluidParams {
-        density_kg_m3: 1.0,
-        viscosity_m2_s: nu,
-        advection: scheme,
-        ..Default::default()
-    };
-    let mut s = FluidSolver::new(grid, params)?;
-    s.set_velocity_field(|c, x| {
+    // The staggered samples of the Beltrami field are not exactly discretely divergence-free:
+    // `periodic_cube` projects them.
+    let (mut s, mut ok) = periodic_cube(n, h, nu, scheme, |c, x| {
         let [x, y, z] = x.map(|v| k * v);
         match c {
             0 => z.sin() + y.cos(),
             1 => x.sin() + z.cos(),
             _ => y.sin() + x.cos(),
         }
-    });
-    // The staggered samples of the Beltrami field are not exactly discretely divergence-free.
-    let mut ok = s.project_now(1.0).projection_converged;
+    })?;
     let e0 = s.kinetic_energy_j();
     let u_max = s.max_speed_m_s();
     let steps = (0.5 / (0.5 * h / u_max)).ceil() as usize;
