@@ -286,9 +286,7 @@ impl PressureSolver {
     /// to f32; closed regions mean-free), and its largest magnitude.
     fn warm_start_residual(&mut self) -> f32 {
         // Closed regions: pressure is defined up to a constant; keeping it mean-free keeps it small.
-        let pad_of_row = &self.mg.levels[0].pad_of_row;
-        self.regions
-            .remove_closed_means_dense(&mut self.dq, pad_of_row);
+        self.regions.remove_closed_means_dense(&mut self.dq);
         let PressureSolver {
             mg,
             regions,
@@ -325,7 +323,7 @@ impl PressureSolver {
             }) as f32;
             l0.b = r0;
             if regions.any_closed() {
-                regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
+                regions.remove_closed_means_dense(&mut l0.b);
                 l0.pad_of_row
                     .iter()
                     .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
@@ -373,7 +371,7 @@ impl PressureSolver {
             let rz = mg.vcycle(initialised);
             let l0 = &mut mg.levels[0];
             if regions.any_closed() {
-                regions.remove_closed_means_dense(&mut l0.x, &l0.pad_of_row);
+                regions.remove_closed_means_dense(&mut l0.x);
             }
             rz
         };
@@ -419,7 +417,7 @@ impl PressureSolver {
             if regions.any_closed() {
                 // In f32 the rounding of `r -= alpha A p` accumulates a region mean no pressure
                 // can remove, on which CG would stagnate: keep r in the range of A.
-                regions.remove_closed_means_dense(&mut l0.b, &l0.pad_of_row);
+                regions.remove_closed_means_dense(&mut l0.b);
                 rmax = if regions.all_closed() {
                     regions.closed_max_abs as f32
                 } else {

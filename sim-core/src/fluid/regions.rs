@@ -20,6 +20,10 @@ pub(crate) struct Regions {
     /// The rows of the closed regions, in row order (often a few stray cells beside an open
     /// cavity: the mean removal then touches only them).
     closed_rows: Vec<u32>,
+    /// The closed regions' rows as runs of consecutive padded indices (`[region, start, end)`),
+    /// for the dense vectors: a run is an x-run of fluid cells, contiguous in memory and all in
+    /// one region, so its sum and its update are plain slice loops.
+    closed_runs: Vec<[u32; 3]>,
     /// Scratch accumulators, one per region.
     sum: Vec<f64>,
     queue: Vec<u32>,
@@ -72,6 +76,14 @@ impl Regions {
         let rows = self.of_row.iter().enumerate();
         let in_closed = rows.filter(|&(_, &id)| closed[id as usize]);
         self.closed_rows.extend(in_closed.map(|(r, _)| r as u32));
+        self.closed_runs.clear();
+        for &r in &self.closed_rows {
+            let (id, p) = (self.of_row[r as usize], level.pad_of_row[r as usize]);
+            match self.closed_runs.last_mut() {
+                Some(run) if run[0] == id && run[2] == p => run[2] = p + 1,
+                _ => self.closed_runs.push([id, p, p + 1]),
+            }
+        }
     }
 
     /// Number of regions.
@@ -81,7 +93,8 @@ impl Regions {
 
     /// True if any region is closed.
     pub fn any_closed(&self) -> bool {
-        self.closed.iter().any(|&c| c)
+        // A closed region has at least one row.
+        !self.closed_rows.is_empty()
     }
 
     /// True if every row lies in a closed region (a cavity whose ports are all prescribed
@@ -101,36 +114,41 @@ impl Regions {
         for &r in &self.closed_rows {
             self.sum[self.of_row[r as usize] as usize] += v[r as usize];
         }
-        let mut worst = 0.0f64;
-        let mut total = 0.0f64;
-        for (id, s) in self.sum.iter_mut().enumerate() {
-            *s = if self.closed[id] {
-                total += s.abs();
-                *s / self.size[id] as f64
-            } else {
-                0.0
-            };
-            worst = worst.max(s.abs());
-        }
-        self.removed_total = total;
+        let worst = self.sums_to_means();
         for &r in &self.closed_rows {
             v[r as usize] -= self.sum[self.of_row[r as usize] as usize];
         }
         worst
     }
 
-    /// As [`Regions::remove_closed_means`] for a dense (padded) vector whose rows sit at
-    /// `pad_of_row`; the means are accumulated in f64.
-    pub fn remove_closed_means_dense<T: Real>(&mut self, v: &mut [T], pad_of_row: &[u32]) -> f64 {
+    /// As [`Regions::remove_closed_means`] for a dense (padded) vector of the level the regions
+    /// were built on; the means are accumulated in f64.
+    pub fn remove_closed_means_dense<T: Real>(&mut self, v: &mut [T]) -> f64 {
         self.removed_total = 0.0;
         if !self.any_closed() {
             return 0.0;
         }
         self.sum.fill(0.0);
-        for &r in &self.closed_rows {
-            let p = pad_of_row[r as usize];
-            self.sum[self.of_row[r as usize] as usize] += v[p as usize].to_f64();
+        for &[id, s, e] in &self.closed_runs {
+            let run = &v[s as usize..e as usize];
+            self.sum[id as usize] += run.iter().map(|x| x.to_f64()).sum::<f64>();
         }
+        let worst = self.sums_to_means();
+        let mut max_abs = 0.0f64;
+        for &[id, s, e] in &self.closed_runs {
+            let mean = self.sum[id as usize];
+            for x in &mut v[s as usize..e as usize] {
+                *x = T::from_f64(x.to_f64() - mean);
+                max_abs = max_abs.max(x.to_f64().abs());
+            }
+        }
+        self.closed_max_abs = max_abs;
+        worst
+    }
+
+    /// Turns the per-region sums into the means to remove (0 for open regions), sets
+    /// `removed_total` and returns the largest absolute mean.
+    fn sums_to_means(&mut self) -> f64 {
         let mut worst = 0.0f64;
         let mut total = 0.0f64;
         for (id, s) in self.sum.iter_mut().enumerate() {
@@ -143,13 +161,6 @@ impl Regions {
             worst = worst.max(s.abs());
         }
         self.removed_total = total;
-        let mut max_abs = 0.0f64;
-        for &r in &self.closed_rows {
-            let x = &mut v[pad_of_row[r as usize] as usize];
-            *x = T::from_f64(x.to_f64() - self.sum[self.of_row[r as usize] as usize]);
-            max_abs = max_abs.max(x.to_f64().abs());
-        }
-        self.closed_max_abs = max_abs;
         worst
     }
 }

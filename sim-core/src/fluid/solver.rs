@@ -993,8 +993,7 @@ impl FluidSolver {
         } else {
             rows_kernel(rows, &mut ps.bd, 0);
         }
-        ps.regions
-            .remove_closed_means_dense(&mut ps.bd, &l0.pad_of_row)
+        ps.regions.remove_closed_means_dense(&mut ps.bd)
     }
 
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
