@@ -366,6 +366,10 @@ pub struct Scene {
     candidates: Vec<(f64, BoundaryCell, f64)>,
     wall_velocity: Vec<[f32; 3]>,
     labels_dirty: bool,
+    /// Per row `j + ny k`, the x range `[first, end)` of cells that are not solid after the last
+    /// [`Scene::compose_labels`], and the range it visited (that one and the one before).
+    kind_extent: Vec<[u32; 2]>,
+    visit_extent: Vec<[u32; 2]>,
     /// The hydraulic pressure the surface was last replayed for, Pa.
     deformed_at_pa: f64,
     topology_revision: u64,
@@ -482,6 +486,8 @@ impl Scene {
             candidates: Vec::with_capacity(n),
             wall_velocity: vec![[0.0; 3]; n],
             labels_dirty: true,
+            kind_extent: vec![[0, 0]; cells.dims[1] * cells.dims[2]],
+            visit_extent: vec![[0, 0]; cells.dims[1] * cells.dims[2]],
             deformed_at_pa: f64::NAN,
             topology_revision: 1,
             report: StepReport {
@@ -659,7 +665,7 @@ impl Scene {
         let t = Instant::now();
         let relabel = self.labels_dirty;
         if relabel {
-            self.compose_labels()?;
+            self.compose_labels(false)?;
             self.labels_dirty = false;
         }
         // Boundaries move fluid when some flow exceeds one face's worth at the rest speed.
@@ -823,42 +829,55 @@ impl Scene {
     }
 
     /// Kinds and labels of every cell from the voxelizer and the scope; rebuilds the boundary
-    /// cell lists.
-    fn compose_labels(&mut self) -> Result<(), SceneError> {
+    /// cell lists. Visits, row by row, only the x range that is or was off solid (the voxelizer's
+    /// extent, the scope's, and the row's last extent): every cell beyond it is solid before and
+    /// after, so the kinds, lists and labels equal those of a pass over the whole box (`whole`,
+    /// which [`Scene::relabel_whole_box`] checks that against).
+    fn compose_labels(&mut self, whole: bool) -> Result<(), SceneError> {
         let cells = self.cells;
-        let [nx, ny, nz] = cells.dims;
+        let [nx, ny, _] = cells.dims;
         let h = cells.spacing_m;
         let states = self.voxelizer.states();
         let owners = self.voxelizer.owners();
+        let extents = self.voxelizer.row_extents();
         let caps = self.surface.cap_triangles() as u32;
-        // Cavity first.
-        for n in 0..cells.cell_count() {
-            self.kinds[n] = match states[n] {
-                state::INSIDE => VoxelKind::Fluid,
-                state::BAND if owners[n] < caps => VoxelKind::Open,
-                state::BAND => VoxelKind::Wall,
-                _ => VoxelKind::Solid,
-            };
-        }
-        // The scope on top.
+        let hull = |a: [u32; 2], b: [u32; 2]| match (a[0] < a[1], b[0] < b[1]) {
+            (false, _) => b,
+            (_, false) => a,
+            _ => [a[0].min(b[0]), a[1].max(b[1])],
+        };
+        let all = [0, nx as u32];
         self.scope_built = self.scope;
-        if let Some(sc) = self.scope {
-            let x0 = cells.origin_m[0];
-            for k in 0..nz {
-                for j in 0..ny {
-                    let c = cells.centre_m(0, j, k);
-                    let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) else {
-                        continue;
-                    };
+        let x0 = cells.origin_m[0];
+        for (row, &vox) in extents.iter().enumerate() {
+            let (j, k) = (row % ny, row / ny);
+            let base = cells.index(0, j, k);
+            let last = self.kind_extent[row];
+            // Cavity first.
+            let [a, b] = if whole { all } else { hull(last, vox) };
+            for n in base + a as usize..base + b as usize {
+                self.kinds[n] = match states[n] {
+                    state::INSIDE => VoxelKind::Fluid,
+                    state::BAND if owners[n] < caps => VoxelKind::Open,
+                    state::BAND => VoxelKind::Wall,
+                    _ => VoxelKind::Solid,
+                };
+            }
+            // The scope on top.
+            let mut now = vox;
+            if let Some(sc) = self.scope {
+                let c = cells.centre_m(0, j, k);
+                if let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) {
                     for i in a..=b {
-                        let p = cells.centre_m(i, j, k);
-                        let part = sc.part(p, h);
-                        if part != ScopePart::None {
-                            self.kinds[cells.index(i, j, k)] = VoxelKind::Scope;
+                        if sc.part(cells.centre_m(i, j, k), h) != ScopePart::None {
+                            self.kinds[base + i] = VoxelKind::Scope;
+                            now = hull(now, [i as u32, i as u32 + 1]);
                         }
                     }
                 }
             }
+            self.kind_extent[row] = now;
+            self.visit_extent[row] = hull(last, now);
         }
         // Boundary lists: walls beside fluid, port candidates at the tip and in the hole band.
         self.walls.clear();
@@ -867,45 +886,45 @@ impl Scene {
         self.outflow.clear();
         self.candidates.clear();
         let mut fluid_cells = 0usize;
-        for k in 0..nz {
-            for j in 0..ny {
-                for i in 0..nx {
-                    let n = cells.index(i, j, k);
-                    let kind = self.kinds[n];
-                    if kind == VoxelKind::Fluid {
-                        fluid_cells += 1;
-                        continue;
-                    }
-                    if kind == VoxelKind::Solid {
-                        continue;
-                    }
-                    let faces = self.fluid_faces(i, j, k);
-                    if faces == 0 {
-                        continue;
-                    }
-                    let b = BoundaryCell {
-                        cell: n as u32,
-                        faces,
-                    };
-                    match kind {
-                        VoxelKind::Wall => self.walls.push(b),
-                        VoxelKind::Open => self.open.push(b),
-                        VoxelKind::Scope => {
-                            if let Some(sc) = self.scope {
-                                let p = cells.centre_m(i, j, k);
-                                match sc.part(p, h) {
-                                    ScopePart::Tip => {
-                                        let g = face_weight(faces, sc.dir);
-                                        let (_, r) = sc.axial_radial(p);
-                                        self.candidates.push((r, b, g));
-                                    }
-                                    ScopePart::Holes => self.outflow.push(b),
-                                    _ => {}
+        for r in 0..self.kind_extent.len() {
+            let (j, k) = (r % ny, r / ny);
+            let [a, b] = if whole { all } else { self.kind_extent[r] };
+            for i in a as usize..b as usize {
+                let n = cells.index(i, j, k);
+                let kind = self.kinds[n];
+                if kind == VoxelKind::Fluid {
+                    fluid_cells += 1;
+                    continue;
+                }
+                if kind == VoxelKind::Solid {
+                    continue;
+                }
+                let faces = self.fluid_faces(i, j, k);
+                if faces == 0 {
+                    continue;
+                }
+                let b = BoundaryCell {
+                    cell: n as u32,
+                    faces,
+                };
+                match kind {
+                    VoxelKind::Wall => self.walls.push(b),
+                    VoxelKind::Open => self.open.push(b),
+                    VoxelKind::Scope => {
+                        if let Some(sc) = self.scope {
+                            let p = cells.centre_m(i, j, k);
+                            match sc.part(p, h) {
+                                ScopePart::Tip => {
+                                    let g = face_weight(faces, sc.dir);
+                                    let (_, r) = sc.axial_radial(p);
+                                    self.candidates.push((r, b, g));
                                 }
+                                ScopePart::Holes => self.outflow.push(b),
+                                _ => {}
                             }
                         }
-                        _ => {}
                     }
+                    _ => {}
                 }
             }
         }
@@ -934,39 +953,42 @@ impl Scene {
         self.report.fluid_cells = fluid_cells;
         self.report.grid_fluid_volume_m3 = fluid_cells as f64 * h * h * h;
 
-        // Labels into the solver.
+        // Labels into the solver, and cells that stopped being ports or walls move no more.
         let mut changed = 0;
         if let Some(solver) = self.fluid.as_mut() {
             let g = solver.grid_mut();
-            for k in 0..nz {
-                for j in 0..ny {
-                    for i in 0..nx {
-                        let n = cells.index(i, j, k);
-                        let label = match self.kinds[n] {
-                            VoxelKind::Fluid => CellLabel::Fluid,
-                            VoxelKind::Open => CellLabel::Outflow,
-                            VoxelKind::Solid => CellLabel::Solid,
-                            _ => CellLabel::Velocity,
-                        };
-                        if self.labels[n] != label {
-                            self.labels[n] = label;
-                            g.set_label([i, j, k], label)?;
-                            changed += 1;
-                        }
+            for (r, &visit) in self.visit_extent.iter().enumerate() {
+                let (j, k) = (r % ny, r / ny);
+                let [a, b] = if whole { all } else { visit };
+                for i in a as usize..b as usize {
+                    let n = cells.index(i, j, k);
+                    let label = match self.kinds[n] {
+                        VoxelKind::Fluid => CellLabel::Fluid,
+                        VoxelKind::Open => CellLabel::Outflow,
+                        VoxelKind::Solid => CellLabel::Solid,
+                        _ => CellLabel::Velocity,
+                    };
+                    if self.labels[n] != label {
+                        self.labels[n] = label;
+                        g.set_label([i, j, k], label)?;
+                        changed += 1;
                     }
-                }
-            }
-            // Cells that stopped being ports or walls move no more.
-            for n in 0..cells.cell_count() {
-                if self.labels[n] != CellLabel::Velocity && self.wall_velocity[n] != [0.0; 3] {
-                    self.wall_velocity[n] = [0.0; 3];
-                    let c = [n % nx, (n / nx) % ny, n / (nx * ny)];
-                    g.set_velocity(c, [0.0; 3])?;
+                    if label != CellLabel::Velocity && self.wall_velocity[n] != [0.0; 3] {
+                        self.wall_velocity[n] = [0.0; 3];
+                        g.set_velocity([i, j, k], [0.0; 3])?;
+                    }
                 }
             }
         }
         self.report.relabelled_cells = changed;
         Ok(())
+    }
+
+    /// Recomposes the kind and label of every cell of the box, visiting every cell, and returns how many solver labels that changed: 0 when the row-limited composition of
+    /// the last step was complete. For verification; the kinds and lists end as a step leaves them.
+    pub fn relabel_whole_box(&mut self) -> Result<usize, SceneError> {
+        self.compose_labels(true)?;
+        Ok(self.report.relabelled_cells)
     }
 
     /// Bits of the faces of cell `(i, j, k)` that border fluid.

@@ -117,6 +117,9 @@ pub struct Voxelizer {
     bins: Vec<Vec<u32>>,
     state: Vec<u8>,
     owner: Vec<u32>,
+    /// Per row `j + ny k`, the x range `[first, end)` of its cells off [`state::OUTSIDE`]
+    /// (`[0, 0]`: none).
+    extent: Vec<[u32; 2]>,
     // Scratch, reused.
     moved: Vec<bool>,
     tri_moved: Vec<bool>,
@@ -143,6 +146,7 @@ impl Voxelizer {
             bins: vec![Vec::new(); bins_dims[0] * bins_dims[1]],
             state: vec![state::OUTSIDE; n],
             owner: vec![NO_TRIANGLE; n],
+            extent: vec![[0, 0]; cells.dims[1] * cells.dims[2]],
             moved: vec![false; vertex_count],
             tri_moved: vec![false; t],
             row_dirty: vec![false; cells.dims[1] * cells.dims[2]],
@@ -169,6 +173,11 @@ impl Voxelizer {
     /// Per-cell lowest index of a triangle touching it ([`NO_TRIANGLE`] off the band).
     pub fn owners(&self) -> &[u32] {
         &self.owner
+    }
+    /// Per row `j + ny k` of the box, the x range `[first, end)` of its cells that are not
+    /// [`state::OUTSIDE`] (`[0, 0]` when there is none): every cell beyond it is outside.
+    pub fn row_extents(&self) -> &[[u32; 2]] {
+        &self.extent
     }
     /// The positions (m) the current labels were computed from.
     pub fn voxel_positions_m(&self) -> &[[f32; 3]] {
@@ -407,6 +416,14 @@ impl Voxelizer {
             }
         }
         let base = self.cells.index(0, j, k);
+        let first = self.row_state.iter().position(|&s| s != state::OUTSIDE);
+        self.extent[j + self.cells.dims[1] * k] = match first {
+            Some(a) => {
+                let b = self.row_state.iter().rposition(|&s| s != state::OUTSIDE);
+                [a as u32, b.unwrap_or(a) as u32 + 1]
+            }
+            None => [0, 0],
+        };
         let mut changed = 0;
         for i in 0..nx {
             let (s, o) = (self.row_state[i], self.row_owner[i]);
