@@ -87,6 +87,8 @@ pub(crate) struct FaceSet {
     previous: Vec<u32>,
     layer_scratch: Vec<u32>,
     fixed_scratch: Vec<[u32; 3]>,
+    /// Coordinates of each active face (scratch of the rebuild: no index division per face).
+    active_coords: Vec<[u32; 3]>,
 }
 
 /// The x range `[first, end)` of the open (fluid or outflow) cells of every cell row `(j, k)`
@@ -169,6 +171,32 @@ pub(crate) fn neighbour_index(
     }
 }
 
+/// Coordinates of the neighbour face [`neighbour_index`] finds (which must exist): one step along
+/// axis `d`, wrapped on a periodic axis.
+#[inline]
+pub(crate) fn neighbour_coords(
+    layout: &Layout,
+    c: usize,
+    f: [usize; 3],
+    d: usize,
+    dir: i32,
+) -> [usize; 3] {
+    let n = layout.fdims[c][d];
+    let mut g = f;
+    g[d] = if dir < 0 {
+        if f[d] == 0 {
+            n - 1
+        } else {
+            f[d] - 1
+        }
+    } else if f[d] + 1 >= n {
+        0
+    } else {
+        f[d] + 1
+    };
+    g
+}
+
 /// Wall velocity component `c` of a pair of non-fluid cells (mean over `Velocity` cells).
 pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
     let mut sum = 0.0;
@@ -211,6 +239,7 @@ impl FaceSet {
             }
         }
         self.active.clear();
+        self.active_coords.clear();
         self.fixed.clear();
         self.stencil.clear();
         self.diag.clear();
@@ -288,6 +317,7 @@ impl FaceSet {
                         ACTIVE => {
                             self.compact[idx] = self.active.len() as u32;
                             self.active.push(idx as u32);
+                            self.active_coords.push([i as u32, fj as u32, fk as u32]);
                         }
                         _ => {}
                     }
@@ -298,7 +328,7 @@ impl FaceSet {
         // Viscous stencils.
         for n in 0..self.active.len() {
             let idx = self.active[n] as usize;
-            let f = layout.face_coords(c, idx);
+            let f = self.active_coords[n].map(|x| x as usize);
             let mut st = [NONE; 6];
             let mut diag = 6.0f32;
             for d in 0..3 {
@@ -323,7 +353,7 @@ impl FaceSet {
                         }
                         continue;
                     }
-                    let (lo, up) = face_cells(grid, c, layout.face_coords(c, gi));
+                    let (lo, up) = face_cells(grid, c, neighbour_coords(layout, c, f, d, dir));
                     let (ll, li) = label_of(grid, lo);
                     let (ul, ui) = label_of(grid, up);
                     if ll.is_wall() && ul.is_wall() {
@@ -597,7 +627,7 @@ mod tests {
     }
 
     #[test]
-    fn neighbour_index_steps_one_face_and_wraps_on_periodic_axes() {
+    fn neighbour_index_and_coords_step_one_face_and_wrap_on_periodic_axes() {
         for periodic in [[false; 3], [true, true, true], [true, false, true]] {
             let layout = Layout::new([4, 3, 5], periodic);
             for c in 0..3 {
@@ -615,6 +645,10 @@ mod tests {
                                 None
                             };
                             assert_eq!(neighbour_index(&layout, c, f, idx, d, dir), want);
+                            if let Some(w) = want {
+                                let g = neighbour_coords(&layout, c, f, d, dir);
+                                assert_eq!(layout.face_index(c, g), w);
+                            }
                         }
                     }
                 }
