@@ -130,17 +130,8 @@ impl Regions {
         }
         self.sum.fill(0.0);
         for &[id, s, e] in &self.closed_runs {
-            // Four partial sums: independent additions (the run's order fixed, so deterministic).
             let run = &v[s as usize..e as usize];
-            let mut acc = [0.0f64; 4];
-            let quads = run.chunks_exact(4);
-            let mut sum = quads.remainder().iter().map(|x| x.to_f64()).sum::<f64>();
-            for q in quads {
-                for (a, x) in acc.iter_mut().zip(q) {
-                    *a += x.to_f64();
-                }
-            }
-            sum += (acc[0] + acc[1]) + (acc[2] + acc[3]);
+            let sum = run.iter().map(|x| x.to_f64()).sum::<f64>();
             self.sum[id as usize] += sum;
         }
         let worst = self.sums_to_means();

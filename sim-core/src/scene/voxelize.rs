@@ -446,13 +446,13 @@ fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Optio
         let hi = v[0][0].max(v[1][0]).max(v[2][0]);
         return Some((lo, hi));
     }
-    let mut a = [[0.0f64; 3]; 9];
-    let mut b = [[0.0f64; 3]; 9];
-    a[..3].copy_from_slice(v);
+    // Two polygon buffers used in turn (no copy between the passes).
+    let mut bufs = [[[0.0f64; 3]; 9]; 2];
+    bufs[0][..3].copy_from_slice(v);
+    let mut cur = 0;
     let mut n = 3;
     // Planes as (axis, bound, keep >= bound?).
     for (axis, bound, ge) in [(1, y0, true), (1, y1, false), (2, z0, true), (2, z1, false)] {
-        let mut m = 0;
         let keep = |p: &[f64; 3]| {
             if ge {
                 p[axis] >= bound
@@ -460,6 +460,13 @@ fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Optio
                 p[axis] <= bound
             }
         };
+        // Every vertex kept: the pass would return the polygon as it is.
+        if bufs[cur][..n].iter().all(keep) {
+            continue;
+        }
+        let [b0, b1] = &mut bufs;
+        let (a, b) = if cur == 0 { (&*b0, b1) } else { (&*b1, b0) };
+        let mut m = 0;
         for s in 0..n {
             let p = a[s];
             let q = a[(s + 1) % n];
@@ -485,11 +492,11 @@ fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Optio
         if n == 0 {
             return None;
         }
-        std::mem::swap(&mut a, &mut b);
+        cur ^= 1;
     }
     let mut lo = f64::INFINITY;
     let mut hi = f64::NEG_INFINITY;
-    for p in &a[..n] {
+    for p in &bufs[cur][..n] {
         lo = lo.min(p[0]);
         hi = hi.max(p[0]);
     }
