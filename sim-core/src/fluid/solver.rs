@@ -759,9 +759,9 @@ impl FluidSolver {
                 }
                 advection::scatter(&self.plan, &self.adv, &mut self.tmp);
                 let [t0, t1, t2] = &self.tmp;
+                // The forward trace is done: this pass only samples `tmp` at its feet.
                 let forward = advection::Pass {
                     src: [t0, t1, t2],
-                    dt_cells: -dt_cells,
                     ..pass
                 };
                 let [f0, f1, f2] = &self.adv_foot;
