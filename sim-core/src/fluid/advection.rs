@@ -548,9 +548,17 @@ impl Pass<'_> {
 
     /// [`Pass::block`] one face at a time (the fallback, and the reference of the AVX2 kernel).
     #[inline(always)]
-    fn block_scalar<const BOUNDS: bool>(&self, b: usize, each: impl FnMut(usize, (f32, f32, f32))) {
+    fn block_scalar<const BOUNDS: bool>(
+        &self,
+        b: usize,
+        mut each: impl FnMut(usize, (f32, f32, f32)),
+    ) {
         let geo = self.geo;
-        self.block_scalar_with(b, |c, src, p| geo.sample::<BOUNDS>(c, src, p), each)
+        self.trace_scalar::<false>(
+            b,
+            |c, src, p| geo.sample::<BOUNDS>(c, src, p),
+            |n, r, _| each(n, r),
+        )
     }
 
     /// [`Pass::block_scalar`] with the foot-point sampler `sample(component, field, point)`.
@@ -561,49 +569,69 @@ impl Pass<'_> {
         sample: impl Fn(usize, &[f32], V4) -> (f32, f32, f32),
         mut each: impl FnMut(usize, (f32, f32, f32)),
     ) {
+        self.trace_scalar::<false>(b, sample, |n, r, _| each(n, r))
+    }
+
+    /// [`Pass::block_scalar_with`], and with `FORWARD` also the foot point of the forward trace
+    /// (the trace of this pass with `-dt_cells`, to the bit; zero without `FORWARD`):
+    /// `each(position within the block, sample, forward foot)`.
+    #[inline(always)]
+    fn trace_scalar<const FORWARD: bool>(
+        &self,
+        b: usize,
+        sample: impl Fn(usize, &[f32], V4) -> (f32, f32, f32),
+        mut each: impl FnMut(usize, (f32, f32, f32), V4),
+    ) {
         let plan = self.plan;
         let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
         let base = b * BLOCK;
         let (geo, v, dt) = (self.geo, self.vc, self.dt_cells);
-        {
-            for run in runs {
-                let c = run.c as usize;
-                let f0 = run.f.map(|v| v as usize);
-                let src = self.src[c];
-                let o = run.compact as usize - base;
-                let sh: [f32; 3] = std::array::from_fn(|a| if a == c { 0.0 } else { 0.5 });
-                let mut x0 = v4::new(
-                    f0[0] as f32 + sh[0],
-                    f0[1] as f32 + sh[1],
-                    f0[2] as f32 + sh[2],
-                );
-                let step = v4::new(1.0, 0.0, 0.0);
-                // Three short loops over a chunk instead of one long one: each face's work is a
-                // chain of dependent loads (velocity -> midpoint -> velocity -> foot -> samples),
-                // and independent iterations let the CPU overlap many chains.
-                let len = run.len as usize;
-                let mut start = 0;
-                while start < len {
-                    let n = (len - start).min(CHAIN);
-                    let mut pts = [v4::zero(); CHAIN];
-                    let mut x = x0;
-                    for (i, p) in pts[..n].iter_mut().enumerate() {
-                        // At the face the centred field is the mean of the two cells beside it.
-                        let (lo, hi) = geo.face_cells(c, [f0[0] + start + i, f0[1], f0[2]]);
-                        *p = v4::sub_scaled(x, 0.5 * dt, lerp4(v[lo], v[hi], 0.5));
-                        x = v4::add(x, step);
+        let dt_f = -dt;
+        for run in runs {
+            let c = run.c as usize;
+            let f0 = run.f.map(|v| v as usize);
+            let src = self.src[c];
+            let o = run.compact as usize - base;
+            let sh: [f32; 3] = std::array::from_fn(|a| if a == c { 0.0 } else { 0.5 });
+            let mut x0 = v4::new(
+                f0[0] as f32 + sh[0],
+                f0[1] as f32 + sh[1],
+                f0[2] as f32 + sh[2],
+            );
+            let step = v4::new(1.0, 0.0, 0.0);
+            // Three short loops over a chunk instead of one long one: each face's work is a
+            // chain of dependent loads (velocity -> midpoint -> velocity -> foot -> samples),
+            // and independent iterations let the CPU overlap many chains.
+            let len = run.len as usize;
+            let mut start = 0;
+            while start < len {
+                let n = (len - start).min(CHAIN);
+                let mut pts = [v4::zero(); CHAIN];
+                let mut pts_f = [v4::zero(); CHAIN];
+                let mut x = x0;
+                for i in 0..n {
+                    // At the face the centred field is the mean of the two cells beside it.
+                    let (lo, hi) = geo.face_cells(c, [f0[0] + start + i, f0[1], f0[2]]);
+                    let vf = lerp4(v[lo], v[hi], 0.5);
+                    pts[i] = v4::sub_scaled(x, 0.5 * dt, vf);
+                    if FORWARD {
+                        pts_f[i] = v4::sub_scaled(x, 0.5 * dt_f, vf);
                     }
-                    let mut x = x0;
-                    for p in &mut pts[..n] {
-                        *p = v4::sub_scaled(x, dt, geo.centred(v, *p));
-                        x = v4::add(x, step);
-                    }
-                    for (i, p) in pts[..n].iter().enumerate() {
-                        each(o + start + i, sample(c, src, *p));
-                    }
-                    x0 = x;
-                    start += n;
+                    x = v4::add(x, step);
                 }
+                let mut x = x0;
+                for i in 0..n {
+                    pts[i] = v4::sub_scaled(x, dt, geo.centred(v, pts[i]));
+                    if FORWARD {
+                        pts_f[i] = v4::sub_scaled(x, dt_f, geo.centred(v, pts_f[i]));
+                    }
+                    x = v4::add(x, step);
+                }
+                for i in 0..n {
+                    each(o + start + i, sample(c, src, pts[i]), pts_f[i]);
+                }
+                x0 = x;
+                start += n;
             }
         }
     }
@@ -614,16 +642,7 @@ impl Pass<'_> {
             #[cfg(target_arch = "x86_64")]
             if avx2::available() {
                 // SAFETY: the CPU has AVX2 and FMA (checked by `available`).
-                unsafe {
-                    avx2::block::<false>(self, b, |o, m, v, _, _| {
-                        // A fixed-size copy for whole vectors (one store, no memcpy call).
-                        if m == 8 {
-                            os[o..o + 8].copy_from_slice(v);
-                        } else {
-                            os[o..o + m].copy_from_slice(&v[..m]);
-                        }
-                    })
-                };
+                unsafe { avx2::block::<false>(self, b, |o, m, v, _, _| put(os, o, v, m)) };
                 return;
             }
             self.block_scalar::<false>(b, |n, r| os[n] = r.0)
@@ -674,74 +693,166 @@ impl Pass<'_> {
         }
     }
 
-    /// MacCormack correction (this pass traces forward and samples the backward-step field `hat`
-    /// in `src`): `out` holds the backward-step values on entry and the corrected values clamped to
-    /// `[lo, hi]` on return. `orig` is the compact field before the step.
-    pub fn maccormack(
+    /// MacCormack's backward step and forward trace, in one pass: `hat` gets the semi-Lagrangian
+    /// values at every active face, `lo` and `hi` the min and max of the samples they used, and
+    /// `foot` (x, y, z) the foot points of the forward trace (this pass with `-dt_cells`), all in
+    /// concatenated compact order. [`Pass::maccormack_correct`] finishes the step.
+    pub fn maccormack_trace(
         &self,
-        orig: &[f32],
-        out: &mut [f32],
-        lo: &[f32],
-        hi: &[f32],
+        hat: &mut [f32],
+        [lo, hi]: [&mut [f32]; 2],
+        foot: [&mut [f32]; 3],
         parallel: bool,
     ) {
-        type Slices<'s> = (((&'s mut [f32], &'s [f32]), &'s [f32]), &'s [f32]);
-        let task = |(b, (((os, ls), hs), us)): (usize, Slices)| {
-            self.block::<false>(b, |n, (back, _, _)| {
-                let fwd = os[n];
-                let v = fwd + 0.5 * (us[n] - back);
-                os[n] = if v.is_finite() {
-                    v.clamp(ls[n], hs[n])
-                } else {
-                    fwd
-                };
-            })
-        };
-        let blocks = |first: usize, out: &mut [f32], lo: &[f32], hi: &[f32], orig: &[f32]| {
-            let chunks = out.chunks_mut(BLOCK).zip(lo.chunks(BLOCK));
-            let chunks = chunks.zip(hi.chunks(BLOCK)).zip(orig.chunks(BLOCK));
-            for (b, s) in chunks.enumerate() {
-                task((first + b, s));
+        let [fx, fy, fz] = foot;
+        for_blocks(
+            [hat, lo, hi, fx, fy, fz],
+            [],
+            parallel,
+            |b, [os, ls, hs, xs, ys, zs], []| {
+                #[cfg(target_arch = "x86_64")]
+                if avx2::available() {
+                    // SAFETY: the CPU has AVX2 and FMA (checked by `available`).
+                    unsafe {
+                        avx2::trace::<true, true>(self, b, |o, m, v, lo, hi, f| {
+                            put(os, o, v, m);
+                            put(ls, o, lo, m);
+                            put(hs, o, hi, m);
+                            put(xs, o, &f[0], m);
+                            put(ys, o, &f[1], m);
+                            put(zs, o, &f[2], m);
+                        })
+                    };
+                    return;
+                }
+                let geo = self.geo;
+                self.trace_scalar::<true>(
+                    b,
+                    |c, src, p| geo.sample::<true>(c, src, p),
+                    |n, r, f| {
+                        (os[n], ls[n], hs[n]) = r;
+                        [xs[n], ys[n], zs[n], _] = v4::lanes(f);
+                    },
+                )
+            },
+        );
+    }
+
+    /// MacCormack's correction, this pass sampling the backward step's field in `src` (`u` off
+    /// the active faces) at the forward feet `foot` of [`Pass::maccormack_trace`]: `out` holds the
+    /// backward step's values on entry and the corrected values clamped to `[lo, hi]` on return
+    /// ([`maccormack_value`]). `orig` is the full face arrays before the step.
+    pub fn maccormack_correct(
+        &self,
+        orig: [&[f32]; 3],
+        foot: [&[f32]; 3],
+        [lo, hi]: [&[f32]; 2],
+        out: &mut [f32],
+        parallel: bool,
+    ) {
+        let [fx, fy, fz] = foot;
+        for_blocks(
+            [out],
+            [fx, fy, fz, lo, hi],
+            parallel,
+            |b, [os], [xs, ys, zs, ls, hs]| {
+                #[cfg(target_arch = "x86_64")]
+                if avx2::available() {
+                    // SAFETY: the CPU has AVX2 and FMA (checked by `available`).
+                    unsafe { avx2::correct(self, b, orig, [xs, ys, zs], [ls, hs], os) };
+                    return;
+                }
+                self.correct_scalar(b, orig, [xs, ys, zs], [ls, hs], os)
+            },
+        );
+    }
+
+    /// [`Pass::maccormack_correct`] on block `b` one face at a time (the fallback, and the
+    /// reference of the AVX2 kernel): `foot`, `lo`, `hi` and `out` are the block's slices.
+    fn correct_scalar(
+        &self,
+        b: usize,
+        orig: [&[f32]; 3],
+        [xs, ys, zs]: [&[f32]; 3],
+        [ls, hs]: [&[f32]; 2],
+        os: &mut [f32],
+    ) {
+        let (plan, base) = (self.plan, b * BLOCK);
+        let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
+        for run in runs {
+            let c = run.c as usize;
+            let (o, full) = (run.compact as usize - base, run.full as usize);
+            for i in 0..run.len as usize {
+                let n = o + i;
+                let p = v4::new(xs[n], ys[n], zs[n]);
+                let (back, _, _) = self.geo.sample::<false>(c, self.src[c], p);
+                os[n] = maccormack_value(os[n], orig[c][full + i], back, ls[n], hs[n]);
             }
-        };
-        match split_block(out.len(), parallel) {
-            Some(mid) => {
-                let at = mid * BLOCK;
-                let (o0, o1) = out.split_at_mut(at);
-                let ((l0, l1), (h0, h1), (u0, u1)) =
-                    (lo.split_at(at), hi.split_at(at), orig.split_at(at));
-                crate::fork_join::join(
-                    || blocks(0, o0, l0, h0, u0),
-                    || blocks(mid, o1, l1, h1, u1),
-                );
-            }
-            None => blocks(0, out, lo, hi, orig),
         }
     }
 }
 
-/// Runs `task(block, out block, input blocks)` over the blocks of the concatenated compact array
-/// `out` (with the matching blocks of `ins`), in two halves on two threads if `parallel`.
-fn for_blocks<const N: usize>(
-    out: &mut [f32],
+/// The first `m` of `v` to `out` from `o`: a fixed-size copy for whole vectors (one store, no
+/// memcpy call).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn put(out: &mut [f32], o: usize, v: &[f32; 8], m: usize) {
+    if m == 8 {
+        out[o..o + 8].copy_from_slice(v);
+    } else {
+        out[o..o + m].copy_from_slice(&v[..m]);
+    }
+}
+
+/// MacCormack's corrected value of a face: `hat + (u - back) / 2` (`hat` the backward step's
+/// value, `u` the value before the step, `back` the forward step of `hat`), clamped to the
+/// backward step's samples `[lo, hi]`; `hat` where that is not finite.
+#[inline(always)]
+fn maccormack_value(hat: f32, u: f32, back: f32, lo: f32, hi: f32) -> f32 {
+    let v = hat + 0.5 * (u - back);
+    if !v.is_finite() {
+        return hat;
+    }
+    // `f32::clamp`'s order without its panic on NaN bounds.
+    let v = if v < lo { lo } else { v };
+    if v > hi {
+        hi
+    } else {
+        v
+    }
+}
+
+/// Runs `task(block, output blocks, input blocks)` over the blocks of the concatenated compact
+/// arrays `outs` and `ins` (all of one length), in two halves on two threads if `parallel`.
+fn for_blocks<const M: usize, const N: usize>(
+    outs: [&mut [f32]; M],
     ins: [&[f32]; N],
     parallel: bool,
-    task: impl Fn(usize, &mut [f32], [&[f32]; N]) + Sync,
+    task: impl Fn(usize, [&mut [f32]; M], [&[f32]; N]) + Sync,
 ) {
-    let run = |first: usize, out: &mut [f32], ins: [&[f32]; N]| {
-        for (b, os) in out.chunks_mut(BLOCK).enumerate() {
-            let s = b * BLOCK;
-            task(first + b, os, ins.map(|i| &i[s..s + os.len()]));
+    let len = outs.first().map_or(0, |o| o.len());
+    debug_assert!(outs.iter().all(|o| o.len() == len) && ins.iter().all(|i| i.len() == len));
+    let run = |first: usize, mut outs: [&mut [f32]; M], ins: [&[f32]; N]| {
+        let len = outs.first().map_or(0, |o| o.len());
+        for (b, s) in (0..len).step_by(BLOCK).enumerate() {
+            let e = (s + BLOCK).min(len);
+            task(
+                first + b,
+                outs.each_mut().map(|o| &mut o[s..e]),
+                ins.map(|i| &i[s..e]),
+            );
         }
     };
-    match split_block(out.len(), parallel) {
+    match split_block(len, parallel) {
         Some(mid) => {
             let at = mid * BLOCK;
-            let (a, b) = out.split_at_mut(at);
+            let mut halves = outs.map(|o| o.split_at_mut(at));
+            let a = std::array::from_fn(|i| std::mem::take(&mut halves[i].0));
+            let b = std::array::from_fn(|i| std::mem::take(&mut halves[i].1));
             let (ia, ib) = (ins.map(|i| &i[..at]), ins.map(|i| &i[at..]));
             crate::fork_join::join(|| run(0, a, ia), || run(mid, b, ib));
         }
-        None => run(0, out, ins),
+        None => run(0, outs, ins),
     }
 }
 
@@ -750,7 +861,7 @@ impl Pass<'_> {
     /// `src`): `w` holds the field before the step on entry and `w + (w - forward) / 2` on return
     /// (unchanged where that is not finite).
     pub fn bfecc_source(&self, w: &mut [f32], parallel: bool) {
-        for_blocks(w, [], parallel, |b, ws, []| {
+        for_blocks([w], [], parallel, |b, [ws], []| {
             self.block::<false>(b, |n, (fwd, _, _)| {
                 let v = ws[n] + 0.5 * (ws[n] - fwd);
                 if v.is_finite() {
@@ -762,7 +873,7 @@ impl Pass<'_> {
 
     /// Semi-Lagrangian values clamped to `[lo, hi]` into `out` (unchanged where not finite).
     pub fn clamped(&self, out: &mut [f32], lo: &[f32], hi: &[f32], parallel: bool) {
-        for_blocks(out, [lo, hi], parallel, |b, os, [ls, hs]| {
+        for_blocks([out], [lo, hi], parallel, |b, [os], [ls, hs]| {
             self.block::<false>(b, |n, (v, _, _)| {
                 if v.is_finite() {
                     // max/min (not clamp): no panic on inverted or NaN bounds.
@@ -775,7 +886,7 @@ impl Pass<'_> {
     /// Monotone tricubic semi-Lagrangian values ([`Geometry::sample_cubic`]) into `out`.
     pub fn cubic(&self, out: &mut [f32], parallel: bool) {
         let geo = self.geo;
-        for_blocks(out, [], parallel, |b, os, []| {
+        for_blocks([out], [], parallel, |b, [os], []| {
             self.block_scalar_with(
                 b,
                 |c, src, p| geo.sample_cubic(c, src, p),
@@ -886,6 +997,9 @@ pub(crate) mod avx2 {
         periodic: bool,
         /// The upper sample is always the next one in memory (clamped axis, n > 1, stride 1).
         pairs: bool,
+        /// Offset from the lower to the upper sample, the same in every lane (`step` on a clamped
+        /// axis, where `locate` keeps the lower index at most n - 2), or `None` (periodic).
+        fixed_step: Option<i32>,
         shift: __m256,
         last: __m256,
         top: __m256i,
@@ -902,6 +1016,7 @@ pub(crate) mod avx2 {
             Self {
                 periodic: a.periodic,
                 pairs: !a.periodic && a.n > 1 && a.stride * scale == 1,
+                fixed_step: (!a.periodic).then_some((a.step * scale) as i32),
                 shift: _mm256_set1_ps(a.shift),
                 last: _mm256_set1_ps(a.last),
                 top: _mm256_set1_epi32(a.top as i32),
@@ -1087,6 +1202,9 @@ pub(crate) mod avx2 {
         len: usize,
         /// Per pair p, the lane indices `[p; 4] ++ [p + 4; 4]` (weights to the pair layout).
         pair: [__m256i; 4],
+        /// Without a periodic axis, the offsets in bytes of the eight corners from the first (x
+        /// fastest, then y, then z).
+        corner_bytes: Option<[usize; 8]>,
     }
 
     impl Centred {
@@ -1103,6 +1221,8 @@ pub(crate) mod avx2 {
                     let (a, b) = (p as i32, p as i32 + 4);
                     _mm256_setr_epi32(a, a, a, a, b, b, b, b)
                 }),
+                corner_bytes: corner_offsets(geo.centred.ax.map(|a| AxisV::new(&a, 1).fixed_step))
+                    .map(|o| o.map(|o| o as usize * std::mem::size_of::<V4>())),
             }
         }
 
@@ -1141,102 +1261,171 @@ pub(crate) mod avx2 {
         }
 
         /// [`super::Geometry::centred`] at eight points.
-        #[target_feature(enable = "avx2,fma")]
-        pub(super) fn sample(&self, p: [__m256; 3]) -> [__m256; 3] {
-            let (x0, x1, tx) = self.ax[0].locate(p[0]);
-            let (y0, y1, ty) = self.ax[1].locate(p[1]);
-            let (z0, z1, tz) = self.ax[2].locate(p[2]);
-            // Corner cells: rows (y, z) 00, 10, 01, 11, each at x0 and x1.
-            let rows = [
-                _mm256_add_epi32(y0, z0),
-                _mm256_add_epi32(y1, z0),
-                _mm256_add_epi32(y0, z1),
-                _mm256_add_epi32(y1, z1),
-            ];
-            let mut corner = [[0i32; 8]; 8];
-            for (q, r) in rows.iter().enumerate() {
-                corner[2 * q] = lanes_i32(_mm256_add_epi32(*r, x0));
-                corner[2 * q + 1] = lanes_i32(_mm256_add_epi32(*r, x1));
+        ///
+        /// # Safety
+        /// The CPU must have AVX2 and FMA. Not a `target_feature` function, so that it can be
+        /// `inline(always)` (the callers are, and the intrinsics inline there): called twice per
+        /// face, it must not be a call with its vectors passed through memory.
+        #[inline(always)]
+        pub(super) unsafe fn sample(&self, p: [__m256; 3]) -> [__m256; 3] {
+            // SAFETY: the CPU has AVX2 and FMA (the caller's contract); the loads are in bounds
+            // as said at each.
+            unsafe {
+                let (x0, x1, tx) = self.ax[0].locate(p[0]);
+                let (y0, y1, ty) = self.ax[1].locate(p[1]);
+                let (z0, z1, tz) = self.ax[2].locate(p[2]);
+                let mut out = [_mm256_setzero_ps(); 4];
+                // Pair p (lanes p and p + 4) lerped from its eight corners `$v(p, k)` (rows (y, z)
+                // 00, 10, 01, 11, each at x0 and x1).
+                macro_rules! pairs {
+                    ($v:expr) => {
+                        for (p, o) in out.iter_mut().enumerate() {
+                            let g = |k: usize| ($v)(p, k);
+                            let wx = _mm256_permutevar8x32_ps(tx, self.pair[p]);
+                            let wy = _mm256_permutevar8x32_ps(ty, self.pair[p]);
+                            let wz = _mm256_permutevar8x32_ps(tz, self.pair[p]);
+                            let c0 = lerp(lerp(g(0), g(1), wx), lerp(g(2), g(3), wx), wy);
+                            let c1 = lerp(lerp(g(4), g(5), wx), lerp(g(6), g(7), wx), wy);
+                            *o = lerp(c0, c1, wz);
+                        }
+                    };
+                }
+                if let Some(off) = self.corner_bytes {
+                    // No periodic axis: the corners are fixed offsets from the first, one index per
+                    // lane instead of eight (and the loads address `first + offset` directly).
+                    let first = lanes_i32(_mm256_add_epi32(_mm256_add_epi32(y0, z0), x0));
+                    pairs!(|p: usize, k: usize| {
+                        debug_assert!((first[p].max(first[p + 4]) as usize) < self.len);
+                        // In bounds: `locate` keeps each lower index at most n - 2 on a clamped
+                        // axis (0 for a single cell, whose step is 0), so every corner is a cell.
+                        let lo = self.ptr.add(first[p] as usize).byte_add(off[k]);
+                        let hi = self.ptr.add(first[p + 4] as usize).byte_add(off[k]);
+                        _mm256_loadu2_m128(hi.cast(), lo.cast())
+                    });
+                } else {
+                    let rows = [
+                        _mm256_add_epi32(y0, z0),
+                        _mm256_add_epi32(y1, z0),
+                        _mm256_add_epi32(y0, z1),
+                        _mm256_add_epi32(y1, z1),
+                    ];
+                    let corner: [[i32; 8]; 8] = std::array::from_fn(|k| {
+                        lanes_i32(_mm256_add_epi32(
+                            rows[k / 2],
+                            if k % 2 == 0 { x0 } else { x1 },
+                        ))
+                    });
+                    // In bounds: `locate` keeps every axis index in range, so the corners are cells.
+                    pairs!(|p: usize, k: usize| self.pair_at(corner[k][p], corner[k][p + 4]));
+                }
+                transpose(out)
             }
-            let mut out = [_mm256_setzero_ps(); 4];
-            for (p, o) in out.iter_mut().enumerate() {
-                // SAFETY: `locate` keeps every axis index in range, so the corners are cells.
-                let g = |k: usize| unsafe { self.pair_at(corner[k][p], corner[k][p + 4]) };
-                let wx = _mm256_permutevar8x32_ps(tx, self.pair[p]);
-                let wy = _mm256_permutevar8x32_ps(ty, self.pair[p]);
-                let wz = _mm256_permutevar8x32_ps(tz, self.pair[p]);
-                let c0 = lerp(lerp(g(0), g(1), wx), lerp(g(2), g(3), wx), wy);
-                let c1 = lerp(lerp(g(4), g(5), wx), lerp(g(6), g(7), wx), wy);
-                *o = lerp(c0, c1, wz);
-            }
-            transpose(out)
         }
+    }
+
+    /// The offsets of the eight corners of a trilinear stencil from the first (x fastest, then y,
+    /// then z), if every axis has a fixed step ([`AxisV::fixed_step`]).
+    fn corner_offsets(steps: [Option<i32>; 3]) -> Option<[i32; 8]> {
+        let [sx, sy, sz] = [steps[0]?, steps[1]?, steps[2]?];
+        Some(std::array::from_fn(|k| {
+            let bit = |b: usize, s: i32| if k >> b & 1 == 1 { s } else { 0 };
+            bit(0, sx) + bit(1, sy) + bit(2, sz)
+        }))
     }
 
     /// [`super::Geometry::sample`] of component `c` at eight points: (value, min, max).
     ///
     /// # Safety
-    /// `field` must be a full face array of component `c` (`layout.face_count(c)` values).
-    #[target_feature(enable = "avx2,fma")]
+    /// The CPU must have AVX2 and FMA, and `field` must be a full face array of component `c`
+    /// (`layout.face_count(c)` values). Not a `target_feature` function, so that it can be
+    /// `inline(always)`, as [`Centred::sample`].
+    #[inline(always)]
     unsafe fn sample_face<const BOUNDS: bool>(
         ax: &[AxisV; 3],
         field: &[f32],
         p: [__m256; 3],
     ) -> (__m256, __m256, __m256) {
-        let (x0, x1, tx) = ax[0].locate(p[0]);
-        let (y0, y1, ty) = ax[1].locate(p[1]);
-        let (z0, z1, tz) = ax[2].locate(p[2]);
-        let r = [
-            _mm256_add_epi32(y0, z0),
-            _mm256_add_epi32(y1, z0),
-            _mm256_add_epi32(y0, z1),
-            _mm256_add_epi32(y1, z1),
-        ];
-        let (ptr, len) = (field.as_ptr(), field.len());
-        let s: [__m256; 8] = if ax[0].pairs {
-            // x1 = x0 + 1 in every lane: one 8-byte load per row and face instead of gathers
-            // (~40 micro-ops each on Zen 3), then even/odd floats split into x0 and x1 lanes.
-            // Faces are loaded in the order (0, 1, 4, 5) and (2, 3, 6, 7) so that the in-lane
-            // shuffles come out in lane order.
-            let mut s = [_mm256_setzero_ps(); 8];
-            for (q, r) in r.iter().enumerate() {
-                let i = lanes_i32(_mm256_add_epi32(*r, x0));
-                // SAFETY: `locate` keeps x0 <= n - 2 on a clamped axis with n > 1 (`pairs`),
-                // so both floats of each pair are faces of the array (its length is the
-                // caller's contract).
-                let ld = |l: usize| unsafe {
-                    debug_assert!(i[l] >= 0 && (i[l] as usize) + 1 < len);
-                    ptr.add(i[l] as usize).cast::<i64>().read_unaligned()
-                };
-                let a = _mm256_castsi256_ps(_mm256_setr_epi64x(ld(0), ld(1), ld(4), ld(5)));
-                let b = _mm256_castsi256_ps(_mm256_setr_epi64x(ld(2), ld(3), ld(6), ld(7)));
-                s[2 * q] = _mm256_shuffle_ps::<0x88>(a, b);
-                s[2 * q + 1] = _mm256_shuffle_ps::<0xDD>(a, b);
+        // SAFETY: the CPU has AVX2 and FMA (the caller's contract); the loads are in bounds as
+        // said at each.
+        unsafe {
+            let (x0, x1, tx) = ax[0].locate(p[0]);
+            let (y0, y1, ty) = ax[1].locate(p[1]);
+            let (z0, z1, tz) = ax[2].locate(p[2]);
+            let r = [
+                _mm256_add_epi32(y0, z0),
+                _mm256_add_epi32(y1, z0),
+                _mm256_add_epi32(y0, z1),
+                _mm256_add_epi32(y1, z1),
+            ];
+            let (ptr, len) = (field.as_ptr(), field.len());
+            let s: [__m256; 8] = if ax[0].pairs {
+                // x1 = x0 + 1 in every lane: one 8-byte load per row and face instead of gathers
+                // (~40 micro-ops each on Zen 3), then even/odd floats split into x0 and x1 lanes.
+                // Faces are loaded in the order (0, 1, 4, 5) and (2, 3, 6, 7) so that the in-lane
+                // shuffles come out in lane order.
+                let mut s = [_mm256_setzero_ps(); 8];
+                // Row q's eight pairs from `$at(q, lane)`, the address of the lower float.
+                macro_rules! rows {
+                    ($at:expr) => {
+                        for q in 0..4 {
+                            let ld = |l: usize| {
+                                let at: *const f32 = ($at)(q, l);
+                                // In bounds: `locate` keeps x0 <= n - 2 on a clamped axis with
+                                // n > 1 (`pairs`), so both floats of each pair are faces of the
+                                // array (its length is the caller's contract).
+                                at.cast::<i64>().read_unaligned()
+                            };
+                            let a =
+                                _mm256_castsi256_ps(_mm256_setr_epi64x(ld(0), ld(1), ld(4), ld(5)));
+                            let b =
+                                _mm256_castsi256_ps(_mm256_setr_epi64x(ld(2), ld(3), ld(6), ld(7)));
+                            s[2 * q] = _mm256_shuffle_ps::<0x88>(a, b);
+                            s[2 * q + 1] = _mm256_shuffle_ps::<0xDD>(a, b);
+                        }
+                    };
+                }
+                if let (Some(sy), Some(sz)) = (ax[1].fixed_step, ax[2].fixed_step) {
+                    // Clamped y and z: the rows are fixed offsets from the first, one index per lane
+                    // instead of four (and the loads address `first + offset` directly).
+                    let first = lanes_i32(_mm256_add_epi32(r[0], x0));
+                    let f32_bytes = std::mem::size_of::<f32>();
+                    let off = [0, sy, sz, sy + sz].map(|o| o as usize * f32_bytes);
+                    rows!(|q: usize, l: usize| {
+                        debug_assert!(first[l] >= 0 && first[l] as usize + off[q] / 4 + 1 < len);
+                        ptr.add(first[l] as usize).byte_add(off[q])
+                    });
+                } else {
+                    let i = r.map(|r| lanes_i32(_mm256_add_epi32(r, x0)));
+                    rows!(|q: usize, l: usize| {
+                        debug_assert!(i[q][l] >= 0 && (i[q][l] as usize) + 1 < len);
+                        ptr.add(i[q][l] as usize)
+                    });
+                }
+                s
+            } else {
+                // In bounds: `locate` keeps each axis index below that axis' face count, so the
+                // offsets index faces of the array (the caller's contract gives its length).
+                std::array::from_fn(|k| {
+                    gather(
+                        ptr,
+                        len,
+                        _mm256_add_epi32(r[k / 2], if k % 2 == 0 { x0 } else { x1 }),
+                    )
+                })
+            };
+            let (mut lo, mut hi) = (_mm256_setzero_ps(), _mm256_setzero_ps());
+            if BOUNDS {
+                lo = s[0];
+                hi = s[0];
+                for &v in &s[1..] {
+                    lo = _mm256_min_ps(lo, v);
+                    hi = _mm256_max_ps(hi, v);
+                }
             }
-            s
-        } else {
-            // SAFETY: `locate` keeps each axis index below that axis' face count, so the
-            // offsets index faces of the array (the caller's contract gives its length).
-            std::array::from_fn(|k| unsafe {
-                gather(
-                    ptr,
-                    len,
-                    _mm256_add_epi32(r[k / 2], if k % 2 == 0 { x0 } else { x1 }),
-                )
-            })
-        };
-        let (mut lo, mut hi) = (_mm256_setzero_ps(), _mm256_setzero_ps());
-        if BOUNDS {
-            lo = s[0];
-            hi = s[0];
-            for &v in &s[1..] {
-                lo = _mm256_min_ps(lo, v);
-                hi = _mm256_max_ps(hi, v);
-            }
+            let c0 = lerp(lerp(s[0], s[1], tx), lerp(s[2], s[3], tx), ty);
+            let c1 = lerp(lerp(s[4], s[5], tx), lerp(s[6], s[7], tx), ty);
+            (lerp(c0, c1, tz), lo, hi)
         }
-        let c0 = lerp(lerp(s[0], s[1], tx), lerp(s[2], s[3], tx), ty);
-        let c1 = lerp(lerp(s[4], s[5], tx), lerp(s[6], s[7], tx), ty);
-        (lerp(c0, c1, tz), lo, hi)
     }
 
     /// [`Pass::block`] eight faces at a time: `each(position within the block, valid lanes,
@@ -1250,6 +1439,23 @@ pub(crate) mod avx2 {
         b: usize,
         mut each: impl FnMut(usize, usize, &[f32; 8], &[f32; 8], &[f32; 8]),
     ) {
+        // SAFETY: the caller's contract.
+        unsafe { trace::<BOUNDS, false>(pass, b, |o, m, v, lo, hi, _| each(o, m, v, lo, hi)) }
+    }
+
+    /// [`Pass::block`] eight faces at a time, and with `FORWARD` also the forward trace's foot
+    /// points (the trace of the same pass with `-dt_cells`, to the bit): `each(position within
+    /// the block, valid lanes, values, min, max, forward foot x, y, z)`. The two traces share the
+    /// velocity at the face and run side by side (their gathers overlap).
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn trace<const BOUNDS: bool, const FORWARD: bool>(
+        pass: &Pass,
+        b: usize,
+        mut each: impl FnMut(usize, usize, &[f32; 8], &[f32; 8], &[f32; 8], &[[f32; 8]; 3]),
+    ) {
         let plan = pass.plan;
         let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
         let base = b * BLOCK;
@@ -1258,21 +1464,14 @@ pub(crate) mod avx2 {
         let dims = geo.dims.map(|d| d as i32);
         let dt = _mm256_set1_ps(pass.dt_cells);
         let half_dt = _mm256_set1_ps(0.5 * pass.dt_cells);
+        // The forward trace's steps, as a pass with `-dt_cells` would compute them.
+        let dt_f = _mm256_set1_ps(-pass.dt_cells);
+        let half_dt_f = _mm256_set1_ps(0.5 * -pass.dt_cells);
         let lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
         let (mut vo, mut lo, mut hi) = ([0f32; 8], [0f32; 8], [0f32; 8]);
+        let mut fo = [[0f32; 8]; 3];
         // The gathers' bounds rest on this (a cheap check per block, not a debug assertion).
-        for c in 0..3 {
-            let faces = geo.faces[c]
-                .ax
-                .iter()
-                .map(|a| a.n as usize)
-                .product::<usize>();
-            assert_eq!(
-                pass.src[c].len(),
-                faces,
-                "advection source {c} is not a full face array"
-            );
-        }
+        check_sources(pass);
         for run in runs {
             let c = run.c as usize;
             let src = pass.src[c];
@@ -1302,6 +1501,7 @@ pub(crate) mod avx2 {
                 let nv = ((len - k) as usize).div_ceil(8).min(CHUNK_VECTORS);
                 let mut pos = [[_mm256_setzero_ps(); 3]; CHUNK_VECTORS];
                 let mut pts = [[_mm256_setzero_ps(); 3]; CHUNK_VECTORS];
+                let mut pts_f = [[_mm256_setzero_ps(); 3]; CHUNK_VECTORS];
                 for j in 0..nv {
                     let k = k + 8 * j as i32;
                     // Lanes past the run repeat its last face (valid indices; results dropped).
@@ -1327,17 +1527,30 @@ pub(crate) mod avx2 {
                     let v = unsafe { centred.mean(c_lo, c_hi) };
                     for a in 0..3 {
                         pts[j][a] = sub_scaled(pos[j][a], half_dt, v[a]);
+                        if FORWARD {
+                            pts_f[j][a] = sub_scaled(pos[j][a], half_dt_f, v[a]);
+                        }
                     }
                 }
                 for j in 0..nv {
-                    let vm = centred.sample(pts[j]);
+                    // SAFETY: the CPU has AVX2 and FMA (this function's contract).
+                    let vm = unsafe { centred.sample(pts[j]) };
+                    let vm_f = if FORWARD {
+                        // SAFETY: as above.
+                        unsafe { centred.sample(pts_f[j]) }
+                    } else {
+                        vm
+                    };
                     for a in 0..3 {
                         pts[j][a] = sub_scaled(pos[j][a], dt, vm[a]);
+                        if FORWARD {
+                            pts_f[j][a] = sub_scaled(pos[j][a], dt_f, vm_f[a]);
+                        }
                     }
                 }
                 for (j, p) in pts[..nv].iter().enumerate() {
                     let k = k + 8 * j as i32;
-                    // SAFETY: `src` is the full face array of component c (asserted above).
+                    // SAFETY: `src` is the full face array of component c (checked above).
                     let (v, l, h) = unsafe { sample_face::<BOUNDS>(&fax, src, *p) };
                     // SAFETY: the arrays have room for eight lanes.
                     unsafe {
@@ -1346,10 +1559,123 @@ pub(crate) mod avx2 {
                             _mm256_storeu_ps(lo.as_mut_ptr(), l);
                             _mm256_storeu_ps(hi.as_mut_ptr(), h);
                         }
+                        if FORWARD {
+                            for (a, fa) in fo.iter_mut().enumerate() {
+                                _mm256_storeu_ps(fa.as_mut_ptr(), pts_f[j][a]);
+                            }
+                        }
                     }
-                    each(o + k as usize, (len - k).min(8) as usize, &vo, &lo, &hi);
+                    each(
+                        o + k as usize,
+                        (len - k).min(8) as usize,
+                        &vo,
+                        &lo,
+                        &hi,
+                        &fo,
+                    );
                 }
                 k += 8 * nv as i32;
+            }
+        }
+    }
+
+    /// Asserts that every source of `pass` is a full face array of its component (what keeps the
+    /// gathers of [`sample_face`] in bounds).
+    fn check_sources(pass: &Pass) {
+        for c in 0..3 {
+            let faces = pass.geo.faces[c]
+                .ax
+                .iter()
+                .map(|a| a.n as usize)
+                .product::<usize>();
+            assert_eq!(
+                pass.src[c].len(),
+                faces,
+                "advection source {c} is not a full face array"
+            );
+        }
+    }
+
+    /// Eight lanes of `s` from `k` (`m` valid, the rest zero).
+    ///
+    /// # Safety
+    /// The CPU must have AVX. Not a `target_feature` function, so that it can be
+    /// `inline(always)`, as [`Centred::sample`].
+    #[inline(always)]
+    unsafe fn load8(s: &[f32], k: usize, m: usize) -> __m256 {
+        let mut a = [0f32; 8];
+        let s = if m == 8 {
+            &s[k..k + 8]
+        } else {
+            a[..m].copy_from_slice(&s[k..k + m]);
+            &a
+        };
+        // SAFETY: `s` has eight floats; the CPU has AVX (the caller's contract).
+        unsafe { _mm256_loadu_ps(s.as_ptr()) }
+    }
+
+    /// [`Pass::maccormack_correct`] on block `b`, eight faces at a time (the same operations as
+    /// the scalar loop, so the same values): `foot`, `lo`, `hi` and `out` are the block's slices.
+    ///
+    /// # Safety
+    /// The CPU must have AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub(super) unsafe fn correct(
+        pass: &Pass,
+        b: usize,
+        orig: [&[f32]; 3],
+        foot: [&[f32]; 3],
+        [lo, hi]: [&[f32]; 2],
+        out: &mut [f32],
+    ) {
+        let plan = pass.plan;
+        let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
+        let base = b * BLOCK;
+        let half = _mm256_set1_ps(0.5);
+        let abs_mask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff));
+        let inf = _mm256_set1_ps(f32::INFINITY);
+        let mut r = [0f32; 8];
+        check_sources(pass);
+        for run in runs {
+            let c = run.c as usize;
+            let src = pass.src[c];
+            let fax: [AxisV; 3] = std::array::from_fn(|a| AxisV::new(&pass.geo.faces[c].ax[a], 1));
+            let (len, o, full) = (
+                run.len as usize,
+                run.compact as usize - base,
+                run.full as usize,
+            );
+            let orig = &orig[c][full..full + len];
+            let mut k = 0;
+            while k < len {
+                let (m, n) = ((len - k).min(8), o + k);
+                // SAFETY: the CPU has AVX2 and FMA (this function's contract), and `src` is the
+                // full face array of component c (checked above).
+                let (hat, u0, l, h, back) = unsafe {
+                    let p = [
+                        load8(foot[0], n, m),
+                        load8(foot[1], n, m),
+                        load8(foot[2], n, m),
+                    ];
+                    let (hat, u0) = (load8(out, n, m), load8(orig, k, m));
+                    let (l, h) = (load8(lo, n, m), load8(hi, n, m));
+                    (hat, u0, l, h, sample_face::<false>(&fax, src, p).0)
+                };
+                let v = _mm256_add_ps(hat, _mm256_mul_ps(half, _mm256_sub_ps(u0, back)));
+                let finite = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_and_ps(v, abs_mask), inf);
+                let w = _mm256_blendv_ps(v, l, _mm256_cmp_ps::<_CMP_LT_OQ>(v, l));
+                let w = _mm256_blendv_ps(w, h, _mm256_cmp_ps::<_CMP_GT_OQ>(w, h));
+                let res = _mm256_blendv_ps(hat, w, finite);
+                if m == 8 {
+                    let s = &mut out[n..n + 8];
+                    // SAFETY: `s` has eight floats.
+                    unsafe { _mm256_storeu_ps(s.as_mut_ptr(), res) };
+                } else {
+                    // SAFETY: `r` has eight floats.
+                    unsafe { _mm256_storeu_ps(r.as_mut_ptr(), res) };
+                    out[n..n + m].copy_from_slice(&r[..m]);
+                }
+                k += m;
             }
         }
     }
@@ -1410,18 +1736,12 @@ mod tests {
             }
         }
     }
-    /// The AVX2 trace against the scalar one on every face of random fields, with time steps
-    /// that put the feet inside, on and far outside the grid, on periodic and clamped axes (and a
-    /// single-cell axis).
-    #[cfg(target_arch = "x86_64")]
-    #[test]
-    fn avx2_trace_matches_the_scalar_trace_where_available() {
-        if !avx2::available() {
-            eprintln!("SKIP avx2_trace_matches_the_scalar_trace_where_available: no AVX2+FMA");
-            return;
-        }
-        let mut rng = fastrand::Rng::with_seed(11);
-        let mut checked = 0usize;
+    /// Random advection cases: grids with an axis of one cell, every periodicity pattern, random
+    /// fields and centred velocity, about 3/4 of the faces active (runs of every length, some of
+    /// one face), and time steps that put the feet inside, on and far outside the grid:
+    /// `each(layout, pass)`.
+    fn random_passes(seed: u64, mut each: impl FnMut(&Layout, &Pass)) {
+        let mut rng = fastrand::Rng::with_seed(seed);
         for dims in [[7, 4, 6], [11, 1, 3]] {
             for periodic in [
                 [false; 3],
@@ -1436,7 +1756,6 @@ mod tests {
                 let centred: Vec<V4> = (0..cells)
                     .map(|_| v4::new(rng.f32() - 0.5, rng.f32() - 0.5, rng.f32() - 0.5))
                     .collect();
-                // About 3/4 of the faces active: runs of every length, some of one face.
                 let active: Vec<Vec<u32>> = (0..3)
                     .map(|c| {
                         (0..layout.face_count(c) as u32)
@@ -1446,7 +1765,6 @@ mod tests {
                     .collect();
                 let mut plan = Plan::default();
                 plan.rebuild(&layout, [&active[0], &active[1], &active[2]]);
-                let total = plan.offset[3];
                 for dt_cells in [0.3, -2.5, 7.0, 300.0, -5000.0] {
                     let pass = Pass {
                         geo: &geo,
@@ -1455,29 +1773,154 @@ mod tests {
                         src: [&fields[0], &fields[1], &fields[2]],
                         dt_cells,
                     };
-                    let mut want = vec![(0.0, 0.0, 0.0); total];
-                    let mut got = vec![(f32::NAN, 0.0, 0.0); total];
-                    for b in 0..plan.block_runs.len() - 1 {
-                        pass.block_scalar::<true>(b, |n, r| want[b * BLOCK + n] = r);
-                        // SAFETY: the CPU has AVX2 and FMA (checked above).
-                        unsafe {
-                            avx2::block::<true>(&pass, b, |o, m, v, lo, hi| {
-                                for i in 0..m {
-                                    got[b * BLOCK + o + i] = (v[i], lo[i], hi[i]);
-                                }
-                            })
-                        };
-                    }
-                    for (n, (w, g)) in want.iter().zip(&got).enumerate() {
-                        let ctx = || format!("{dims:?} {periodic:?} dt {dt_cells} face {n}");
-                        // Same operations in the same order: equal to the bit.
-                        assert_eq!(w.0.to_bits(), g.0.to_bits(), "{}: {w:?} {g:?}", ctx());
-                        assert_eq!((w.1, w.2), (g.1, g.2), "{}", ctx());
-                    }
-                    checked += total;
+                    each(&layout, &pass);
                 }
             }
         }
+    }
+
+    /// The AVX2 kernels against the scalar ones on every face of [`random_passes`]: the trace
+    /// (values, bounds, and the forward feet of the fused MacCormack trace) and MacCormack's
+    /// correction.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn avx2_trace_matches_the_scalar_trace_where_available() {
+        if !avx2::available() {
+            eprintln!("SKIP avx2_trace_matches_the_scalar_trace_where_available: no AVX2+FMA");
+            return;
+        }
+        let mut checked = 0usize;
+        random_passes(11, |layout, pass| {
+            let (plan, dt_cells) = (pass.plan, pass.dt_cells);
+            let total = plan.offset[3];
+            let mut want = vec![(0.0, 0.0, 0.0); total];
+            let mut got = vec![(f32::NAN, 0.0, 0.0); total];
+            let mut want_foot = vec![[0f32; 3]; total];
+            let mut got_foot = vec![[f32::NAN; 3]; total];
+            for b in 0..plan.block_runs.len() - 1 {
+                pass.block_scalar::<true>(b, |n, r| want[b * BLOCK + n] = r);
+                let geo = pass.geo;
+                pass.trace_scalar::<true>(
+                    b,
+                    |c, src, p| geo.sample::<false>(c, src, p),
+                    |n, _, f| {
+                        let [x, y, z, _] = v4::lanes(f);
+                        want_foot[b * BLOCK + n] = [x, y, z];
+                    },
+                );
+                // SAFETY: the CPU has AVX2 and FMA (checked above).
+                unsafe {
+                    avx2::block::<true>(pass, b, |o, m, v, lo, hi| {
+                        for i in 0..m {
+                            got[b * BLOCK + o + i] = (v[i], lo[i], hi[i]);
+                        }
+                    });
+                    avx2::trace::<false, true>(pass, b, |o, m, _, _, _, f| {
+                        for i in 0..m {
+                            got_foot[b * BLOCK + o + i] = [f[0][i], f[1][i], f[2][i]];
+                        }
+                    });
+                }
+            }
+            for (n, (w, g)) in want.iter().zip(&got).enumerate() {
+                let ctx = || format!("{:?} dt {dt_cells} face {n}", layout.periodic);
+                // Same operations in the same order: equal to the bit.
+                assert_eq!(w.0.to_bits(), g.0.to_bits(), "{}: {w:?} {g:?}", ctx());
+                assert_eq!((w.1, w.2), (g.1, g.2), "{}", ctx());
+                let (wf, gf) = (want_foot[n], got_foot[n]);
+                assert_eq!(wf.map(f32::to_bits), gf.map(f32::to_bits), "{}", ctx());
+            }
+            // The correction on random inputs around the same values (some outside the bounds,
+            // some not finite), block by block.
+            let mut rng = fastrand::Rng::with_seed(total as u64);
+            let mut r = |_| rng.f32() * 4.0 - 2.0;
+            let foot: [Vec<f32>; 3] = [0, 1, 2].map(|a| {
+                want_foot
+                    .iter()
+                    .map(|f| f[a] + r(0) * 0.01 * a as f32)
+                    .collect()
+            });
+            let lo: Vec<f32> = (0..total).map(|_| r(0) - 1.0).collect();
+            let hi: Vec<f32> = lo.iter().map(|l| l + r(0).abs()).collect();
+            let mut hat: Vec<f32> = (0..total).map(r).collect();
+            hat.iter_mut().step_by(17).for_each(|h| *h = f32::INFINITY);
+            let orig = pass.src;
+            let (mut want, mut got) = (hat.clone(), hat.clone());
+            for b in 0..plan.block_runs.len() - 1 {
+                let s = b * BLOCK..((b + 1) * BLOCK).min(total);
+                let foot = [0, 1, 2].map(|a| &foot[a][s.clone()]);
+                let bounds = [&lo[s.clone()], &hi[s.clone()]];
+                pass.correct_scalar(b, orig, foot, bounds, &mut want[s.clone()]);
+                // SAFETY: the CPU has AVX2 and FMA (checked above).
+                unsafe { avx2::correct(pass, b, orig, foot, bounds, &mut got[s]) };
+            }
+            for (n, (w, g)) in want.iter().zip(&got).enumerate() {
+                assert_eq!(w.to_bits(), g.to_bits(), "correction, face {n}: {w} {g}");
+            }
+            checked += total;
+        });
+        assert!(checked > 10_000, "{checked}");
+    }
+
+    /// The fused MacCormack (one pass for the backward step and the forward trace, one for the
+    /// forward step and the correction) against the textbook two passes, each a full scalar
+    /// semi-Lagrangian step, with `f32::clamp`: equal to the bit, serial and split.
+    #[test]
+    fn fused_maccormack_matches_the_backward_and_forward_steps() {
+        let mut checked = 0usize;
+        random_passes(13, |layout, pass| {
+            let plan = pass.plan;
+            let total = plan.offset[3];
+            let blocks = plan.block_runs.len() - 1;
+            // Backward step with its bounds, then the forward step of its result.
+            let mut hat = vec![(0.0, 0.0, 0.0); total];
+            for b in 0..blocks {
+                pass.block_scalar::<true>(b, |n, r| hat[b * BLOCK + n] = r);
+            }
+            let hat_values: Vec<f32> = hat.iter().map(|h| h.0).collect();
+            let mut tmp: [Vec<f32>; 3] = pass.src.map(|s| s.to_vec());
+            scatter(plan, &hat_values, &mut tmp);
+            let forward = Pass {
+                src: [&tmp[0], &tmp[1], &tmp[2]],
+                dt_cells: -pass.dt_cells,
+                ..*pass
+            };
+            let mut orig = vec![0.0; total];
+            gather(plan, pass.src, &mut orig);
+            let mut want = vec![0f32; total];
+            for b in 0..blocks {
+                forward.block_scalar::<false>(b, |n, (back, _, _)| {
+                    let (h, lo, hi) = hat[b * BLOCK + n];
+                    let v = h + 0.5 * (orig[b * BLOCK + n] - back);
+                    want[b * BLOCK + n] = if v.is_finite() { v.clamp(lo, hi) } else { h };
+                });
+            }
+            for parallel in [false, true] {
+                let mut out = vec![f32::NAN; total];
+                let (mut lo, mut hi) = (vec![0.0; total], vec![0.0; total]);
+                let mut foot = [vec![0.0; total], vec![0.0; total], vec![0.0; total]];
+                let [fx, fy, fz] = &mut foot;
+                pass.maccormack_trace(&mut out, [&mut lo, &mut hi], [fx, fy, fz], parallel);
+                let mut tmp: [Vec<f32>; 3] = pass.src.map(|s| s.to_vec());
+                scatter(plan, &out, &mut tmp);
+                let forward = Pass {
+                    src: [&tmp[0], &tmp[1], &tmp[2]],
+                    ..*pass
+                };
+                let [fx, fy, fz] = &foot;
+                forward.maccormack_correct(pass.src, [fx, fy, fz], [&lo, &hi], &mut out, parallel);
+                for (n, (w, g)) in want.iter().zip(&out).enumerate() {
+                    assert_eq!(
+                        w.to_bits(),
+                        g.to_bits(),
+                        "{:?} dt {} parallel {parallel} face {n}: {w} {g}",
+                        layout.periodic,
+                        pass.dt_cells
+                    );
+                }
+            }
+            checked += total;
+        });
         assert!(checked > 10_000, "{checked}");
     }
     /// The centred velocity (AVX2 rows and scalar tails) against the face means, cell by cell.

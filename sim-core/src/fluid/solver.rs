@@ -186,6 +186,8 @@ pub struct FluidSolver {
     adv_lo: Vec<f32>,
     adv_hi: Vec<f32>,
     adv_orig: Vec<f32>,
+    /// MacCormack's forward foot points (x, y, z), compact.
+    adv_foot: [Vec<f32>; 3],
     /// The first half step's unprojected field of advection-reflection.
     adv_refl: Vec<f32>,
     ghost: [Vec<f32>; 3],
@@ -232,6 +234,7 @@ impl FluidSolver {
             adv_lo: Vec::new(),
             adv_hi: Vec::new(),
             adv_orig: Vec::new(),
+            adv_foot: Default::default(),
             adv_refl: Vec::new(),
             u,
             grid,
@@ -416,12 +419,16 @@ impl FluidSolver {
         self.plan
             .rebuild(&self.layout, [&f0.active, &f1.active, &f2.active]);
         let total = self.plan.offset[3];
+        let [f0, f1, f2] = &mut self.adv_foot;
         for v in [
             &mut self.adv,
             &mut self.adv_lo,
             &mut self.adv_hi,
             &mut self.adv_orig,
             &mut self.adv_refl,
+            f0,
+            f1,
+            f2,
         ] {
             v.clear();
             v.resize(total, 0.0);
@@ -737,8 +744,36 @@ impl FluidSolver {
             AdvectionScheme::MonotoneCubic => pass.cubic(&mut self.adv, parallel),
             AdvectionScheme::MacCormack
             | AdvectionScheme::MacCormackReflection
-            | AdvectionScheme::MacCormackLaggedReflection
-            | AdvectionScheme::Bfecc => {
+            | AdvectionScheme::MacCormackLaggedReflection => {
+                // The backward step with its bounds and the forward trace in one pass, then the
+                // forward step of its result (`tmp`: `u` off the active faces) and the correction.
+                let [f0, f1, f2] = &mut self.adv_foot;
+                pass.maccormack_trace(
+                    &mut self.adv,
+                    [&mut self.adv_lo, &mut self.adv_hi],
+                    [f0, f1, f2],
+                    parallel,
+                );
+                for c in 0..3 {
+                    self.tmp[c].copy_from_slice(&self.u[c]);
+                }
+                advection::scatter(&self.plan, &self.adv, &mut self.tmp);
+                let [t0, t1, t2] = &self.tmp;
+                // The forward trace is done: this pass only samples `tmp` at its feet.
+                let forward = advection::Pass {
+                    src: [t0, t1, t2],
+                    ..pass
+                };
+                let [f0, f1, f2] = &self.adv_foot;
+                forward.maccormack_correct(
+                    [u0, u1, u2],
+                    [f0, f1, f2],
+                    [&self.adv_lo, &self.adv_hi],
+                    &mut self.adv,
+                    parallel,
+                );
+            }
+            AdvectionScheme::Bfecc => {
                 pass.semi_lagrangian_bounds(
                     &mut self.adv,
                     &mut self.adv_lo,
@@ -756,26 +791,16 @@ impl FluidSolver {
                     dt_cells: -dt_cells,
                     ..pass
                 };
-                if scheme == AdvectionScheme::Bfecc {
-                    // The corrected field `u + (u - forward(backward(u))) / 2`, advected backward
-                    // once more (`tmp` keeps `u` off the active faces) and clamped.
-                    forward.bfecc_source(&mut self.adv_orig, parallel);
-                    advection::scatter(&self.plan, &self.adv_orig, &mut self.tmp);
-                    let [t0, t1, t2] = &self.tmp;
-                    let corrected = advection::Pass {
-                        src: [t0, t1, t2],
-                        ..pass
-                    };
-                    corrected.clamped(&mut self.adv, &self.adv_lo, &self.adv_hi, parallel);
-                } else {
-                    forward.maccormack(
-                        &self.adv_orig,
-                        &mut self.adv,
-                        &self.adv_lo,
-                        &self.adv_hi,
-                        parallel,
-                    );
-                }
+                // The corrected field `u + (u - forward(backward(u))) / 2`, advected backward
+                // once more (`tmp` keeps `u` off the active faces) and clamped.
+                forward.bfecc_source(&mut self.adv_orig, parallel);
+                advection::scatter(&self.plan, &self.adv_orig, &mut self.tmp);
+                let [t0, t1, t2] = &self.tmp;
+                let corrected = advection::Pass {
+                    src: [t0, t1, t2],
+                    ..pass
+                };
+                corrected.clamped(&mut self.adv, &self.adv_lo, &self.adv_hi, parallel);
             }
         }
         advection::scatter(&self.plan, &self.adv, &mut self.u);
