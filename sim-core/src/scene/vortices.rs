@@ -299,8 +299,6 @@ pub struct VortexField {
     /// The node layer splitting the nodes of `node_mask` in halves (the two tasks of
     /// `rebuild`).
     split_k: usize,
-    /// Scratch of `sync_labels` (one flag per face).
-    face_scratch: Vec<bool>,
     /// `Psi(q) w(q)` over `Gamma / (2 pi)` at `q = r^2/R^2`.
     table: Box<[f32; TABLE_SIZE + 1]>,
     stats: VortexStats,
@@ -328,7 +326,6 @@ impl VortexField {
             rng: SeededRng::new(spec.seed),
             vortices: Vec::with_capacity(spec.max_count),
             fluid_nodes: Vec::new(),
-            face_scratch: Vec::new(),
             split_k: 0,
             row_nodes: vec![(1, 0); (dims[1] + 1) * (dims[2] + 1)],
             core_radius_m: spec.core_radius_m(h),
@@ -393,85 +390,106 @@ impl VortexField {
             return;
         }
         self.revision = g.revision();
+        // The potential's support moved with the labels: start the field afresh (what was
+        // injected stays in the solver's state and decays there). Everything non-zero sits on
+        // the old lists, so only they are cleared: the work follows the fluid cells, not the
+        // grid (the cavity relabels often).
+        for &n in &self.fluid_nodes {
+            self.node_mask[n as usize] = 0;
+            for p in &mut self.pot {
+                p[n as usize] = 0.0;
+            }
+        }
+        for c in 0..3 {
+            for &[f, _] in &self.fluid_faces[c] {
+                self.faces[c][f as usize] = 0.0;
+                self.injected[c][f as usize] = 0.0;
+            }
+        }
         let [nx, ny, nz] = self.dims;
         let labels = g.labels();
-        let fluid =
-            |i: usize, j: usize, k: usize| labels[i + nx * (j + ny * k)] == CellLabel::Fluid;
+        let fluid = |n: usize| labels[n] == CellLabel::Fluid;
         self.fluid_cells.clear();
         for (n, l) in labels.iter().enumerate() {
             if *l == CellLabel::Fluid {
                 self.fluid_cells.push(n as u32);
             }
         }
-        let (sx, sy) = (nx + 1, ny + 1);
-        for k in 0..=nz {
-            for j in 0..=ny {
-                for i in 0..=nx {
-                    let inside = i > 0 && j > 0 && k > 0 && i < nx && j < ny && k < nz;
-                    let m = inside
-                        && (0..8).all(|b| {
-                            fluid(i - 1 + (b & 1), j - 1 + (b >> 1 & 1), k - 1 + (b >> 2))
-                        });
-                    self.node_mask[i + sx * (j + sy * k)] = m as u8;
-                }
+        // A node is in `node_mask` when its eight cells are fluid: count the fluid cells around
+        // each corner of the fluid cells in `node_mask` itself, list the nodes that reach 8
+        // (marked 9), zero the other counters, then set the listed nodes to 1.
+        let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
+        let corners = |n: u32| {
+            let n = n as usize;
+            let base = n % nx + sx * ((n / nx) % ny) + sy * (n / (nx * ny));
+            (0..8).map(move |b| base + (b & 1) + sx * (b >> 1 & 1) + sy * (b >> 2))
+        };
+        for &n in &self.fluid_cells {
+            for node in corners(n) {
+                self.node_mask[node] += 1;
             }
         }
         self.fluid_nodes.clear();
         self.row_nodes.fill((1, 0));
-        for (n, &m) in self.node_mask.iter().enumerate() {
-            if m != 0 {
-                self.fluid_nodes.push(n as u32);
-                let (i, row) = ((n % sx) as u32, n / sx);
-                let r = &mut self.row_nodes[row];
-                *r = if r.0 > r.1 {
-                    (i, i)
-                } else {
-                    (r.0.min(i), r.1.max(i))
-                };
+        for &n in &self.fluid_cells {
+            for node in corners(n) {
+                match self.node_mask[node] {
+                    // All eight cells are fluid, so the node is inside the grid.
+                    8 => {
+                        self.node_mask[node] = 9;
+                        self.fluid_nodes.push(node as u32);
+                        let (i, row) = ((node % sx) as u32, node / sx);
+                        let r = &mut self.row_nodes[row];
+                        *r = if r.0 > r.1 {
+                            (i, i)
+                        } else {
+                            (r.0.min(i), r.1.max(i))
+                        };
+                    }
+                    9 => {}
+                    _ => self.node_mask[node] = 0,
+                }
             }
         }
-        let layer = (nx + 1) * (ny + 1);
+        for &n in &self.fluid_nodes {
+            self.node_mask[n as usize] = 1;
+        }
+        self.fluid_nodes.sort_unstable();
+        let layer = sy;
         self.split_k = self
             .fluid_nodes
             .get(self.fluid_nodes.len() / 2)
             .map_or(0, |&n| n as usize / layer);
-        // The faces of the fluid cells, each once, in index order; only those with a corner
-        // node in `node_mask` (the others' circulation is zero).
-        let node_stride = [1, nx + 1, (nx + 1) * (ny + 1)];
+        // The faces of the fluid cells, each once (the upper face only where the next cell is
+        // not fluid), in index order; only those with a corner node in `node_mask` (the others'
+        // circulation is zero).
+        let node_stride = [1, sx, sy];
+        let cell_stride = [1, nx, nx * ny];
         for c in 0..3 {
             let mut fd = [nx, ny, nz];
             fd[c] += 1;
-            let face = &mut self.face_scratch;
-            face.clear();
-            face.resize(fd.iter().product(), false);
+            let (sa, sb) = (node_stride[(c + 1) % 3], node_stride[(c + 2) % 3]);
+            let list = &mut self.fluid_faces[c];
+            list.clear();
             for &n in &self.fluid_cells {
                 let n = n as usize;
                 let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                let next_fluid = cell[c] + 1 < [nx, ny, nz][c] && fluid(n + cell_stride[c]);
                 for up in 0..2 {
+                    if up == 1 && next_fluid {
+                        continue;
+                    }
                     let mut f = cell;
                     f[c] += up;
-                    face[f[0] + fd[0] * (f[1] + fd[1] * f[2])] = true;
+                    let idx = f[0] + fd[0] * (f[1] + fd[1] * f[2]);
+                    let node = f[0] + sx * f[1] + sy * f[2];
+                    let corners = [node, node + sa, node + sb, node + sa + sb];
+                    if corners.iter().any(|&m| self.node_mask[m] != 0) {
+                        list.push([idx as u32, node as u32]);
+                    }
                 }
             }
-            let list = &mut self.fluid_faces[c];
-            list.clear();
-            let (sa, sb) = (node_stride[(c + 1) % 3], node_stride[(c + 2) % 3]);
-            for (idx, _) in face.iter().enumerate().filter(|(_, &on)| on) {
-                let (i, r) = (idx % fd[0], idx / fd[0]);
-                let (j, k) = (r % fd[1], r / fd[1]);
-                let node = i + (nx + 1) * (j + (ny + 1) * k);
-                let corners = [node, node + sa, node + sb, node + sa + sb];
-                if corners.iter().any(|&m| self.node_mask[m] != 0) {
-                    list.push([idx as u32, node as u32]);
-                }
-            }
-        }
-        // The potential's support moved with the labels: start the field afresh (what was
-        // injected stays in the solver's state and decays there).
-        for c in 0..3 {
-            self.faces[c].fill(0.0);
-            self.injected[c].fill(0.0);
-            self.pot[c].fill(0.0);
+            list.sort_unstable();
         }
         // Vortices now outside the fluid respawn on the next step.
     }
