@@ -163,6 +163,74 @@ impl Layout {
         lerp(lerp(c00, c10, ty), lerp(c01, c11, ty), tz)
     }
 
+    /// The velocity at `p` and `d[c][a]`: component `c` at `p + e_a` minus at `p - e_a` (one
+    /// cell each way), for `a != c` (`d[c][c]` is 0); `None` where a sample would be clamped or
+    /// wrap (then sample the points one by one). Each component's weights serve all three
+    /// points: a shift by a whole cell keeps them.
+    pub fn velocity_and_cross_differences(
+        &self,
+        u: [&[f32]; 3],
+        p: [f32; 3],
+    ) -> Option<([f32; 3], [[f32; 3]; 3])> {
+        if self.periodic.iter().any(|&x| x) {
+            return None;
+        }
+        let mut v = [0.0f32; 3];
+        let mut d = [[0.0f32; 3]; 3];
+        for c in 0..3 {
+            let fd = self.fdims[c];
+            let stride = [1, fd[0], fd[0] * fd[1]];
+            let mut base = 0;
+            let mut t = [0.0f32; 3];
+            for a in 0..3 {
+                let s = if a == c { p[a] } else { p[a] - 0.5 };
+                // Room for the shifted samples (a != c) or for the stencil (a == c).
+                let room = if a == c { 0.0 } else { 1.0 };
+                if !(s >= room && s < fd[a] as f32 - 1.0 - room) {
+                    return None;
+                }
+                let i0 = s as i32 as usize;
+                base += i0 * stride[a];
+                t[a] = s - i0 as f32;
+            }
+            let (sx, sy, sz) = (stride[0], stride[1], stride[2]);
+            let idx = [
+                base,
+                base + sx,
+                base + sy,
+                base + sy + sx,
+                base + sz,
+                base + sz + sx,
+                base + sz + sy,
+                base + sz + sy + sx,
+            ];
+            let (tx, ty, tz) = (t[0], t[1], t[2]);
+            let (ux, uy, uz) = (1.0 - tx, 1.0 - ty, 1.0 - tz);
+            let w = [
+                ux * uy * uz,
+                tx * uy * uz,
+                ux * ty * uz,
+                tx * ty * uz,
+                ux * uy * tz,
+                tx * uy * tz,
+                ux * ty * tz,
+                tx * ty * tz,
+            ];
+            let field = u[c];
+            for n in 0..8 {
+                v[c] += w[n] * field[idx[n]];
+            }
+            for a in (0..3).filter(|&a| a != c) {
+                let mut x = 0.0;
+                for n in 0..8 {
+                    x += w[n] * (field[idx[n] + stride[a]] - field[idx[n] - stride[a]]);
+                }
+                d[c][a] = x;
+            }
+        }
+        Some((v, d))
+    }
+
     /// The velocity vector at `p`.
     #[inline]
     pub fn velocity(&self, u: [&[f32]; 3], p: [f32; 3]) -> [f32; 3] {
@@ -212,5 +280,50 @@ mod tests {
         // Outside a non-periodic axis the sample clamps to the last face.
         let edge = layout.sample(0, &field, [5.0, 1.5, 1.5]);
         assert_eq!(layout.sample(0, &field, [9.0, 1.5, 1.5]), edge);
+    }
+
+    #[test]
+    fn shared_weight_differences_match_six_samples_and_decline_at_the_edges() {
+        let dims = [7, 6, 8];
+        let layout = Layout::new(dims, [false; 3]);
+        let fields: [Vec<f32>; 3] = std::array::from_fn(|c| {
+            (0..layout.face_count(c))
+                .map(|i| ((i * 7919 + 13 * c) % 101) as f32 / 50.0 - 1.0)
+                .collect()
+        });
+        let u = [&fields[0][..], &fields[1][..], &fields[2][..]];
+        let mut checked = 0;
+        for p in [
+            [3.2, 2.7, 4.9],
+            [1.6, 1.51, 1.5],
+            [5.4, 4.4, 6.45],
+            [2.5, 3.0, 3.0],
+        ] {
+            let (v, d) = layout.velocity_and_cross_differences(u, p).expect("inside");
+            for c in 0..3 {
+                assert!((v[c] - layout.sample(c, u[c], p)).abs() < 1e-6);
+                for a in (0..3).filter(|&a| a != c) {
+                    let (mut lo, mut hi) = (p, p);
+                    lo[a] -= 1.0;
+                    hi[a] += 1.0;
+                    let want = layout.sample(c, u[c], hi) - layout.sample(c, u[c], lo);
+                    assert!((d[c][a] - want).abs() < 1e-5, "{p:?} {c} {a}");
+                    checked += 1;
+                }
+            }
+        }
+        assert_eq!(checked, 24);
+        // Within a cell of the boundary a shifted sample would clamp: the caller samples.
+        for p in [
+            [0.9, 3.0, 3.0],
+            [3.0, 5.2, 3.0],
+            [3.0, 3.0, 7.6],
+            [f32::NAN, 3.0, 3.0],
+        ] {
+            assert!(
+                layout.velocity_and_cross_differences(u, p).is_none(),
+                "{p:?}"
+            );
+        }
     }
 }

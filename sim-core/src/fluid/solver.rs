@@ -1160,6 +1160,47 @@ impl FluidSolver {
         [v[0] as f64, v[1] as f64, v[2] as f64]
     }
 
+    /// Component `c` of the velocity (m/s) interpolated at a point (clamped into the grid): a
+    /// third of [`FluidSolver::sample_velocity_m_s`]'s work.
+    pub fn sample_velocity_component_m_s(&self, c: usize, point_m: [f64; 3]) -> f64 {
+        let p = self.grid_units(point_m);
+        f64::from(self.layout.sample(c, &self.u[c], p))
+    }
+
+    /// The interpolated velocity at a point (m/s, as [`FluidSolver::sample_velocity_m_s`]) and
+    /// its curl (1/s) by central differences over one cell each way.
+    pub fn velocity_and_curl(&self, point_m: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        let h = self.grid.spacing_m();
+        let [u0, u1, u2] = &self.u;
+        let p = self.grid_units(point_m);
+        // d[c][a] = u_c(p + h e_a) - u_c(p - h e_a).
+        let (v, d) = match self.layout.velocity_and_cross_differences([u0, u1, u2], p) {
+            Some((v, d)) => (v.map(f64::from), d.map(|r| r.map(f64::from))),
+            None => (
+                self.sample_velocity_m_s(point_m),
+                std::array::from_fn(|c| {
+                    std::array::from_fn(|a| {
+                        if a == c {
+                            return 0.0;
+                        }
+                        let (mut lo, mut hi) = (point_m, point_m);
+                        lo[a] -= h;
+                        hi[a] += h;
+                        self.sample_velocity_component_m_s(c, hi)
+                            - self.sample_velocity_component_m_s(c, lo)
+                    })
+                }),
+            ),
+        };
+        let k = 0.5 / h;
+        let curl = [
+            (d[2][1] - d[1][2]) * k,
+            (d[0][2] - d[2][0]) * k,
+            (d[1][0] - d[0][1]) * k,
+        ];
+        (v, curl)
+    }
+
     fn grid_units(&self, point_m: [f64; 3]) -> [f32; 3] {
         let h = self.grid.spacing_m();
         let o = self.grid.origin_m();

@@ -508,6 +508,12 @@ pub struct ParticleSystem {
     birth_s: Vec<f32>,
     /// Cell-centred velocity, cells/s (4 lanes).
     field: Vec<[f32; 4]>,
+    /// The cell kinds `field`'s cell lists were built for.
+    field_kinds: Vec<VoxelKind>,
+    /// Fluid and open cells: `(cell, lowest x face, lowest y face)` (the z face is the cell's).
+    centred_cells: Vec<[u32; 3]>,
+    /// Inflow, outflow and wall cells (prescribed velocity).
+    prescribed_cells: Vec<u32>,
     /// Per class and step: slip decay, slip displacement factor, terminal slip (cells/s).
     class_step: Vec<([f32; 3], f32, f32)>,
     /// Per particle, this step: KEEP or how it left.
@@ -551,6 +557,9 @@ impl ParticleSystem {
             class: Vec::with_capacity(capacity),
             birth_s: Vec::with_capacity(capacity),
             field: vec![[0.0; 4]; grid.cell_count()],
+            field_kinds: Vec::new(),
+            centred_cells: Vec::new(),
+            prescribed_cells: Vec::new(),
             class_step: Vec::with_capacity(256),
             fate: Vec::with_capacity(capacity),
             counts: ParticleCounts::default(),
@@ -661,6 +670,37 @@ impl ParticleSystem {
         true
     }
 
+    /// Rebuilds the lists of cells whose velocity `build_field` writes when the kinds changed
+    /// (the cavity moved); the other cells' velocity is zero.
+    fn sync_kinds(&mut self, kinds: &[VoxelKind]) {
+        let cells = self.field.len();
+        let kinds = &kinds[..cells.min(kinds.len())];
+        if self.field_kinds.as_slice() == kinds {
+            return;
+        }
+        self.field_kinds.clear();
+        self.field_kinds.extend_from_slice(kinds);
+        self.field.fill([0.0; 4]);
+        self.centred_cells.clear();
+        self.prescribed_cells.clear();
+        let [nx, ny, _] = self.dims;
+        for (n, kind) in kinds.iter().enumerate() {
+            match kind {
+                VoxelKind::Fluid | VoxelKind::Open => {
+                    // x faces: (nx + 1) per row, so the row count is added; y faces: nx more per
+                    // layer.
+                    let (row, layer) = (n / nx, n / (nx * ny));
+                    self.centred_cells
+                        .push([n as u32, (n + row) as u32, (n + nx * layer) as u32]);
+                }
+                VoxelKind::Inflow | VoxelKind::Outflow | VoxelKind::Wall => {
+                    self.prescribed_cells.push(n as u32);
+                }
+                _ => {}
+            }
+        }
+    }
+
     /// Builds the cell-centred velocity (cells/s): the mean of the faces in fluid and open
     /// cells (plus the overlay's), the prescribed velocity in port and wall cells, zero elsewhere.
     fn build_field(
@@ -669,88 +709,49 @@ impl ParticleSystem {
         kinds: &[VoxelKind],
         overlay: Option<[&[f32]; 3]>,
     ) {
-        let [nx, ny, nz] = self.dims;
+        self.sync_kinds(kinds);
+        let [nx, ny, _] = self.dims;
         let inv_h = (1.0 / self.h) as f32;
+        let half = 0.5 * inv_h;
         let grid = solver.grid();
-        let (u, v, w) = (
-            solver.face_velocities(0),
-            solver.face_velocities(1),
-            solver.face_velocities(2),
-        );
-        let zero: &[f32] = &[];
-        let (ou, ov, ow) = match overlay {
-            Some([a, b, c]) => (a, b, c),
-            None => (zero, zero, zero),
+        let faces: [&[f32]; 3] = std::array::from_fn(|c| solver.face_velocities(c));
+        let centred = |faces: [&[f32]; 3], n: usize, a: usize, b: usize| -> [f32; 3] {
+            let [u, v, w] = faces;
+            [u[a] + u[a + 1], v[b] + v[b + nx], w[n] + w[n + nx * ny]]
         };
-        let has_overlay = overlay.is_some();
-        let mut n = 0;
-        for k in 0..nz {
-            for j in 0..ny {
-                let fu = (nx + 1) * (j + ny * k);
-                let fv = nx * (j + (ny + 1) * k);
-                let fw = nx * (j + ny * k);
-                for i in 0..nx {
-                    let kind = kinds.get(n).copied().unwrap_or_default();
-                    self.field[n] = match kind {
-                        VoxelKind::Fluid | VoxelKind::Open => {
-                            let (a, b, c) = (fu + i, fv + i, fw + i);
-                            let mut x = 0.5 * (u[a] + u[a + 1]);
-                            let mut y = 0.5 * (v[b] + v[b + nx]);
-                            let mut z = 0.5 * (w[c] + w[c + nx * ny]);
-                            if has_overlay {
-                                x += 0.5 * (ou[a] + ou[a + 1]);
-                                y += 0.5 * (ov[b] + ov[b + nx]);
-                                z += 0.5 * (ow[c] + ow[c + nx * ny]);
-                            }
-                            [x * inv_h, y * inv_h, z * inv_h, 0.0]
-                        }
-                        VoxelKind::Inflow | VoxelKind::Outflow | VoxelKind::Wall => {
-                            let p = grid.velocity_at(n);
-                            [p[0] * inv_h, p[1] * inv_h, p[2] * inv_h, 0.0]
-                        }
-                        _ => [0.0; 4],
-                    };
-                    n += 1;
+        let field = &mut self.field;
+        match overlay {
+            None => {
+                for &[n, a, b] in &self.centred_cells {
+                    let (n, a, b) = (n as usize, a as usize, b as usize);
+                    let s = centred(faces, n, a, b);
+                    field[n] = [s[0] * half, s[1] * half, s[2] * half, 0.0];
                 }
             }
+            Some(o) => {
+                for &[n, a, b] in &self.centred_cells {
+                    let (n, a, b) = (n as usize, a as usize, b as usize);
+                    let s = centred(faces, n, a, b);
+                    let t = centred(o, n, a, b);
+                    field[n] = [
+                        (s[0] + t[0]) * half,
+                        (s[1] + t[1]) * half,
+                        (s[2] + t[2]) * half,
+                        0.0,
+                    ];
+                }
+            }
+        }
+        for &n in &self.prescribed_cells {
+            let p = grid.velocity_at(n as usize);
+            field[n as usize] = [p[0] * inv_h, p[1] * inv_h, p[2] * inv_h, 0.0];
         }
     }
 
     /// Trilinear interpolation of the cell-centred field at `p` (grid units), cells/s.
-    #[inline(always)]
     fn sample(field: &[[f32; 4]], dims: [usize; 3], p: [f32; 3]) -> [f32; 3] {
-        #[inline(always)]
-        fn axis(s: f32, n: usize) -> (usize, usize, f32) {
-            if n == 1 {
-                return (0, 0, 0.0);
-            }
-            let s = (s - 0.5).max(0.0).min((n - 1) as f32);
-            let i0 = (s as usize).min(n - 2);
-            (i0, i0 + 1, s - i0 as f32)
-        }
-        let (x0, x1, tx) = axis(p[0], dims[0]);
-        let (y0, y1, ty) = axis(p[1], dims[1]);
-        let (z0, z1, tz) = axis(p[2], dims[2]);
-        let nx = dims[0];
-        let nxy = nx * dims[1];
-        let r00 = y0 * nx + z0 * nxy;
-        let r10 = y1 * nx + z0 * nxy;
-        let r01 = y0 * nx + z1 * nxy;
-        let r11 = y1 * nx + z1 * nxy;
-        let lerp = |a: [f32; 4], b: [f32; 4], t: f32| -> [f32; 4] {
-            [
-                a[0] + t * (b[0] - a[0]),
-                a[1] + t * (b[1] - a[1]),
-                a[2] + t * (b[2] - a[2]),
-                0.0,
-            ]
-        };
-        let c00 = lerp(field[r00 + x0], field[r00 + x1], tx);
-        let c10 = lerp(field[r10 + x0], field[r10 + x1], tx);
-        let c01 = lerp(field[r01 + x0], field[r01 + x1], tx);
-        let c11 = lerp(field[r11 + x0], field[r11 + x1], tx);
-        let r = lerp(lerp(c00, c10, ty), lerp(c01, c11, ty), tz);
-        [r[0], r[1], r[2]]
+        let v = Sampler::new(field, dims).sample(p);
+        [v[0], v[1], v[2]]
     }
 
     /// Advances every particle by `dt_s` in the solver's current velocity (plus the overlay's
@@ -767,12 +768,16 @@ impl ParticleSystem {
         self.time_s += dt_s;
         if !self.pos.is_empty() && dt_s > 0.0 && kinds.len() >= self.field.len() {
             self.build_field(solver, kinds, overlay);
-            self.advance(kinds, dt_s);
+            let cone = view.map(|v| Cone::new(v, self.origin, self.h));
+            let sums = self.advance(kinds, dt_s, cone);
+            return view.map(|v| self.clarity_from(v, &sums));
         }
         view.map(|v| self.clarity(v))
     }
 
-    fn advance(&mut self, kinds: &[VoxelKind], dt_s: f64) {
+    /// Moves every particle; returns the clarity's sums per class over the particles that stay
+    /// (zero without a cone).
+    fn advance(&mut self, kinds: &[VoxelKind], dt_s: f64, cone: Option<Cone>) -> ClassSums {
         let inv_h = 1.0 / self.h;
         for (c, s) in self.classes.iter().zip(&mut self.class_step) {
             let e = if c.tau_s > 0.0 {
@@ -785,32 +790,57 @@ impl ParticleSystem {
             *s = (t, e as f32, disp as f32);
         }
         let k = Kernel {
-            field: &self.field,
+            field: Sampler::new(&self.field, self.dims),
             kinds,
             dims: self.dims,
             class_step: &self.class_step,
             dt: dt_s as f32,
-            max_sub: self.max_substeps,
+            max_sub: self.max_substeps as i32,
+            cone,
         };
         let n = self.pos.len();
         // The fate of every particle this step (KEEP, or the outlet), then a compaction.
         self.fate.clear();
         self.fate.resize(n, KEEP);
-        let chunk = PARALLEL_CHUNK;
-        if n >= 2 * chunk {
+        let mut sums = [0.0f32; 256];
+        if n >= PARALLEL_MIN {
             use rayon::prelude::*;
-            self.pos
+            let chunk = n.div_ceil(PARALLEL_TASKS);
+            sums = self
+                .pos
                 .par_chunks_mut(chunk)
                 .zip(self.slip.par_chunks_mut(chunk))
                 .zip(self.class.par_chunks(chunk))
                 .zip(self.fate.par_chunks_mut(chunk))
-                .for_each(|(((p, w), c), f)| k.run(p, w, c, f));
+                .map(|(((p, w), c), f)| {
+                    let mut s = [0.0f32; 256];
+                    k.run(p, w, c, f, &mut s);
+                    s
+                })
+                .reduce(
+                    || [0.0f32; 256],
+                    |mut a, b| {
+                        for (x, y) in a.iter_mut().zip(b) {
+                            *x += y;
+                        }
+                        a
+                    },
+                );
         } else {
-            k.run(&mut self.pos, &mut self.slip, &self.class, &mut self.fate);
+            k.run(
+                &mut self.pos,
+                &mut self.slip,
+                &self.class,
+                &mut self.fate,
+                &mut sums,
+            );
         }
-        // Compaction (order kept) and the counters.
-        let mut out = 0;
-        for i in 0..n {
+        // Compaction (order kept, from the first particle that left) and the counters.
+        let Some(first) = self.fate.iter().position(|&f| f != KEEP) else {
+            return sums;
+        };
+        let mut out = first;
+        for i in first..n {
             let f = self.fate[i];
             if f == KEEP {
                 if out != i {
@@ -833,32 +863,24 @@ impl ParticleSystem {
         self.slip.truncate(out);
         self.class.truncate(out);
         self.birth_s.truncate(out);
+        sums
     }
 
     /// The clarity of `view` (see [`View`]): `exp(-mean optical depth over the view cone)`.
     pub fn clarity(&self, view: &View) -> f64 {
-        let h = self.h as f32;
-        let tip: [f32; 3] =
-            std::array::from_fn(|a| ((view.tip_m[a] - self.origin[a]) / self.h) as f32);
-        let dir = view.dir.map(|x| x as f32);
-        let (cos_min, depth) = (view.cos_half_angle as f32, (view.depth_m / self.h) as f32);
-        let near2 = ((view.near_m / self.h) as f32).powi(2);
-        let mut sums = [0.0f32; 255];
+        let cone = Cone::new(view, self.origin, self.h);
+        let mut sums = [0.0f32; 256];
         for (p, &c) in self.pos.iter().zip(&self.class) {
-            let d = [p[0] - tip[0], p[1] - tip[1], p[2] - tip[2]];
-            let along = d[0] * dir[0] + d[1] * dir[1] + d[2] * dir[2];
-            if !(along > 0.0 && along <= depth) {
-                continue;
-            }
-            let r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
-            if along * along < cos_min * cos_min * r2 {
-                continue;
-            }
-            sums[c as usize] += 1.0 / r2.max(near2);
+            sums[c as usize] += cone.weight(*p);
         }
+        self.clarity_from(view, &sums)
+    }
+
+    /// The clarity from the per-class sums of [`Cone::weight`].
+    fn clarity_from(&self, view: &View, sums: &ClassSums) -> f64 {
         let mut tau = 0.0f64;
         for (c, s) in self.classes.iter().zip(sums) {
-            tau += c.shade_m2 * s as f64 / (h as f64 * h as f64);
+            tau += c.shade_m2 * f64::from(*s) / (self.h * self.h);
         }
         (-tau / view.solid_angle_sr()).exp()
     }
@@ -983,17 +1005,114 @@ const KEEP: u8 = 0;
 const OUTFLOW: u8 = 1;
 const OPEN: u8 = 2;
 const LOST: u8 = 3;
-/// Particles per parallel task (two tasks from twice this many).
-const PARALLEL_CHUNK: usize = 8192;
+/// From this many particles a step runs in parallel tasks ...
+const PARALLEL_MIN: usize = 4096;
+/// ... this many (a few per core, so a slow chunk does not hold the step).
+const PARALLEL_TASKS: usize = 8;
+/// Longest substep along any axis, cells.
+const SUBSTEP_CELLS: f32 = 0.9;
+
+/// Per class: the sum over a step's particles of their [`Cone::weight`].
+type ClassSums = [f32; 256];
+
+/// The view cone in grid units.
+#[derive(Clone, Copy)]
+struct Cone {
+    tip: [f32; 3],
+    dir: [f32; 3],
+    cos2: f32,
+    depth: f32,
+    near2: f32,
+}
+
+impl Cone {
+    fn new(view: &View, origin: [f64; 3], h: f64) -> Self {
+        let c = view.cos_half_angle as f32;
+        Self {
+            tip: std::array::from_fn(|a| ((view.tip_m[a] - origin[a]) / h) as f32),
+            dir: view.dir.map(|x| x as f32),
+            cos2: c * c,
+            depth: (view.depth_m / h) as f32,
+            near2: ((view.near_m / h) as f32).powi(2),
+        }
+    }
+
+    /// `1 / max(r, near)^2` (grid units) for a particle inside the cone, else 0.
+    #[inline(always)]
+    fn weight(&self, p: [f32; 3]) -> f32 {
+        let d = [p[0] - self.tip[0], p[1] - self.tip[1], p[2] - self.tip[2]];
+        let along = d[0] * self.dir[0] + d[1] * self.dir[1] + d[2] * self.dir[2];
+        let r2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+        if along > 0.0 && along <= self.depth && along * along >= self.cos2 * r2 {
+            1.0 / r2.max(self.near2)
+        } else {
+            0.0
+        }
+    }
+}
+
+/// Trilinear interpolation of the cell-centred field (4 lanes, one SIMD lerp per pair).
+#[derive(Clone, Copy)]
+struct Sampler<'a> {
+    field: &'a [[f32; 4]],
+    /// Largest sample position along each axis (`n - 1`).
+    smax: [f32; 3],
+    /// Largest lower sample index along each axis (`n - 2`, 0 for one cell).
+    imax: [i32; 3],
+    /// Index step to the upper sample along each axis (0 for one cell).
+    step: [usize; 3],
+    /// Index strides.
+    stride: [usize; 2],
+}
+
+impl<'a> Sampler<'a> {
+    fn new(field: &'a [[f32; 4]], dims: [usize; 3]) -> Self {
+        let stride = [dims[0], dims[0] * dims[1]];
+        Self {
+            field,
+            smax: dims.map(|n| n.saturating_sub(1) as f32),
+            imax: dims.map(|n| n.saturating_sub(2) as i32),
+            step: std::array::from_fn(|a| usize::from(dims[a] > 1) * [1, stride[0], stride[1]][a]),
+            stride,
+        }
+    }
+
+    #[inline(always)]
+    fn sample(&self, p: [f32; 3]) -> [f32; 4] {
+        let mut i = [0usize; 3];
+        let mut t = [0.0f32; 3];
+        for a in 0..3 {
+            // max/min (not clamp) so a NaN position lands on sample 0; i32 conversions compile
+            // to one instruction.
+            let s = (p[a] - 0.5).max(0.0).min(self.smax[a]);
+            let i0 = (s as i32).min(self.imax[a]);
+            i[a] = i0 as usize;
+            t[a] = s - i0 as f32;
+        }
+        #[inline(always)]
+        fn lerp(a: [f32; 4], b: [f32; 4], t: f32) -> [f32; 4] {
+            std::array::from_fn(|l| a[l] + t * (b[l] - a[l]))
+        }
+        let f = self.field;
+        let [sx, sy, sz] = self.step;
+        let b = i[0] + self.stride[0] * i[1] + self.stride[1] * i[2];
+        let c00 = lerp(f[b], f[b + sx], t[0]);
+        let c10 = lerp(f[b + sy], f[b + sy + sx], t[0]);
+        let c01 = lerp(f[b + sz], f[b + sz + sx], t[0]);
+        let c11 = lerp(f[b + sz + sy], f[b + sz + sy + sx], t[0]);
+        lerp(lerp(c00, c10, t[1]), lerp(c01, c11, t[1]), t[2])
+    }
+}
 
 /// The per-particle step, shared by the threads.
 struct Kernel<'a> {
-    field: &'a [[f32; 4]],
+    field: Sampler<'a>,
     kinds: &'a [VoxelKind],
     dims: [usize; 3],
     class_step: &'a [([f32; 3], f32, f32)],
     dt: f32,
-    max_sub: usize,
+    max_sub: i32,
+    cone: Option<Cone>,
 }
 
 impl Kernel<'_> {
@@ -1003,7 +1122,12 @@ impl Kernel<'_> {
         if !(p[0] >= 0.0 && p[1] >= 0.0 && p[2] >= 0.0) {
             return VoxelKind::Solid;
         }
-        let (i, j, k) = (p[0] as usize, p[1] as usize, p[2] as usize);
+        // Non-negative here: the i32 conversion truncates (and saturates far outside).
+        let (i, j, k) = (
+            p[0] as i32 as usize,
+            p[1] as i32 as usize,
+            p[2] as i32 as usize,
+        );
         if i < d[0] && j < d[1] && k < d[2] {
             self.kinds[i + d[0] * (j + d[1] * k)]
         } else {
@@ -1011,8 +1135,15 @@ impl Kernel<'_> {
         }
     }
 
-    fn run(&self, pos: &mut [[f32; 3]], slip: &mut [[f32; 3]], class: &[u8], fate: &mut [u8]) {
-        let (dims, dt, field) = (self.dims, self.dt, self.field);
+    fn run(
+        &self,
+        pos: &mut [[f32; 3]],
+        slip: &mut [[f32; 3]],
+        class: &[u8],
+        fate: &mut [u8],
+        sums: &mut ClassSums,
+    ) {
+        let (dt, field) = (self.dt, &self.field);
         for n in 0..pos.len() {
             let mut p = pos[n];
             // A cell that stopped being fluid: leave through an outlet, or move to a fluid
@@ -1036,7 +1167,8 @@ impl Kernel<'_> {
                 },
             }
             // Slip: w(t) = wt + (w0 - wt) e^(-t/tau), integrated exactly over the step.
-            let (wt, e, disp) = self.class_step[class[n] as usize];
+            let c = class[n];
+            let (wt, e, disp) = self.class_step[c as usize];
             let w0 = slip[n];
             let mut slip_d = [0.0f32; 3];
             let mut w1 = [0.0f32; 3];
@@ -1044,29 +1176,35 @@ impl Kernel<'_> {
                 slip_d[a] = wt[a] * dt + (w0[a] - wt[a]) * disp;
                 w1[a] = wt[a] + (w0[a] - wt[a]) * e;
             }
-            let mut k1 = ParticleSystem::sample(field, dims, p);
-            let travel = (k1[0].abs() + k1[1].abs() + k1[2].abs()) * dt
-                + slip_d[0].abs()
-                + slip_d[1].abs()
-                + slip_d[2].abs();
-            let subs = (travel / 0.9).ceil().clamp(1.0, self.max_sub as f32) as usize;
+            // Substeps: the particle's own displacement, at most SUBSTEP_CELLS along any axis.
+            let mut k1 = field.sample(p);
+            let mut travel = 0.0f32;
+            for a in 0..3 {
+                travel = travel.max(k1[a].abs() * dt + slip_d[a].abs());
+            }
+            let x = travel * (1.0 / SUBSTEP_CELLS);
+            let whole = x as i32;
+            let subs = (whole + i32::from((whole as f32) < x)).clamp(1, self.max_sub);
             let hs = dt / subs as f32;
             let sd = slip_d.map(|d| d / subs as f32);
+            let mut keep = true;
             for sub in 0..subs {
                 if sub > 0 {
-                    k1 = ParticleSystem::sample(field, dims, p);
+                    k1 = field.sample(p);
                 }
                 let mid = std::array::from_fn(|a| p[a] + 0.5 * hs * k1[a] + 0.5 * sd[a]);
-                let k2 = ParticleSystem::sample(field, dims, mid);
+                let k2 = field.sample(mid);
                 let q: [f32; 3] = std::array::from_fn(|a| p[a] + hs * k2[a] + sd[a]);
                 match self.kind_at(q) {
                     VoxelKind::Fluid => p = q,
                     VoxelKind::Outflow => {
                         fate[n] = OUTFLOW;
+                        keep = false;
                         break;
                     }
                     VoxelKind::Open => {
                         fate[n] = OPEN;
+                        keep = false;
                         break;
                     }
                     _ => {
@@ -1084,6 +1222,11 @@ impl Kernel<'_> {
             }
             pos[n] = p;
             slip[n] = w1;
+            if keep {
+                if let Some(cone) = &self.cone {
+                    sums[c as usize] += cone.weight(p);
+                }
+            }
         }
     }
 }

@@ -283,16 +283,24 @@ pub struct VortexField {
     /// Per node: 1 when all eight cells around it are fluid.
     node_mask: Vec<u8>,
     fluid_cells: Vec<u32>,
+    /// Per component: every face of a fluid cell once, as `(face, its lowest node)`.
+    fluid_faces: [Vec<[u32; 2]>; 3],
     /// Node-centred vector potential, per component, m^2/s.
     pot: [Vec<f32>; 3],
     /// The field's face velocities, m/s (the solver's layout).
     faces: [Vec<f32>; 3],
     /// The field last added to the solver (injected mode).
     injected: [Vec<f32>; 3],
-    /// Node boxes written last time (`[lo; 3], [hi; 3]` inclusive), to clear.
-    boxes: Vec<([usize; 3], [usize; 3])>,
+    /// The nodes of `node_mask` (the only ones whose potential can be non-zero).
+    fluid_nodes: Vec<u32>,
+    /// Per row of nodes (`j + (ny + 1) k`): the first and last `i` of its nodes in `node_mask`
+    /// (first > last: none).
+    row_nodes: Vec<(u32, u32)>,
+    /// The node layer splitting the nodes of `node_mask` in halves (the two tasks of
+    /// `rebuild`).
+    split_k: usize,
     /// `Psi(q) w(q)` over `Gamma / (2 pi)` at `q = r^2/R^2`.
-    table: Vec<f32>,
+    table: Box<[f32; TABLE_SIZE + 1]>,
     stats: VortexStats,
 }
 
@@ -310,16 +318,16 @@ impl VortexField {
         let faces: [Vec<f32>; 3] =
             std::array::from_fn(|c| vec![0.0; solver.face_velocities(c).len()]);
         let qmax = CUTOFF_CORES * CUTOFF_CORES;
-        let table = (0..=TABLE_SIZE)
-            .map(|i| {
-                let r = (qmax * i as f64 / TABLE_SIZE as f64).sqrt();
-                (rankine_psi(r) * taper(r, RANKINE_EXACT_CORES, CUTOFF_CORES).0) as f32
-            })
-            .collect();
+        let table = Box::new(std::array::from_fn(|i| {
+            let r = (qmax * i as f64 / TABLE_SIZE as f64).sqrt();
+            (rankine_psi(r) * taper(r, RANKINE_EXACT_CORES, CUTOFF_CORES).0) as f32
+        }));
         Ok(Self {
             rng: SeededRng::new(spec.seed),
             vortices: Vec::with_capacity(spec.max_count),
-            boxes: Vec::with_capacity(spec.max_count),
+            fluid_nodes: Vec::new(),
+            split_k: 0,
+            row_nodes: vec![(1, 0); (dims[1] + 1) * (dims[2] + 1)],
             core_radius_m: spec.core_radius_m(h),
             spec,
             dims,
@@ -328,6 +336,7 @@ impl VortexField {
             revision: 0,
             node_mask: vec![0; nodes],
             fluid_cells: Vec::new(),
+            fluid_faces: std::array::from_fn(|_| Vec::new()),
             pot: std::array::from_fn(|_| vec![0.0; nodes]),
             injected: faces.clone(),
             faces,
@@ -381,37 +390,107 @@ impl VortexField {
             return;
         }
         self.revision = g.revision();
+        // The potential's support moved with the labels: start the field afresh (what was
+        // injected stays in the solver's state and decays there). Everything non-zero sits on
+        // the old lists, so only they are cleared: the work follows the fluid cells, not the
+        // grid (the cavity relabels often).
+        for &n in &self.fluid_nodes {
+            self.node_mask[n as usize] = 0;
+            for p in &mut self.pot {
+                p[n as usize] = 0.0;
+            }
+        }
+        for c in 0..3 {
+            for &[f, _] in &self.fluid_faces[c] {
+                self.faces[c][f as usize] = 0.0;
+                self.injected[c][f as usize] = 0.0;
+            }
+        }
         let [nx, ny, nz] = self.dims;
         let labels = g.labels();
-        let fluid =
-            |i: usize, j: usize, k: usize| labels[i + nx * (j + ny * k)] == CellLabel::Fluid;
+        let fluid = |n: usize| labels[n] == CellLabel::Fluid;
         self.fluid_cells.clear();
         for (n, l) in labels.iter().enumerate() {
             if *l == CellLabel::Fluid {
                 self.fluid_cells.push(n as u32);
             }
         }
-        let (sx, sy) = (nx + 1, ny + 1);
-        for k in 0..=nz {
-            for j in 0..=ny {
-                for i in 0..=nx {
-                    let inside = i > 0 && j > 0 && k > 0 && i < nx && j < ny && k < nz;
-                    let m = inside
-                        && (0..8).all(|b| {
-                            fluid(i - 1 + (b & 1), j - 1 + (b >> 1 & 1), k - 1 + (b >> 2))
-                        });
-                    self.node_mask[i + sx * (j + sy * k)] = m as u8;
+        // A node is in `node_mask` when its eight cells are fluid: count the fluid cells around
+        // each corner of the fluid cells in `node_mask` itself, list the nodes that reach 8
+        // (marked 9), zero the other counters, then set the listed nodes to 1.
+        let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
+        let corners = |n: u32| {
+            let n = n as usize;
+            let base = n % nx + sx * ((n / nx) % ny) + sy * (n / (nx * ny));
+            (0..8).map(move |b| base + (b & 1) + sx * (b >> 1 & 1) + sy * (b >> 2))
+        };
+        for &n in &self.fluid_cells {
+            for node in corners(n) {
+                self.node_mask[node] += 1;
+            }
+        }
+        self.fluid_nodes.clear();
+        self.row_nodes.fill((1, 0));
+        for &n in &self.fluid_cells {
+            for node in corners(n) {
+                match self.node_mask[node] {
+                    // All eight cells are fluid, so the node is inside the grid.
+                    8 => {
+                        self.node_mask[node] = 9;
+                        self.fluid_nodes.push(node as u32);
+                        let (i, row) = ((node % sx) as u32, node / sx);
+                        let r = &mut self.row_nodes[row];
+                        *r = if r.0 > r.1 {
+                            (i, i)
+                        } else {
+                            (r.0.min(i), r.1.max(i))
+                        };
+                    }
+                    9 => {}
+                    _ => self.node_mask[node] = 0,
                 }
             }
         }
-        // The potential's support moved with the labels: start the field afresh (what was
-        // injected stays in the solver's state and decays there).
-        for c in 0..3 {
-            self.faces[c].fill(0.0);
-            self.injected[c].fill(0.0);
-            self.pot[c].fill(0.0);
+        for &n in &self.fluid_nodes {
+            self.node_mask[n as usize] = 1;
         }
-        self.boxes.clear();
+        self.fluid_nodes.sort_unstable();
+        let layer = sy;
+        self.split_k = self
+            .fluid_nodes
+            .get(self.fluid_nodes.len() / 2)
+            .map_or(0, |&n| n as usize / layer);
+        // The faces of the fluid cells, each once (the upper face only where the next cell is
+        // not fluid), in index order; only those with a corner node in `node_mask` (the others'
+        // circulation is zero).
+        let node_stride = [1, sx, sy];
+        let cell_stride = [1, nx, nx * ny];
+        for c in 0..3 {
+            let mut fd = [nx, ny, nz];
+            fd[c] += 1;
+            let (sa, sb) = (node_stride[(c + 1) % 3], node_stride[(c + 2) % 3]);
+            let list = &mut self.fluid_faces[c];
+            list.clear();
+            for &n in &self.fluid_cells {
+                let n = n as usize;
+                let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                let next_fluid = cell[c] + 1 < [nx, ny, nz][c] && fluid(n + cell_stride[c]);
+                for up in 0..2 {
+                    if up == 1 && next_fluid {
+                        continue;
+                    }
+                    let mut f = cell;
+                    f[c] += up;
+                    let idx = f[0] + fd[0] * (f[1] + fd[1] * f[2]);
+                    let node = f[0] + sx * f[1] + sy * f[2];
+                    let corners = [node, node + sa, node + sb, node + sa + sb];
+                    if corners.iter().any(|&m| self.node_mask[m] != 0) {
+                        list.push([idx as u32, node as u32]);
+                    }
+                }
+            }
+            list.sort_unstable();
+        }
         // Vortices now outside the fluid respawn on the next step.
     }
 
@@ -432,28 +511,14 @@ impl VortexField {
             .is_some_and(|n| solver.grid().label_at(n) == CellLabel::Fluid)
     }
 
-    /// The curl of the resolved velocity at `p` (central differences over one cell), 1/s.
-    fn curl(&self, solver: &FluidSolver, p: [f64; 3]) -> [f64; 3] {
-        let h = self.h;
-        let d = |a: usize, c: usize| {
-            let mut lo = p;
-            let mut hi = p;
-            lo[a] -= h;
-            hi[a] += h;
-            (solver.sample_velocity_m_s(hi)[c] - solver.sample_velocity_m_s(lo)[c]) / (2.0 * h)
-        };
-        [d(1, 2) - d(2, 1), d(2, 0) - d(0, 2), d(0, 1) - d(1, 0)]
-    }
-
     /// Axis and circulation from the resolved flow at the vortex's centre; a vortex where the
     /// flow has no curl keeps its axis.
     fn orient(&self, solver: &FluidSolver, v: &mut Vortex) {
-        let w = self.curl(solver, v.centre_m);
+        let (u, w) = solver.velocity_and_curl(v.centre_m);
         let m = dot(w, w).sqrt();
         if m.is_finite() && m > 1e-9 {
             v.axis = w.map(|x| x / m);
         }
-        let u = solver.sample_velocity_m_s(v.centre_m);
         let speed = dot(u, u).sqrt();
         let peak = (self.spec.intensity * speed).min(self.spec.max_peak_speed_m_s);
         let peak = if peak.is_finite() { peak } else { 0.0 };
@@ -530,128 +595,67 @@ impl VortexField {
     /// evaluated.
     pub fn rebuild(&mut self, solver: &FluidSolver) -> usize {
         self.sync_labels(solver);
-        let [nx, ny, _] = self.dims;
-        let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
-        for &(lo, hi) in &self.boxes {
-            for k in lo[2]..=hi[2] {
-                for j in lo[1]..=hi[1] {
-                    let row = sx * j + sy * k;
-                    for p in &mut self.pot {
-                        p[row + lo[0]..=row + hi[0]].fill(0.0);
-                    }
-                }
+        for &n in &self.fluid_nodes {
+            for p in &mut self.pot {
+                p[n as usize] = 0.0;
             }
         }
-        self.boxes.clear();
-        let mut evaluated = 0;
-        let qmax = (CUTOFF_CORES * CUTOFF_CORES) as f32;
-        let tscale = TABLE_SIZE as f32 / qmax;
-        let h = self.h;
-        for v in &self.vortices {
-            let ext = v.half_extent_m();
-            let mut lo = [0usize; 3];
-            let mut hi = [0usize; 3];
-            let mut empty = false;
-            for a in 0..3 {
-                let l = ((v.centre_m[a] - ext[a] - self.origin[a]) / h)
-                    .ceil()
-                    .max(0.0);
-                let u = ((v.centre_m[a] + ext[a] - self.origin[a]) / h)
-                    .floor()
-                    .min(self.dims[a] as f64);
-                if l.is_nan() || u.is_nan() || l > u {
-                    empty = true;
-                }
-                lo[a] = l as usize;
-                hi[a] = u.max(0.0) as usize;
-            }
-            if empty || v.circulation_m2_s == 0.0 {
-                continue;
-            }
-            self.boxes.push((lo, hi));
-            let n = v.axis.map(|x| x as f32);
-            let amp = (v.circulation_m2_s / (2.0 * std::f64::consts::PI)) as f32;
-            let inv_r2 = (1.0 / (v.core_radius_m * v.core_radius_m)) as f32;
-            let (flat, end) = (
-                (AXIAL_FLAT_CORES * v.core_radius_m) as f32,
-                (AXIAL_END_CORES * v.core_radius_m) as f32,
-            );
-            let inv_len = 1.0 / (end - flat);
-            let dx0 = (self.origin[0] + lo[0] as f64 * h - v.centre_m[0]) as f32;
-            let hf = h as f32;
-            let table = &self.table[..];
-            let [p0, p1, p2] = &mut self.pot;
-            for k in lo[2]..=hi[2] {
-                let dz = self.origin[2] + k as f64 * h - v.centre_m[2];
-                for j in lo[1]..=hi[1] {
-                    let dy = self.origin[1] + j as f64 * h - v.centre_m[1];
-                    let s0 = (dy * v.axis[1] + dz * v.axis[2]) as f32;
-                    let e0 = (dy * dy + dz * dz) as f32;
-                    let row = sx * j + sy * k;
-                    for i in lo[0]..=hi[0] {
-                        let node = row + i;
-                        if self.node_mask[node] == 0 {
-                            continue;
-                        }
-                        let dx = dx0 + (i - lo[0]) as f32 * hf;
-                        let s = s0 + dx * n[0];
-                        let sa = s.abs();
-                        if sa >= end {
-                            continue;
-                        }
-                        let q = (dx * dx + e0 - s * s).max(0.0) * inv_r2;
-                        if q >= qmax {
-                            continue;
-                        }
-                        evaluated += 1;
-                        let g = if sa <= flat {
-                            1.0
-                        } else {
-                            let t = (sa - flat) * inv_len;
-                            1.0 - t * t * (3.0 - 2.0 * t)
-                        };
-                        let x = q * tscale;
-                        let m = (x as usize).min(TABLE_SIZE - 1);
-                        let f = x - m as f32;
-                        let psi = table[m] + f * (table[m + 1] - table[m]);
-                        let phi = amp * g * psi;
-                        p0[node] += phi * n[0];
-                        p1[node] += phi * n[1];
-                        p2[node] += phi * n[2];
-                    }
-                }
-            }
-        }
+        // Two tasks: the node layers below `split_k` and the rest (disjoint nodes, so no
+        // locks), then the curl's faces in two halves.
+        let layer = (self.dims[0] + 1) * (self.dims[1] + 1);
+        let at = self.split_k * layer;
+        let [p0, p1, p2] = &mut self.pot;
+        let (p0a, p0b) = p0.split_at_mut(at);
+        let (p1a, p1b) = p1.split_at_mut(at);
+        let (p2a, p2b) = p2.split_at_mut(at);
+        let slab = Slab {
+            vortices: &self.vortices,
+            node_mask: &self.node_mask,
+            row_nodes: &self.row_nodes,
+            table: &self.table,
+            dims: self.dims,
+            origin: self.origin,
+            h: self.h,
+        };
+        let (lower, upper) = rayon::join(
+            || slab.potential(0..self.split_k, 0, [p0a, p1a, p2a]),
+            || slab.potential(self.split_k..self.dims[2] + 1, at, [p0b, p1b, p2b]),
+        );
         self.curl_faces();
-        evaluated
+        lower + upper
     }
 
-    /// Face velocities of the fluid cells' faces from the node potential.
+    /// Face velocities of the fluid cells' faces from the node potential (each component's
+    /// faces in two halves, on two tasks).
     fn curl_faces(&mut self) {
-        let [nx, ny, nz] = self.dims;
+        let [nx, ny, _] = self.dims;
         let stride = [1, nx + 1, (nx + 1) * (ny + 1)];
         let inv = (0.5 / self.h) as f32;
         let pot = &self.pot;
-        for &n in &self.fluid_cells {
-            let n = n as usize;
-            let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
-            for c in 0..3 {
-                // Both faces of the cell along c (the lower one may border a non-fluid cell).
-                for up in 0..2 {
-                    let mut f = cell;
-                    f[c] += up;
-                    let (a, b) = ((c + 1) % 3, (c + 2) % 3);
-                    let base = f[0] + stride[1] * f[1] + stride[2] * f[2];
-                    let (sa, sb) = (stride[a], stride[b]);
-                    let (na, nb) = (&pot[a], &pot[b]);
+        type Part<'a> = (&'a [[u32; 2]], &'a mut [f32], usize);
+        let [f0, f1, f2] = &mut self.faces;
+        let parts: [[Part; 2]; 3] = [(0, f0), (1, f1), (2, f2)].map(|(c, out)| {
+            let list = &self.fluid_faces[c][..];
+            let (la, lb) = list.split_at(list.len() / 2);
+            let at = lb.first().map_or(out.len(), |f| f[0] as usize);
+            let (oa, ob) = out.split_at_mut(at);
+            [(la, oa, 0), (lb, ob, at)]
+        });
+        let [[a0, b0], [a1, b1], [a2, b2]] = parts;
+        let run = |parts: [Part; 3]| {
+            for (c, (list, out, offset)) in parts.into_iter().enumerate() {
+                let (a, b) = ((c + 1) % 3, (c + 2) % 3);
+                let (sa, sb) = (stride[a], stride[b]);
+                let (na, nb) = (&pot[a][..], &pot[b][..]);
+                for &[f, base] in list {
+                    let base = base as usize;
                     let u = (nb[base + sa] + nb[base + sa + sb] - nb[base] - nb[base + sb])
                         - (na[base + sb] + na[base + sa + sb] - na[base] - na[base + sa]);
-                    let mut fd = [nx, ny, nz];
-                    fd[c] += 1;
-                    self.faces[c][f[0] + fd[0] * (f[1] + fd[1] * f[2])] = u * inv;
+                    out[f as usize - offset] = u * inv;
                 }
             }
-        }
+        };
+        rayon::join(|| run([a0, a1, a2]), || run([b0, b1, b2]));
     }
 
     /// Adds the change of the field since the last injection to the solver's face velocities
@@ -661,23 +665,15 @@ impl VortexField {
         if solver.grid().revision() != self.revision {
             return;
         }
-        let [nx, ny, nz] = self.dims;
         for c in 0..3 {
-            let mut fd = [nx, ny, nz];
-            fd[c] += 1;
             let u = solver.face_velocities_mut(c);
-            for &n in &self.fluid_cells {
-                let n = n as usize;
-                let f = [n % nx, (n / nx) % ny, n / (nx * ny)];
-                for up in 0..2 {
-                    let mut g = f;
-                    g[c] += up;
-                    let idx = g[0] + fd[0] * (g[1] + fd[1] * g[2]);
-                    let d = self.faces[c][idx] - self.injected[c][idx];
-                    if d != 0.0 {
-                        u[idx] += d;
-                        self.injected[c][idx] = self.faces[c][idx];
-                    }
+            let (faces, injected) = (&self.faces[c], &mut self.injected[c]);
+            for &[f, _] in &self.fluid_faces[c] {
+                let idx = f as usize;
+                let d = faces[idx] - injected[idx];
+                if d != 0.0 {
+                    u[idx] += d;
+                    injected[idx] = faces[idx];
                 }
             }
         }
@@ -701,6 +697,165 @@ impl VortexField {
             }
         }
     }
+}
+
+/// What the potential's evaluation over a range of node layers reads.
+struct Slab<'a> {
+    vortices: &'a [Vortex],
+    node_mask: &'a [u8],
+    row_nodes: &'a [(u32, u32)],
+    table: &'a [f32; TABLE_SIZE + 1],
+    dims: [usize; 3],
+    origin: [f64; 3],
+    h: f64,
+}
+
+impl Slab<'_> {
+    /// Adds every vortex's potential at the nodes of `node_mask` in the node layers `layers`
+    /// to `pot` (those layers' nodes, the first at node `offset`); returns the nodes evaluated.
+    fn potential(
+        &self,
+        layers: std::ops::Range<usize>,
+        offset: usize,
+        mut pot: [&mut [f32]; 3],
+    ) -> usize {
+        if layers.is_empty() {
+            return 0;
+        }
+        let [nx, ny, _] = self.dims;
+        let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
+        let mut evaluated = 0;
+        let qmax = (CUTOFF_CORES * CUTOFF_CORES) as f32;
+        let tscale = TABLE_SIZE as f32 / qmax;
+        let h = self.h;
+        for v in self.vortices {
+            let ext = v.half_extent_m();
+            let mut lo = [0usize; 3];
+            let mut hi = [0usize; 3];
+            let mut empty = false;
+            for a in 0..3 {
+                let l = ((v.centre_m[a] - ext[a] - self.origin[a]) / h)
+                    .ceil()
+                    .max(0.0);
+                let u = ((v.centre_m[a] + ext[a] - self.origin[a]) / h)
+                    .floor()
+                    .min(self.dims[a] as f64);
+                if l.is_nan() || u.is_nan() || l > u {
+                    empty = true;
+                }
+                lo[a] = l as usize;
+                hi[a] = u.max(0.0) as usize;
+            }
+            if empty || v.circulation_m2_s == 0.0 {
+                continue;
+            }
+            let n = v.axis.map(|x| x as f32);
+            let amp = (v.circulation_m2_s / (2.0 * std::f64::consts::PI)) as f32;
+            let inv_r2 = (1.0 / (v.core_radius_m * v.core_radius_m)) as f32;
+            let (flat, end) = (
+                (AXIAL_FLAT_CORES * v.core_radius_m) as f32,
+                (AXIAL_END_CORES * v.core_radius_m) as f32,
+            );
+            let inv_len = 1.0 / (end - flat);
+            let hf = h as f32;
+            let inv_hf = 1.0 / hf;
+            let r2max = qmax / inv_r2;
+            let table = self.table;
+            let [p0, p1, p2] = &mut pot;
+            for k in lo[2].max(layers.start)..=hi[2].min(layers.end - 1) {
+                let dz = self.origin[2] + k as f64 * h - v.centre_m[2];
+                for j in lo[1]..=hi[1] {
+                    // Only the row's nodes in `node_mask` (their extent, precomputed).
+                    let (ra, rb) = self.row_nodes[j + (ny + 1) * k];
+                    let (ia, ib) = (lo[0].max(ra as usize), hi[0].min(rb as usize));
+                    if ia > ib {
+                        continue;
+                    }
+                    let dy = self.origin[1] + j as f64 * h - v.centre_m[1];
+                    let s0 = (dy * v.axis[1] + dz * v.axis[2]) as f32;
+                    let e0 = (dy * dy + dz * dz) as f32;
+                    let x_ia = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
+                    // The row's stretch within the cylinder r < cutoff (a node of margin).
+                    let Some((ia, ib)) = row_span(ia, ib, x_ia, [s0, e0, n[0]], r2max, inv_hf)
+                    else {
+                        continue;
+                    };
+                    let row = sx * j + sy * k - offset;
+                    let nodes = row + ia..=row + ib;
+                    let mut dx = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
+                    for (((&mask, a0), a1), a2) in self.node_mask
+                        [nodes.start() + offset..=nodes.end() + offset]
+                        .iter()
+                        .zip(&mut p0[nodes.clone()])
+                        .zip(&mut p1[nodes.clone()])
+                        .zip(&mut p2[nodes])
+                    {
+                        let x = dx;
+                        dx += hf;
+                        let s = s0 + x * n[0];
+                        let sa = s.abs();
+                        let q = (x * x + e0 - s * s).max(0.0) * inv_r2;
+                        if mask == 0 || sa >= end || q >= qmax {
+                            continue;
+                        }
+                        evaluated += 1;
+                        let g = if sa <= flat {
+                            1.0
+                        } else {
+                            let t = (sa - flat) * inv_len;
+                            1.0 - t * t * (3.0 - 2.0 * t)
+                        };
+                        let x = q * tscale;
+                        let m = (x as i32 as usize).min(TABLE_SIZE - 1);
+                        let f = x - m as f32;
+                        let psi = table[m] + f * (table[m + 1] - table[m]);
+                        let phi = amp * g * psi;
+                        *a0 += phi * n[0];
+                        *a1 += phi * n[1];
+                        *a2 += phi * n[2];
+                    }
+                }
+            }
+        }
+        evaluated
+    }
+}
+
+/// The nodes `ia..=ib` of a row (along x; the first at `x_ia` from the vortex's centre, `s0`
+/// and `e0` the row's axial offset and squared distance in y and z, `n0` the axis's x
+/// component) that can lie within `r^2 < r2max` of the axis, with a node of margin each side;
+/// `None` when none can. (Rows nearly along the axis are not narrowed.)
+#[inline]
+fn row_span(
+    ia: usize,
+    ib: usize,
+    x_ia: f32,
+    [s0, e0, n0]: [f32; 3],
+    r2max: f32,
+    inv_h: f32,
+) -> Option<(usize, usize)> {
+    // r^2(x) = (1 - n0^2) x^2 - 2 s0 n0 x + e0 - s0^2.
+    let a = 1.0 - n0 * n0;
+    if a <= 1e-3 {
+        return Some((ia, ib));
+    }
+    let b = -2.0 * s0 * n0;
+    let c = e0 - s0 * s0 - r2max;
+    let disc = b * b - 4.0 * a * c;
+    if disc.is_nan() || disc < 0.0 {
+        return None;
+    }
+    let (sq, inv_2a) = (disc.sqrt(), 0.5 / a);
+    let first = ((-b - sq) * inv_2a - x_ia) * inv_h - 1.0;
+    let last = ((-b + sq) * inv_2a - x_ia) * inv_h + 1.0;
+    let span = (ib - ia) as f32;
+    if !(last >= 0.0 && first <= span) {
+        return None;
+    }
+    // Non-negative and at most `span` here: the conversions truncate.
+    let first = ia + first.max(0.0) as usize;
+    let last = ia + last.min(span) as usize;
+    (first <= last).then_some((first, last))
 }
 
 /// The vortex stage of a scene.
