@@ -5,11 +5,15 @@ cavity/positions and flow for --seconds and prints one JSON object per received 
 
   {"kind": "topology", "revision", "triangles", "vertices", "t"}
   {"kind": "positions", "t", "revision", "pressure_pa", "volume_m3", "status": {...} | null}
-  {"kind": "flow", "t", "inflow_cells", "jet", "status": {...} | null}
+  {"kind": "flow", "t", "inflow_cells", "jet", "status": {...} | null, "frame_status": {...} | null}
   {"kind": "end", "statuses", "last_status": {...}}
 
 "status" is the status with the sample's status_sequence (null when this subscriber did not get
-it). hil-tests/tests/scene_stream.rs asserts on the lines.
+it). "frame_status" is the first later status whose scene_frames is at least two past the paired
+status's: it shows the scene figures (such as inflow_port_open_fraction) of the frame that
+published the field or of the next one, which the paired status (taken before that frame) may not
+have yet; a figure equal in both held throughout the field's frame.
+hil-tests/tests/scene_stream.rs asserts on the lines.
 """
 
 import argparse
@@ -35,6 +39,8 @@ def brief(s):
         "cavity_volume_m3": s.cavity_volume_m3,
         "cavity_surface_volume_m3": s.cavity_surface_volume_m3,
         "inflow_port_velocity_m_per_s": s.inflow_port_velocity_m_per_s,
+        "inflow_port_open_fraction": s.inflow_port_open_fraction,
+        "scene_frames": s.scene_frames,
         "scope_view_direction": list(s.scope_view_direction),
         "scope_tip_position_m": list(s.scope_tip_position_m),
         "valve_in_opening": s.valve_in_opening,
@@ -46,6 +52,18 @@ def brief(s):
         "deadline_misses": s.deadline_misses,
         "ticks": s.ticks,
     }
+
+
+def frame_status(statuses, seq, newest):
+    """The first status after `seq` (gaps allowed) whose scene_frames is two past status `seq`'s."""
+    base = statuses.get(seq)
+    if base is None:
+        return None
+    for later in range(seq + 1, newest + 1):
+        s = statuses.get(later)
+        if s is not None and s["scene_frames"] >= base["scene_frames"] + 2:
+            return s
+    return None
 
 
 def main() -> int:
@@ -70,9 +88,9 @@ def main() -> int:
                                deadline).listener_builder().create()
     print(json.dumps({"kind": "ready", "t": time.monotonic()}), flush=True)
 
-    statuses, count, last = {}, 0, None
+    statuses, count, last, newest = {}, 0, None, -1
     tris, revision = None, None
-    pending = []  # samples waiting for their status
+    pending = []  # samples waiting for their status (and flow fields for their frame's status)
     end = time.monotonic() + args.seconds
     while time.monotonic() < end:
         listener.timed_wait(iox2.Duration.from_millis(5))
@@ -81,6 +99,7 @@ def main() -> int:
             st = s.payload().contents
             statuses[st.sequence] = brief(st)
             last = statuses[st.sequence]
+            newest = max(newest, st.sequence)
             count += 1
         while (s := topo.receive()) is not None:
             h, tris = hs.triangles(s)
@@ -97,10 +116,15 @@ def main() -> int:
             jet, cells = f.mean_velocity(hs.INFLOW)
             pending.append(({"kind": "flow", "t": now, "inflow_cells": cells,
                              "jet": None if jet is None else [float(x) for x in jet]}, f.status_sequence, now))
-        # A sample's status may arrive a little after the sample: wait up to 50 ms for it.
+        # A sample's status may arrive a little after the sample: wait up to 50 ms for it; a flow
+        # field also waits up to 300 ms for the status of its frame.
         keep = []
         for line, seq, at in pending:
-            if seq in statuses or now - at > 0.05:
+            done = seq in statuses or now - at > 0.05
+            if done and line["kind"] == "flow":
+                line["frame_status"] = frame_status(statuses, seq, newest)
+                done = line["frame_status"] is not None or now - at > 0.3
+            if done:
                 line["status"] = statuses.get(seq)
                 print(json.dumps(line), flush=True)
             else:

@@ -23,7 +23,8 @@ fn python() -> String {
     python
 }
 
-/// Runs the checker for `seconds` and returns its JSON lines.
+/// Runs the checker for `seconds` and returns its JSON lines. Its output is read while `during`
+/// runs: a pipe nobody drains fills after a few dozen lines and stalls the checker.
 fn check(prefix: &str, seconds: f64, during: impl FnOnce()) -> Vec<Value> {
     let script = workspace_root().join("hil-tests/python/scene_check.py");
     let child = Command::new(python())
@@ -33,8 +34,12 @@ fn check(prefix: &str, seconds: f64, during: impl FnOnce()) -> Vec<Value> {
         .stderr(Stdio::piped())
         .spawn()
         .expect("start the Python checker");
+    let output = std::thread::spawn(move || child.wait_with_output());
     during();
-    let out = child.wait_with_output().expect("checker output");
+    let out = output
+        .join()
+        .expect("the checker's reader thread")
+        .expect("checker output");
     assert!(
         out.status.success(),
         "the Python checker failed:\n{}",
@@ -69,13 +74,27 @@ fn wait_running(reader: &StatusReader) {
     });
 }
 
+/// The renderer's view of the default scenario's first half minute: the scope advances through
+/// the cervical canal (tip z 15-34 mm; the cavity starts at z 28 mm) into the cavity with the
+/// inflow valve opening. The jet is checked in both places, as a renderer would draw it: the
+/// inflow cells' velocity points along the status view direction at the status inflow port
+/// velocity divided by `inflow_port_open_fraction`: 1 in the cavity (the port's area on the grid
+/// is the channel's, so the jet is the port velocity itself, and at least a few such fields are
+/// required), less in the canal, where tissue covers part of the tip and the same flow leaves
+/// faster (docs/ipc.md, "Flow field"). The status paired with a field by sequence was taken
+/// before the field's frame, so it may show the open fraction of an earlier frame, and the
+/// field's jet carries the frame's mean flow: a field is checked where the open fraction and the
+/// port velocity of that status equal (velocity within 5 %) those of a status two frames later
+/// (`frame_status`), i.e. they held throughout the field's frame (the tip crosses a cell in about
+/// a second and the flow changes over seconds, so few fields are left out).
 #[test]
-#[ignore = "issue 13 is open: the jet check runs in the default scenario's first 22 s, while the \
-            scope is in the cervical canal (tip z 15-34 mm, cavity z 28-60 mm): its inflow port has \
-            about one 1.2 mm cell face on fluid, half the 2.8 mm^2 channel, so the grid's jet is \
-            about twice the hydraulics' port velocity. It runs with \
-            `cargo nextest run -p hydrometra-hil-tests --test scene_stream --run-ignored all` \
-            (README, Tests); un-ignore it when issue 13 closes"]
+#[ignore = "issue 13: flaky on the loaded 2-core machine. The jet now equals the status port \
+            velocity (open fraction 1 throughout the default scenario's first 28 s; about 2100 \
+            fields of three manual runs all within 0.5 %), but about one run in four shows one \
+            field whose jet is half the port velocity with the flow steady across its frame \
+            (e.g. 0.080 vs 0.169 m/s), not explained yet. It runs with `cargo nextest run -p \
+            hydrometra-hil-tests --release --test scene_stream --run-ignored all` (README, \
+            Tests)"]
 fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_with_status() {
     let prefix = unique_prefix("scene");
     let rate_hz = 30.0;
@@ -89,18 +108,23 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
             "--scene-rate-hz",
             "30",
             "--status-rate-hz",
-            "250",
+            "100",
         ],
     );
     let reader = StatusReader::connect(&prefix, Duration::from_secs(20));
     wait_running(&reader);
-    // The default scenario opens the inflow valve from t = 0 s (0.8 at 8 s); the jet is checked
-    // from 8 s on. A second subscriber is killed with SIGKILL in the middle.
+    // The default scenario opens the inflow valve from t = 0 s (0.8 at 8 s) and brings the tip
+    // into the cavity at about 18 s; the check runs 24 s. A second subscriber is killed with
+    // SIGKILL in the middle.
     let misses_before = reader.drain().last().map_or(0, |s| s.deadline_misses);
     let mut statuses = Vec::new();
-    let lines = check(&prefix, 14.0, || {
+    // Found (an import check, a second or more on a loaded machine) before the status reader
+    // starts collecting: a pause between two collections longer than the subscriber's buffer
+    // (64 statuses, 640 ms at the 100 Hz used here, so a test process held off the CPU for a moment on a loaded machine loses none) would lose statuses.
+    let victim_python = python();
+    let lines = check(&prefix, 24.0, || {
         statuses.extend(reader.collect_for(Duration::from_secs(4)));
-        let mut victim = Command::new(python())
+        let mut victim = Command::new(&victim_python)
             .arg(workspace_root().join("ipc/examples/python/cavity_volume.py"))
             .args(["--prefix", &prefix, "--count", "0"])
             .stdout(Stdio::null())
@@ -110,7 +134,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         statuses.extend(reader.collect_for(Duration::from_secs(3)));
         victim.kill().expect("kill -9 the subscriber");
         let _ = victim.wait();
-        statuses.extend(reader.collect_for(Duration::from_secs(8)));
+        statuses.extend(reader.collect_for(Duration::from_secs(18)));
     });
     statuses.extend(reader.drain());
     assert!(
@@ -157,14 +181,26 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         pos.len()
     );
 
-    // The jet at the scope tip: along the status view direction, at the status port velocity.
-    let mut jets = 0;
+    // The jet at the scope tip: along the status view direction, at the status port velocity
+    // (over the open fraction of the port where tissue covers part of the tip).
+    let (mut jets, mut clear_jets, mut changing) = (0, 0, 0);
     for fl in of(&lines, "flow") {
-        let Some(st) = fl["status"].as_object() else {
+        let (Some(st), Some(frame)) = (fl["status"].as_object(), fl["frame_status"].as_object())
+        else {
             continue;
         };
         let port = f(&st["inflow_port_velocity_m_per_s"]);
-        if port < 0.05 || fl["jet"].is_null() {
+        let open = f(&st["inflow_port_open_fraction"]);
+        if port < 0.05 || fl["jet"].is_null() || open.is_nan() || open <= 0.0 {
+            continue;
+        }
+        // The grid's jet carries the frame-mean flow, status the flow of its instant: compared
+        // where both are the same, i.e. the port velocity held within 5 % across the frame (the
+        // flow swings when the scene hands the atlas's P-V curve to the hydraulics at start).
+        let port_after = f(&frame["inflow_port_velocity_m_per_s"]);
+        if open != f(&frame["inflow_port_open_fraction"]) || (port_after - port).abs() > 0.05 * port
+        {
+            changing += 1;
             continue;
         }
         let jet = vec3(&fl["jet"]);
@@ -172,13 +208,27 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         let speed = norm(jet);
         let cos = (jet[0] * view[0] + jet[1] * view[1] + jet[2] * view[2]) / (speed * norm(view));
         assert!(cos > 0.99, "jet {jet:?} vs view {view:?} (cos {cos:.4})");
+        let expected = port / open;
         assert!(
-            (speed - port).abs() <= 0.1 * port,
-            "jet {speed:.3} m/s vs status inflow port velocity {port:.3} m/s"
+            (speed - expected).abs() <= 0.1 * expected,
+            "jet {speed:.3} m/s vs status inflow port velocity {port:.3} m/s / open fraction \
+             {open:.3} = {expected:.3} m/s"
         );
         jets += 1;
+        if open == 1.0 {
+            clear_jets += 1;
+        }
     }
-    assert!(jets >= 10, "only {jets} flow fields with an inflow jet");
+    let flows = of(&lines, "flow").len();
+    assert!(
+        jets >= 10,
+        "only {jets} of {flows} flow fields with an inflow jet ({changing} left out: the open \
+         fraction or the port velocity changed around them)"
+    );
+    assert!(
+        clear_jets >= 5,
+        "only {clear_jets} of {jets} jets with the port clear of tissue (open fraction 1)"
+    );
 
     // Checked last, so a slow machine still shows the checks above.
     let span = times.last().unwrap() - times.first().unwrap();
@@ -193,13 +243,24 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         "positions stalled for {longest_gap:.3} s"
     );
 
-    // The SIGKILL disturbed nothing: status contiguous, no deadline misses in the run.
+    // The SIGKILL disturbed nothing: status contiguous, and the loop never stalled. A daemon
+    // held up by a dead subscriber misses every tick it is held (a 10 ms stall is 10 misses
+    // between two statuses 4 ms apart); the isolated late ticks of a loaded machine are not
+    // that (this shared 2-core machine shows 16-70 per 30 s with or without subscribers,
+    // BENCHMARKS.md), so the bound is on the largest jump and on the total (0.5 % of ticks).
     hydrometra_hil_tests::assert_contiguous(&statuses);
     let misses_after = statuses.last().map_or(0, |s| s.deadline_misses);
-    assert_eq!(
-        misses_after,
-        misses_before,
-        "deadline misses during the run:\n{}",
+    let ticks = statuses.last().unwrap().ticks - statuses.first().unwrap().ticks;
+    let largest_jump = statuses
+        .windows(2)
+        .map(|w| w[1].deadline_misses - w[0].deadline_misses)
+        .max()
+        .unwrap_or(0);
+    assert!(
+        largest_jump < 10 && (misses_after - misses_before) * 200 <= ticks,
+        "deadline misses during the run: {} in {ticks} ticks, {largest_jump} between two \
+         statuses:\n{}",
+        misses_after - misses_before,
         daemon.log()
     );
 }

@@ -160,6 +160,10 @@ pub struct Status {
     pub view_clarity: f64,
     /// Scene: volume enclosed by the last published cavity surface, m^3 (NaN before the first).
     pub cavity_surface_volume_m3: f64,
+    /// Scene: share of the inflow channel's area that opens on fluid in the flow field, [0, 1]
+    /// (1: the jet leaves at `inflow_port_velocity_m_per_s`; less: tissue covers part of the tip
+    /// and the jet is faster by 1 / this); NaN without a scene or before its first frame.
+    pub inflow_port_open_fraction: f64,
 }
 
 /// Why the rig link is down, as carried in [`Status::link_down_reason`]. The daemon logs the full
@@ -360,6 +364,7 @@ impl Default for Status {
             scene_step_p99_s: 0.0,
             view_clarity: f64::NAN,
             cavity_surface_volume_m3: f64::NAN,
+            inflow_port_open_fraction: f64::NAN,
         }
     }
 }

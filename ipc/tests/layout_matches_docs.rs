@@ -109,6 +109,7 @@ fn layouts() -> Vec<(String, usize, Vec<Row>)> {
             scene_step_p99_s: "f64",
             view_clarity: "f64",
             cavity_surface_volume_m3: "f64",
+            inflow_port_open_fraction: "f64",
         }),
         layout!(MeshTopologyHeader {
             schema_version: "u32",

@@ -136,6 +136,34 @@ fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
                 fl.hydraulic_losses_m3_per_s
             );
         }
+        // The tip is clear of tissue: the port's area on the grid is the channel's (the rim cell
+        // counts with a share of its faces), so the jet every inflow cell publishes is the
+        // hydraulics' port velocity Q_in / channel area, along the view direction.
+        assert_eq!(fl.inflow_open_fraction, 1.0, "frame {f}");
+        if fl.hydraulic_inflow_m3_per_s > 1e-9 && f % 30 == 0 {
+            let area_m2 = scene.desc().scope.inflow_channel_area_mm2 * 1e-6;
+            let port = fl.hydraulic_inflow_m3_per_s / area_m2;
+            assert!((fl.inflow_jet_speed_m_per_s - port).abs() <= 1e-9 * port);
+            let flow = scene.flow().unwrap();
+            let mut v = vec![[0.0f32; 3]; flow.kinds().len()];
+            flow.velocities_into(&mut v);
+            let d = scope.view_direction;
+            let dn = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let mut cells = 0;
+            for (k, v) in flow.kinds().iter().zip(&v) {
+                if *k == VoxelKind::Inflow {
+                    for a in 0..3 {
+                        let want = port * d[a] / dn;
+                        assert!(
+                            (v[a] as f64 - want).abs() <= 1e-5 * port,
+                            "frame {f}: inflow cell {v:?}, jet {port} m/s along {d:?}"
+                        );
+                    }
+                    cells += 1;
+                }
+            }
+            assert!(cells >= 1, "frame {f}: no inflow cell");
+        }
         saw[0] |= fl.hydraulic_inflow_m3_per_s > 1e-6 && !fl.inflow_blocked;
         saw[1] |= fl.hydraulic_outflow_m3_per_s > 1e-6 && !fl.outflow_blocked;
         saw[2] |= fl.hydraulic_dvdt_m3_per_s.abs() > 1e-8;

@@ -205,8 +205,8 @@ pub struct LoopConfig {
     pub status_rate_hz: f64,
     /// Periodic log interval, s.
     pub log_interval_s: f64,
-    /// SCHED_FIFO priority of the simulation and publisher threads (1..=99); 0: normal
-    /// scheduling. Falls back to normal scheduling, with a warning, when not permitted.
+    /// SCHED_FIFO priority of the simulation thread (which publishes status) and the rig I/O
+    /// thread (1..=99); 0: normal scheduling. Falls back to normal scheduling, with a warning, when not permitted.
     pub realtime_priority: u8,
 }
 

@@ -1,7 +1,7 @@
-//! hydrometrad: configuration, the rig input, the fixed-rate simulation loop, the publisher
-//! thread and the supervisor that ties them together (signals, systemd, periodic logs).
+//! hydrometrad: configuration, the rig input, the fixed-rate simulation loop (which publishes
+//! status) and the supervisor that ties them together (signals, systemd, periodic logs).
 //!
-//! Two sides: the real-time threads (rig I/O, the 1 kHz loop, the publisher, the scene thread)
+//! Two sides: the real-time threads (rig I/O, the 1 kHz loop, the scene thread)
 //! are dedicated OS threads that never wait on anything else; the control plane (signals,
 //! supervision, the control service's handlers) runs on a current-thread tokio runtime on the
 //! main thread at normal priority, and reaches the real-time side only through atomics,
@@ -20,7 +20,6 @@ pub mod scene;
 pub mod sim;
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::mpsc::sync_channel;
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -33,19 +32,17 @@ use hydrometra_ipc::ServiceNames;
 use crate::record::recorder::{self, RecorderHandle};
 use config::Config;
 use latency::LatencySummary;
-use publisher::PublisherThread;
+use publisher::StatusPublisher;
 use rig_source::RigSource;
 use sim::{LoopSettings, SimLoop, Telemetry};
 
-/// Capacity of the sim -> publisher channel: 64 ms of statuses at 1 kHz before statuses drop.
-const STATUS_CHANNEL_CAPACITY: usize = 64;
 /// How often the supervisor checks the threads, the duration and the watchdog.
 const SUPERVISOR_PERIOD: Duration = Duration::from_millis(20);
 /// How often the supervisor removes resources of dead iceoryx2 nodes (crashed renderers). Done
-/// here, not in the publisher, because it walks the file system and would delay publication.
+/// here, not on the loop (which publishes), because it walks the file system and would delay a tick.
 const DEAD_NODE_CLEANUP_INTERVAL: Duration = Duration::from_secs(5);
 
-/// A node of its own for removing dead nodes' resources off the publisher's hot path.
+/// A node of its own for removing dead nodes' resources off the loop's hot path.
 fn janitor_node() -> Option<iceoryx2::node::Node<iceoryx2::prelude::ipc::Service>> {
     use iceoryx2::prelude::*;
     let name = NodeName::new("hydrometrad-janitor").ok()?;
@@ -71,7 +68,7 @@ pub struct RunSummary {
     pub deadline_misses: u64,
     /// Statuses published.
     pub statuses_published: u64,
-    /// Statuses dropped between loop and publisher.
+    /// Statuses dropped between loop and publisher (0 since the loop publishes itself).
     pub statuses_dropped: u64,
     /// Rig-sample-to-status latency.
     pub latency: LatencySummary,
@@ -85,11 +82,7 @@ fn summary(telemetry: &Telemetry, elapsed: Duration) -> RunSummary {
         deadline_misses: telemetry.deadline_misses.load(Ordering::Relaxed),
         statuses_published: telemetry.statuses_published.load(Ordering::Relaxed),
         statuses_dropped: telemetry.statuses_dropped.load(Ordering::Relaxed),
-        latency: telemetry
-            .latency
-            .lock()
-            .map(|h| h.summary())
-            .unwrap_or(LatencySummary::EMPTY),
+        latency: telemetry.latency_summary(),
         elapsed,
     }
 }
@@ -367,7 +360,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         procedure.clone(),
     )?;
     // Real-time scheduling is set on the main thread before any other thread starts, so the rig
-    // I/O thread (which timestamps samples), the loop and the publisher all inherit it.
+    // I/O thread (which timestamps samples) and the loop (which publishes status) inherit it.
     let priority = config.sim_loop.realtime_priority;
     // The recorder runs at normal priority: it starts before the real-time policy is applied.
     let (recorder, taps) = match start_recorder(config)? {
@@ -381,21 +374,6 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     };
     let rig = rig_connection::RigConnection::start(&config.rig, scenario, rx_tap)?;
     let telemetry = Arc::new(Telemetry::default());
-    let (frames_tx, frames_rx) = sync_channel(STATUS_CHANNEL_CAPACITY);
-    let publisher = match PublisherThread::spawn(
-        names.clone(),
-        frames_rx,
-        telemetry.clone(),
-        priority,
-        status_tap,
-    ) {
-        Ok(p) => p,
-        Err(e) => {
-            rig.shutdown();
-            return Err(e);
-        }
-    };
-
     let settings = LoopSettings {
         tick: Duration::from_secs_f64(1.0 / config.sim_loop.tick_rate_hz),
         ticks_per_status: config.sim_loop.ticks_per_status(),
@@ -403,22 +381,48 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         run_id: new_run_id(),
     };
     let sim_stop = Arc::new(AtomicBool::new(false));
+    // The loop's thread owns the status publisher (iceoryx2 ports are not `Send`) and reports
+    // whether it could create it before the loop starts.
+    let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
     let sim = {
         let source: Arc<dyn RigSource> = rig.source();
-        let (sim_stop, telemetry) = (sim_stop.clone(), telemetry.clone());
+        let (sim_stop, telemetry, names) = (sim_stop.clone(), telemetry.clone(), names.clone());
         std::thread::Builder::new()
             .name("hm-sim".into())
             .spawn(move || {
                 realtime::apply("hm-sim", priority);
+                let mut publisher = match StatusPublisher::create(&names, status_tap) {
+                    Ok(p) => {
+                        let _ = ready_tx.send(Ok(()));
+                        p
+                    }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(format!("{e:#}")));
+                        return;
+                    }
+                };
                 let mut sim_loop = SimLoop::new(settings);
                 for stage in stages {
                     sim_loop = sim_loop.with_stage(stage);
                 }
-                sim_loop.run(&*source, &frames_tx, &sim_stop, &telemetry);
-                // `frames_tx` drops here: the publisher drains and stops.
+                sim_loop.run(&*source, &mut publisher, &sim_stop, &telemetry);
+                publisher.finish(&telemetry);
             })
             .context("cannot start the simulation thread")?
     };
+    match ready_rx.recv() {
+        Ok(Ok(())) => {}
+        Ok(Err(message)) => {
+            let _ = sim.join();
+            rig.shutdown();
+            return Err(anyhow::anyhow!(message));
+        }
+        Err(_) => {
+            let _ = sim.join();
+            rig.shutdown();
+            anyhow::bail!("simulation thread ended during setup");
+        }
+    }
 
     // The scene thread starts after the loop: it prepares its atlas (maybe building it for a
     // minute or two) while status and hydraulics already run.
@@ -529,7 +533,6 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     if sim.join().is_err() {
         tracing::error!("simulation thread panicked");
     }
-    publisher.join();
     rig.shutdown();
     if let Some(recorder) = recorder {
         let r = match Arc::try_unwrap(recorder) {

@@ -1,82 +1,60 @@
-//! The publisher thread: owns the iceoryx2 node, the status service and the event notifier
-//! (iceoryx2 ports are not `Send`), stamps each status and measures latency at publication.
+//! The status publisher: the iceoryx2 node, the status service and the event notifier, owned by
+//! the 1 kHz loop's thread (iceoryx2 ports are not `Send`), which stamps and sends each status
+//! itself and measures latency at publication.
+//!
+//! It used to be a thread of its own fed by a channel; handing every status over woke that
+//! thread 1000 times a second (a futex wake in the loop and a context switch each time: about a
+//! third of the daemon's CPU at rest, BENCHMARKS.md "Idle CPU"). A loan, a copy of 648 bytes, a
+//! send and a notify cost a few µs and never block (full subscriber buffers discard, a stalled
+//! listener loses wake-ups), so the loop does them inline.
 
 use std::sync::atomic::Ordering;
-use std::sync::mpsc::{Receiver, RecvTimeoutError};
-use std::sync::Arc;
-use std::thread::JoinHandle;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use hydrometra_ipc::{events, status, ServiceNames};
-use iceoryx2::node::NodeBuilder;
+use iceoryx2::node::{Node, NodeBuilder};
 use iceoryx2::port::backpressure_strategy::BackpressureStrategy;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
 use iceoryx2::prelude::{ipc, NodeName, SignalHandlingMode};
+use iceoryx2::service::port_factory::{event, publish_subscribe};
 
-use super::sim::{StatusFrame, Telemetry};
+use super::latency::LatencySummary;
+use super::sim::{StatusFrame, StatusSink, Telemetry};
 use crate::record::recorder::StatusTap;
 
 /// Host `CLOCK_MONOTONIC`, ns (the clock `Instant` uses on Linux), comparable across processes.
 pub use hydrometra_drivers::transport::monotonic_ns;
 
-/// The running publisher thread.
-pub struct PublisherThread {
-    handle: JoinHandle<()>,
+/// How often the latency percentiles in status are recomputed from the histogram (walking it
+/// costs tens of µs: not on every sample).
+pub const LATENCY_SUMMARY_INTERVAL: Duration = Duration::from_millis(100);
+
+/// The status service's publisher and the event notifier, on the loop's thread.
+pub struct StatusPublisher {
+    publisher: Publisher<ipc::Service, hydrometra_ipc::Status, ()>,
+    notifier: Notifier<ipc::Service>,
+    _status_service: publish_subscribe::PortFactory<ipc::Service, hydrometra_ipc::Status, ()>,
+    _event_service: event::PortFactory<ipc::Service>,
+    _node: Node<ipc::Service>,
+    status_tap: Option<StatusTap>,
+    sequence: u64,
+    summary: LatencySummary,
+    summary_at: Option<Instant>,
 }
 
-impl PublisherThread {
-    /// Starts the thread, creates the node and services, and returns once they exist (or with
-    /// the reason they could not be created). The thread ends when `frames` hangs up.
-    pub fn spawn(
-        names: ServiceNames,
-        frames: Receiver<StatusFrame>,
-        telemetry: Arc<Telemetry>,
-        realtime_priority: u8,
-        status_tap: Option<StatusTap>,
-    ) -> anyhow::Result<Self> {
-        let (ready_tx, ready_rx) = std::sync::mpsc::channel::<Result<(), String>>();
-        let handle = std::thread::Builder::new()
-            .name("hm-publisher".into())
-            .spawn(move || {
-                super::realtime::apply("hm-publisher", realtime_priority);
-                run(names, frames, telemetry, ready_tx, status_tap)
-            })?;
-        match ready_rx.recv() {
-            Ok(Ok(())) => Ok(Self { handle }),
-            Ok(Err(message)) => {
-                let _ = handle.join();
-                Err(anyhow::anyhow!(message))
-            }
-            Err(_) => {
-                let _ = handle.join();
-                Err(anyhow::anyhow!("publisher thread ended during setup"))
-            }
-        }
-    }
-
-    /// Waits for the thread to end (after the sim loop dropped its sender).
-    pub fn join(self) {
-        if self.handle.join().is_err() {
-            tracing::error!("publisher thread panicked");
-        }
-    }
-}
-
-fn run(
-    names: ServiceNames,
-    frames: Receiver<StatusFrame>,
-    telemetry: Arc<Telemetry>,
-    ready: std::sync::mpsc::Sender<Result<(), String>>,
-    mut status_tap: Option<StatusTap>,
-) {
-    let prefix = names.prefix().to_string();
-    let setup = || -> Result<_, String> {
-        let node_name = NodeName::new("hydrometrad").map_err(|e| format!("node name: {e:?}"))?;
+impl StatusPublisher {
+    /// Creates the node and services, or says why they could not be created.
+    pub fn create(names: &ServiceNames, status_tap: Option<StatusTap>) -> anyhow::Result<Self> {
+        let prefix = names.prefix().to_string();
+        let node_name =
+            NodeName::new("hydrometrad").map_err(|e| anyhow::anyhow!("node name: {e:?}"))?;
         let node = NodeBuilder::new()
             .name(&node_name)
             // Signals are the supervisor's business; iceoryx2 must not install its own handlers.
             .signal_handling_mode(SignalHandlingMode::Disabled)
             .create::<ipc::Service>()
-            .map_err(|e| format!("cannot create the iceoryx2 node: {e:?}"))?;
+            .map_err(|e| anyhow::anyhow!("cannot create the iceoryx2 node: {e:?}"))?;
         // A daemon killed with SIGKILL leaves its node behind: remove what dead nodes hold before
         // opening the services again.
         let cleaned = node.try_cleanup_dead_nodes();
@@ -87,8 +65,8 @@ fn run(
                 "removed resources of dead iceoryx2 nodes"
             );
         }
-        let status_service = status::create(&node, &names).map_err(|e| {
-            format!(
+        let status_service = status::create(&node, names).map_err(|e| {
+            anyhow::anyhow!(
                 "cannot create or open service {}: {e:?} (a service of another schema version or \
                  with other settings exists under this prefix?)",
                 names.full(hydrometra_ipc::names::suffix::STATUS)
@@ -100,14 +78,14 @@ fn run(
             .max_loaned_samples(2)
             .create()
             .map_err(|e| {
-                format!(
+                anyhow::anyhow!(
                     "cannot publish on {}: {e:?} (is another hydrometrad running with service \
                      prefix {prefix:?}?)",
                     names.full(hydrometra_ipc::names::suffix::STATUS)
                 )
             })?;
-        let event_service = events::create(&node, &names).map_err(|e| {
-            format!(
+        let event_service = events::create(&node, names).map_err(|e| {
+            anyhow::anyhow!(
                 "cannot create or open service {}: {e:?}",
                 names.full(hydrometra_ipc::names::suffix::EVENTS)
             )
@@ -115,37 +93,52 @@ fn run(
         let notifier = event_service
             .notifier_builder()
             .create()
-            .map_err(|e| format!("cannot create the event notifier: {e:?}"))?;
-        Ok((node, status_service, publisher, event_service, notifier))
-    };
-    let (_node, _status_service, publisher, _event_service, notifier) = match setup() {
-        Ok(parts) => {
-            let _ = ready.send(Ok(()));
-            parts
-        }
-        Err(message) => {
-            let _ = ready.send(Err(message));
-            return;
-        }
-    };
-    tracing::info!(prefix = %prefix, "publishing status on {}", names.full("status"));
+            .map_err(|e| anyhow::anyhow!("cannot create the event notifier: {e:?}"))?;
+        tracing::info!(prefix = %prefix, "publishing status on {}", names.full("status"));
+        Ok(Self {
+            publisher,
+            notifier,
+            _status_service: status_service,
+            _event_service: event_service,
+            _node: node,
+            status_tap,
+            sequence: 0,
+            summary: LatencySummary::EMPTY,
+            summary_at: None,
+        })
+    }
 
-    let mut sequence: u64 = 0;
-    let mut summary = super::latency::LatencySummary::EMPTY;
-    loop {
-        let frame = match frames.recv_timeout(Duration::from_millis(100)) {
-            Ok(frame) => frame,
-            Err(RecvTimeoutError::Timeout) => continue,
-            Err(RecvTimeoutError::Disconnected) => break,
-        };
+    /// Sends the shutdown event; the ports, services and node drop after it, releasing their
+    /// shared memory. `telemetry` gets the exact final latency figures.
+    pub fn finish(self, telemetry: &Telemetry) {
+        if self
+            .notifier
+            .notify_with_custom_event_id(events::SHUTDOWN)
+            .is_err()
+        {
+            tracing::debug!("could not send the shutdown event");
+        }
+        if let Ok(h) = telemetry.latency.lock() {
+            telemetry.store_latency_summary(&h.summary());
+        }
+        tracing::info!(
+            published = self.sequence,
+            "publisher stopped; releasing shared memory"
+        );
+    }
+}
+
+impl StatusSink for StatusPublisher {
+    fn publish(&mut self, frame: StatusFrame, telemetry: &Telemetry) -> bool {
         let mut status = frame.status;
-        status.sequence = sequence;
-        status.latency_p50_s = summary.p50_s;
-        status.latency_p99_s = summary.p99_s;
-        status.latency_max_s = summary.max_s;
-        status.latency_samples = summary.count;
+        status.sequence = self.sequence;
+        status.latency_p50_s = self.summary.p50_s;
+        status.latency_p99_s = self.summary.p99_s;
+        status.latency_max_s = self.summary.max_s;
+        status.latency_samples = self.summary.count;
         status.publish_monotonic_ns = monotonic_ns();
-        let sent = publisher
+        let sent = self
+            .publisher
             .loan_uninit()
             .map(|sample| sample.write_payload(status))
             .map_err(|e| format!("{e:?}"))
@@ -153,22 +146,32 @@ fn run(
         match sent {
             Ok(_) => {
                 // Non-blocking hand-over to the recorder (drops are counted, never waited for).
-                if let Some(tap) = status_tap.as_mut() {
+                if let Some(tap) = self.status_tap.as_mut() {
                     tap.offer(&status);
                 }
-                sequence += 1;
+                self.sequence += 1;
                 telemetry
                     .statuses_published
-                    .store(sequence, Ordering::Relaxed);
+                    .store(self.sequence, Ordering::Relaxed);
                 if let Some(received_at) = frame.new_sample_received_at {
-                    let latency = received_at.elapsed();
+                    let now = Instant::now();
+                    let latency = now.saturating_duration_since(received_at);
+                    // Only this thread locks the histogram while the loop runs: never contended.
                     if let Ok(mut h) = telemetry.latency.lock() {
                         h.record(latency);
-                        summary = h.summary();
+                        let due = self
+                            .summary_at
+                            .is_none_or(|at| now.duration_since(at) >= LATENCY_SUMMARY_INTERVAL);
+                        if due {
+                            self.summary = h.summary();
+                            self.summary_at = Some(now);
+                            telemetry.store_latency_summary(&self.summary);
+                        }
                     }
                 }
                 // A listener that stalls only loses wake-ups: notify never blocks.
-                if notifier
+                if self
+                    .notifier
                     .notify_with_custom_event_id(events::STATUS)
                     .is_err()
                 {
@@ -182,16 +185,6 @@ fn run(
                 }
             }
         }
+        true
     }
-    if notifier
-        .notify_with_custom_event_id(events::SHUTDOWN)
-        .is_err()
-    {
-        tracing::debug!("could not send the shutdown event");
-    }
-    tracing::info!(
-        published = sequence,
-        "publisher stopped; releasing shared memory"
-    );
-    // Ports, services and the node drop here, in reverse order, releasing their shared memory.
 }

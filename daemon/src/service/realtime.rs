@@ -1,5 +1,6 @@
-//! Real-time scheduling for the simulation and publisher threads (SCHED_FIFO), so a busy desktop
-//! or a compile on the training PC does not delay the 1 kHz loop. Both threads sleep between
+//! Real-time scheduling (SCHED_FIFO) for the simulation thread (which publishes status) and the
+//! rig I/O thread, so a busy desktop or a compile on the training PC does not delay the 1 kHz
+//! loop. Both threads sleep between
 //! ticks, so they cannot starve the machine.
 
 /// Puts the calling thread under SCHED_FIFO at `priority` (1..=99); 0 leaves it as it is.

@@ -66,6 +66,7 @@ pub struct SceneFigures {
     step_p99_s_bits: AtomicU64,
     view_clarity_bits: AtomicU64,
     surface_volume_m3_bits: AtomicU64,
+    inflow_open_fraction_bits: AtomicU64,
 }
 
 impl SceneFigures {
@@ -89,6 +90,8 @@ impl SceneFigures {
         s.view_clarity = f64::from_bits(self.view_clarity_bits.load(Ordering::Relaxed));
         s.cavity_surface_volume_m3 =
             f64::from_bits(self.surface_volume_m3_bits.load(Ordering::Relaxed));
+        s.inflow_port_open_fraction =
+            f64::from_bits(self.inflow_open_fraction_bits.load(Ordering::Relaxed));
     }
 }
 
@@ -112,6 +115,9 @@ impl Default for SceneFeed {
             .store(f64::NAN.to_bits(), Ordering::Relaxed);
         figures
             .surface_volume_m3_bits
+            .store(f64::NAN.to_bits(), Ordering::Relaxed);
+        figures
+            .inflow_open_fraction_bits
             .store(f64::NAN.to_bits(), Ordering::Relaxed);
         Self {
             snapshot: Mutex::new(None),
@@ -732,6 +738,11 @@ fn write_figures(f: &SceneFigures, report: &hydrometra_sim::scene::StepReport, p
     }
     f.step_p99_s_bits
         .store((c.step.p99_ms() * 1e-3).to_bits(), Ordering::Relaxed);
+    // Before the frame count: a status that shows this frame's count shows its open fraction.
+    f.inflow_open_fraction_bits.store(
+        report.flux.inflow_open_fraction.to_bits(),
+        Ordering::Relaxed,
+    );
     f.frames.store(report.frame, Ordering::Relaxed);
     let fluid = c.get(Stage::Fluid);
     let state = if fluid.present && fluid.ran_last {

@@ -1,5 +1,6 @@
 //! The fixed-rate simulation loop: reads the rig once per tick, applies the safe-state rule,
-//! steps the simulation stages and hands a status frame to the publisher every N ticks.
+//! steps the simulation stages and hands a status frame to its sink (the status publisher, on
+//! the same thread) every N ticks.
 
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
@@ -10,7 +11,7 @@ use hydrometra_drivers::state::{LinkDownReason, LinkState, ScopePose};
 use hydrometra_ipc::status::link_down_reason as reason;
 use hydrometra_ipc::{alarms, Status};
 
-use super::latency::LatencyHistogram;
+use super::latency::{LatencyHistogram, LatencySummary};
 use super::rig_source::{RigSource, RigView};
 
 /// The inputs a simulation stage sees on one tick: the rig's calibrated values, or the safe
@@ -121,14 +122,70 @@ pub struct Telemetry {
     pub deadline_misses: AtomicU64,
     /// Longest tick compute time, ns.
     pub tick_work_max_ns: AtomicU64,
-    /// Statuses the publisher could not take (channel full).
+    /// Statuses a sink could not take (a full channel; 0 with the inline publisher).
     pub statuses_dropped: AtomicU64,
     /// Statuses published.
     pub statuses_published: AtomicU64,
     /// Failed loans/sends/notifications in the publisher.
     pub publish_errors: AtomicU64,
-    /// Rig-sample-to-status latency since start.
+    /// Rig-sample-to-status latency since start (locked by the loop's thread alone while it
+    /// runs; others read `latency_summary`).
     pub latency: Mutex<LatencyHistogram>,
+    /// The latency percentiles as last computed by the publisher (p50, p99, max as f64 bits,
+    /// count), so the supervisor never takes the histogram's lock from the loop.
+    latency_summary: [AtomicU64; 4],
+}
+
+impl Telemetry {
+    /// Stores the latency figures for [`Telemetry::latency_summary`].
+    pub fn store_latency_summary(&self, s: &LatencySummary) {
+        let values = [
+            s.p50_s.to_bits(),
+            s.p99_s.to_bits(),
+            s.max_s.to_bits(),
+            s.count,
+        ];
+        for (slot, v) in self.latency_summary.iter().zip(values) {
+            slot.store(v, Ordering::Relaxed);
+        }
+    }
+
+    /// The latency figures the publisher last computed (every
+    /// `publisher::LATENCY_SUMMARY_INTERVAL`, and exactly when it stops).
+    pub fn latency_summary(&self) -> LatencySummary {
+        let [p50, p99, max, count] = &self.latency_summary;
+        if count.load(Ordering::Relaxed) == 0 {
+            return LatencySummary::EMPTY;
+        }
+        LatencySummary {
+            count: count.load(Ordering::Relaxed),
+            p50_s: f64::from_bits(p50.load(Ordering::Relaxed)),
+            p99_s: f64::from_bits(p99.load(Ordering::Relaxed)),
+            max_s: f64::from_bits(max.load(Ordering::Relaxed)),
+        }
+    }
+}
+
+/// Where the loop hands each status: the iceoryx2 publisher on the loop's own thread in the
+/// daemon, a channel in tests.
+pub trait StatusSink {
+    /// Takes one status without blocking; false when nobody takes statuses any more (the loop
+    /// stops).
+    fn publish(&mut self, frame: StatusFrame, telemetry: &Telemetry) -> bool;
+}
+
+/// A bounded channel: a full one drops the status and counts it (`statuses_dropped`).
+impl StatusSink for SyncSender<StatusFrame> {
+    fn publish(&mut self, frame: StatusFrame, telemetry: &Telemetry) -> bool {
+        match self.try_send(frame) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_)) => {
+                telemetry.statuses_dropped.fetch_add(1, Ordering::Relaxed);
+                true
+            }
+            Err(TrySendError::Disconnected(_)) => false,
+        }
+    }
 }
 
 /// Loop settings.
@@ -165,12 +222,11 @@ impl SimLoop {
         self
     }
 
-    /// Runs until `stop` is set or the publisher hangs up. Never blocks on the publisher: a full
-    /// channel drops the status and counts it.
+    /// Runs until `stop` is set or the sink hangs up. Never blocks on the sink.
     pub fn run(
         mut self,
         rig: &dyn RigSource,
-        out: &SyncSender<StatusFrame>,
+        out: &mut dyn StatusSink,
         stop: &AtomicBool,
         telemetry: &Telemetry,
     ) {
@@ -231,12 +287,8 @@ impl SimLoop {
                     status,
                     new_sample_received_at,
                 };
-                match out.try_send(frame) {
-                    Ok(()) => {}
-                    Err(TrySendError::Full(_)) => {
-                        telemetry.statuses_dropped.fetch_add(1, Ordering::Relaxed);
-                    }
-                    Err(TrySendError::Disconnected(_)) => break,
+                if !out.publish(frame, telemetry) {
+                    break;
                 }
             }
 
@@ -440,7 +492,7 @@ mod tests {
             LinkState::Connected,
             Some((s, age)),
         ))));
-        let (tx, rx) = sync_channel(1024);
+        let (mut tx, rx) = sync_channel(1024);
         let stop = Arc::new(AtomicBool::new(false));
         let telemetry = Arc::new(Telemetry::default());
         let settings = LoopSettings {
@@ -457,7 +509,7 @@ mod tests {
                         steps: 0,
                         dt_total_s: 0.0,
                     }))
-                    .run(&*rig, &tx, &stop, &telemetry)
+                    .run(&*rig, &mut tx, &stop, &telemetry)
             })
         };
         let first: Vec<StatusFrame> = (0..5).map(|_| rx.recv().unwrap()).collect();
@@ -507,7 +559,7 @@ mod tests {
     #[test]
     fn a_full_channel_drops_statuses_instead_of_blocking_the_loop() {
         let rig = Scripted(Mutex::new(RigView::disconnected()));
-        let (tx, rx) = sync_channel(2);
+        let (mut tx, rx) = sync_channel(2);
         let stop = AtomicBool::new(false);
         let telemetry = Telemetry::default();
         let settings = LoopSettings {
@@ -517,7 +569,7 @@ mod tests {
             run_id: 1,
         };
         std::thread::scope(|scope| {
-            scope.spawn(|| SimLoop::new(settings).run(&rig, &tx, &stop, &telemetry));
+            scope.spawn(|| SimLoop::new(settings).run(&rig, &mut tx, &stop, &telemetry));
             // Nobody reads: the loop must keep ticking.
             while telemetry.ticks.load(Ordering::Relaxed) < 50 {
                 std::thread::sleep(Duration::from_millis(1));
@@ -560,7 +612,7 @@ mod tests {
     #[test]
     fn a_stalled_tick_counts_misses_and_the_next_step_covers_the_skipped_time() {
         let rig = Scripted(Mutex::new(RigView::disconnected()));
-        let (tx, rx) = sync_channel(4096);
+        let (mut tx, rx) = sync_channel(4096);
         let stop = AtomicBool::new(false);
         let telemetry = Telemetry::default();
         let settings = LoopSettings {
@@ -579,7 +631,7 @@ mod tests {
             scope.spawn(|| {
                 SimLoop::new(settings)
                     .with_stage(Box::new(stage))
-                    .run(&rig, &tx, &stop, &telemetry)
+                    .run(&rig, &mut tx, &stop, &telemetry)
             });
             while telemetry.ticks.load(Ordering::Relaxed) < 30 {
                 std::thread::sleep(Duration::from_millis(1));

@@ -205,6 +205,14 @@ pub struct FluxBalance {
     pub wall_flux_scale: f64,
     /// The inflow could not enter the fluid (tip in tissue, or not in the grid).
     pub inflow_blocked: bool,
+    /// Fraction of the inflow channel's area that opens on fluid on the grid, in [0, 1]: 1 when
+    /// the tip is clear of tissue (the port's area is the channel's, the jet leaves at
+    /// `Q_in / channel area`), less when tissue covers part of the tip (the cervical canal: the
+    /// jet leaves faster, at `Q_in / (fraction x channel area)`), 0 when nothing opens on fluid.
+    pub inflow_open_fraction: f64,
+    /// The jet speed the inflow port imposes, m/s: `Q_in / (inflow_open_fraction x channel
+    /// area)` (0 when blocked).
+    pub inflow_jet_speed_m_per_s: f64,
     /// The outflow holes have no fluid around them.
     pub outflow_blocked: bool,
 }
@@ -294,9 +302,9 @@ impl FlowField<'_> {
                         VoxelKind::Fluid | VoxelKind::Open => {
                             self.solver.centred_velocity_m_s([i, j, k])
                         }
-                        VoxelKind::Inflow | VoxelKind::Outflow | VoxelKind::Wall => {
-                            grid.velocity_at(n)
-                        }
+                        // The jet out of the channel (the rim cell imposes its share of it).
+                        VoxelKind::Inflow => self.scene.inflow_jet_m_per_s,
+                        VoxelKind::Outflow | VoxelKind::Wall => grid.velocity_at(n),
                         _ => [0.0; 3],
                     };
                     n += 1;
@@ -360,6 +368,11 @@ pub struct Scene {
     scope: Option<ScopeGeometry>,
     scope_built: Option<ScopeGeometry>,
     inflow: Vec<BoundaryCell>,
+    /// Share of the last inflow cell's fluid-facing area that the channel covers, (0, 1]: the
+    /// port's area on the grid is the channel's, not a whole number of faces.
+    inflow_rim_fraction: f64,
+    /// The jet velocity of the inflow cells (published; the rim cell imposes its share of it).
+    inflow_jet_m_per_s: [f32; 3],
     outflow: Vec<BoundaryCell>,
     walls: Vec<BoundaryCell>,
     open: Vec<BoundaryCell>,
@@ -480,6 +493,8 @@ impl Scene {
             scope_built: None,
             // Boundary lists hold at most every cell: reserved once, never grown per frame.
             inflow: Vec::with_capacity(n),
+            inflow_rim_fraction: 1.0,
+            inflow_jet_m_per_s: [0.0; 3],
             outflow: Vec::with_capacity(n),
             walls: Vec::with_capacity(n),
             open: Vec::with_capacity(n),
@@ -928,22 +943,30 @@ impl Scene {
                 }
             }
         }
-        // The inflow port: nearest the axis first, as many as bring the fluid-facing area closest
-        // to the channel's.
+        // The inflow port: the tip cells whose fluid faces look forward, nearest the axis first,
+        // until their fluid-facing area reaches the channel's; the last one (the rim) counts
+        // with the share of its area that completes the channel's, so the port's area on the
+        // grid is the channel's at any voxel size and the jet leaves at the hydraulics' port
+        // velocity. Fewer forward faces than the channel's area: tissue covers part of the tip.
         self.candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
         let area = self.desc.scope.inflow_channel_area_mm2 * 1e-6;
         let face = h * h;
-        let (mut g, mut best, mut best_err) = (0.0, 0, f64::INFINITY);
-        for (m, c) in self.candidates.iter().enumerate() {
-            g += c.2 * face;
-            let err = (g - area).abs();
-            if g > 0.0 && err < best_err {
-                best_err = err;
-                best = m + 1;
+        let mut g = 0.0;
+        self.inflow_rim_fraction = 1.0;
+        for c in &self.candidates {
+            let gc = c.2 * face;
+            if gc <= 0.0 {
+                continue; // its fluid faces look sideways or back: no jet along the view
             }
+            self.inflow.push(c.1);
+            if g + gc >= area {
+                self.inflow_rim_fraction = (area - g) / gc;
+                g = area;
+                break;
+            }
+            g += gc;
         }
-        self.inflow
-            .extend(self.candidates[..best].iter().map(|c| c.1));
+        self.report.flux.inflow_open_fraction = if area > 0.0 { g / area } else { 0.0 };
         for b in &self.inflow {
             self.kinds[b.cell as usize] = VoxelKind::Inflow;
         }
@@ -1032,16 +1055,29 @@ impl Scene {
         flux.inflow_blocked = false;
         flux.outflow_blocked = false;
         if let Some(sc) = self.scope_built {
+            // The port's open area: whole cells and the rim's share (the channel's area when
+            // the tip is clear of tissue).
+            let last = self.inflow.len().saturating_sub(1);
+            let share = |m: usize| {
+                if m == last {
+                    self.inflow_rim_fraction
+                } else {
+                    1.0
+                }
+            };
             let g_in: f64 = self
                 .inflow
                 .iter()
-                .map(|b| face_weight(b.faces, sc.dir))
+                .enumerate()
+                .map(|(m, b)| share(m) * face_weight(b.faces, sc.dir))
                 .sum::<f64>()
                 * h2;
             let u = if g_in > 0.0 { q_in / g_in } else { 0.0 };
             flux.inflow_blocked = g_in <= 0.0 && q_in > 0.0;
-            for b in &self.inflow {
-                let v = sc.dir.map(|d| (u * d) as f32);
+            flux.inflow_jet_speed_m_per_s = u;
+            self.inflow_jet_m_per_s = sc.dir.map(|d| (u * d) as f32);
+            for (m, b) in self.inflow.iter().enumerate() {
+                let v = sc.dir.map(|d| (share(m) * u * d) as f32);
                 self.wall_velocity[b.cell as usize] = v;
                 let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
             }
@@ -1062,6 +1098,8 @@ impl Scene {
         } else {
             flux.inflow_blocked = q_in > 0.0;
             flux.outflow_blocked = q_out > 0.0;
+            flux.inflow_jet_speed_m_per_s = 0.0;
+            self.inflow_jet_m_per_s = [0.0; 3];
         }
         // Walls: dx/dp dp/dt at the owning triangle, scaled so that the flux into the walls is
         // dV/dt exactly.
