@@ -696,6 +696,24 @@ fn time_to_traverse_of_a_plug_flow_is_the_length_over_the_speed() {
 }
 
 #[test]
+fn a_tracer_pressed_into_an_edge_slides_along_it_to_the_outflow() {
+    // A one-cell channel along x (j = k = 1) in walls, the outflow cell at x = 0, and a field
+    // pointing into the channel's -y and -z walls as well as along -x: the tracer is pushed
+    // into the edge y = z = 1 and must slide along it (x is the one free axis there).
+    let (n, h) = ([6, 3, 3], 1e-3);
+    let mut s = solver(n, h);
+    s.set_velocity_field(|_, _| -0.01);
+    let mut kinds = vec![VoxelKind::Wall; n[0] * n[1] * n[2]];
+    let at = |i: usize| i + n[0] * (1 + n[1]);
+    for i in 1..n[0] {
+        kinds[at(i)] = VoxelKind::Fluid;
+    }
+    kinds[at(0)] = VoxelKind::Outflow;
+    let t = time_to_traverse(&s, &kinds, &[[4.5 * h, 1.5 * h, 1.5 * h]], 1e-3, 5.0);
+    assert_eq!((t.released, t.reached), (1, 1), "{t:?}");
+}
+
+#[test]
 fn particle_and_vortex_tables_parse_and_bad_values_name_the_key() {
     let toml = r#"
 [stages]

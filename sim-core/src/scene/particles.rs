@@ -1207,17 +1207,15 @@ impl Kernel<'_> {
                         keep = false;
                         break;
                     }
-                    _ => {
-                        // Slide: revert one axis (the first that lands in fluid), else stay.
-                        for a in 0..3 {
-                            let mut r = q;
-                            r[a] = p[a];
-                            if self.kind_at(r) == VoxelKind::Fluid {
-                                p = r;
-                                break;
-                            }
+                    _ => match self.slide(p, q) {
+                        Slide::To(r) => p = r,
+                        Slide::Leave(f) => {
+                            fate[n] = f;
+                            keep = false;
+                            break;
                         }
-                    }
+                        Slide::Stay => {}
+                    },
                 }
             }
             pos[n] = p;
@@ -1228,6 +1226,45 @@ impl Kernel<'_> {
                 }
             }
         }
+    }
+}
+
+/// Where a substep that ended in a wall goes instead.
+enum Slide {
+    /// Along the axes of the move that stay in the fluid.
+    To([f32; 3]),
+    /// Through an outlet (the fate).
+    Leave(u8),
+    /// Nowhere.
+    Stay,
+}
+
+impl Kernel<'_> {
+    /// The move `p -> q` ended in a wall (or the scope, a port, outside the grid): keep as much
+    /// of it as lands in the fluid or an outlet. First one axis reverted (the first that works),
+    /// then two: a particle pressed into an edge or a corner by a field pointing into both walls
+    /// still moves along the one free axis (with one axis only it stayed, and in a frozen field
+    /// stayed forever).
+    #[inline(always)]
+    fn slide(&self, p: [f32; 3], q: [f32; 3]) -> Slide {
+        let tries = [
+            [false, true, true],
+            [true, false, true],
+            [true, true, false],
+            [true, false, false],
+            [false, true, false],
+            [false, false, true],
+        ];
+        for keep in tries {
+            let r: [f32; 3] = std::array::from_fn(|a| if keep[a] { q[a] } else { p[a] });
+            match self.kind_at(r) {
+                VoxelKind::Fluid => return Slide::To(r),
+                VoxelKind::Outflow => return Slide::Leave(OUTFLOW),
+                VoxelKind::Open => return Slide::Leave(OPEN),
+                _ => {}
+            }
+        }
+        Slide::Stay
     }
 }
 
