@@ -693,6 +693,22 @@ fn time_to_traverse_of_a_plug_flow_is_the_length_over_the_speed() {
         (t.first_s.unwrap() - exact).abs() <= 1.5e-3,
         "{t:?} vs {exact}"
     );
+    // A cloud over the whole cross-section (a regular 12 x 12 sub-grid, as the scene releases
+    // over the port's faces): every tracer arrives, first and half within 1.5 steps of L / U.
+    let cloud: Vec<[f64; 3]> = (0..144)
+        .map(|m| {
+            let (a, b) = ((m % 12) as f64, (m / 12) as f64);
+            [0.0015, (a + 0.5) / 12.0 * 0.008, (b + 0.5) / 12.0 * 0.008]
+        })
+        .collect();
+    let t = time_to_traverse(&s, &kinds, &cloud, 1e-3, 2.0);
+    assert_eq!((t.released, t.reached, t.open), (144, 144, 0), "{t:?}");
+    for x in [t.first_s, t.median_s] {
+        assert!(
+            x.is_some_and(|x| (x - exact).abs() <= 1.5e-3),
+            "{t:?} vs {exact}"
+        );
+    }
 }
 
 #[test]
