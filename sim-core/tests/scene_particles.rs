@@ -117,5 +117,8 @@ rate_ml_min = 2.0
         hydrometra_sim::scene::particles::Particles::time_to_traverse(&scene, 1e-3, 2.0).unwrap();
     // A 4 x 4 sub-grid on each of the port's fluid faces.
     let per_face = hydrometra_sim::scene::particles::TRAVERSE_SUBGRID.pow(2);
-    assert!(t.released > 0 && t.released % per_face == 0, "{t:?}");
+    assert!(
+        t.released > 0 && t.released.is_multiple_of(per_face),
+        "{t:?}"
+    );
 }
