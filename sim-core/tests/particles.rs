@@ -693,6 +693,40 @@ fn time_to_traverse_of_a_plug_flow_is_the_length_over_the_speed() {
         (t.first_s.unwrap() - exact).abs() <= 1.5e-3,
         "{t:?} vs {exact}"
     );
+    // A cloud over the whole cross-section (a regular 12 x 12 sub-grid, as the scene releases
+    // over the port's faces): every tracer arrives, first and half within 1.5 steps of L / U.
+    let cloud: Vec<[f64; 3]> = (0..144)
+        .map(|m| {
+            let (a, b) = ((m % 12) as f64, (m / 12) as f64);
+            [0.0015, (a + 0.5) / 12.0 * 0.008, (b + 0.5) / 12.0 * 0.008]
+        })
+        .collect();
+    let t = time_to_traverse(&s, &kinds, &cloud, 1e-3, 2.0);
+    assert_eq!((t.released, t.reached, t.open), (144, 144, 0), "{t:?}");
+    for x in [t.first_s, t.median_s] {
+        assert!(
+            x.is_some_and(|x| (x - exact).abs() <= 1.5e-3),
+            "{t:?} vs {exact}"
+        );
+    }
+}
+
+#[test]
+fn a_tracer_pressed_into_an_edge_slides_along_it_to_the_outflow() {
+    // A one-cell channel along x (j = k = 1) in walls, the outflow cell at x = 0, and a field
+    // pointing into the channel's -y and -z walls as well as along -x: the tracer is pushed
+    // into the edge y = z = 1 and must slide along it (x is the one free axis there).
+    let (n, h) = ([6, 3, 3], 1e-3);
+    let mut s = solver(n, h);
+    s.set_velocity_field(|_, _| -0.01);
+    let mut kinds = vec![VoxelKind::Wall; n[0] * n[1] * n[2]];
+    let at = |i: usize| i + n[0] * (1 + n[1]);
+    for i in 1..n[0] {
+        kinds[at(i)] = VoxelKind::Fluid;
+    }
+    kinds[at(0)] = VoxelKind::Outflow;
+    let t = time_to_traverse(&s, &kinds, &[[4.5 * h, 1.5 * h, 1.5 * h]], 1e-3, 5.0);
+    assert_eq!((t.released, t.reached), (1, 1), "{t:?}");
 }
 
 #[test]

@@ -115,5 +115,10 @@ rate_ml_min = 2.0
         .contains(&format!("NumberOfPoints=\"{}\"", counts.alive)));
     let t =
         hydrometra_sim::scene::particles::Particles::time_to_traverse(&scene, 1e-3, 2.0).unwrap();
-    assert!(t.released > 0, "{t:?}");
+    // A 4 x 4 sub-grid on each of the port's fluid faces.
+    let per_face = hydrometra_sim::scene::particles::TRAVERSE_SUBGRID.pow(2);
+    assert!(
+        t.released > 0 && t.released.is_multiple_of(per_face),
+        "{t:?}"
+    );
 }

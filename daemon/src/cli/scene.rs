@@ -9,7 +9,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::scene::particles::Particles;
+use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
     Stage, VoxelKind,
@@ -545,6 +545,8 @@ struct BenchRow {
     traverse_released: usize,
     /// Tracers that reached the outflow holes within `--traverse-max-s`.
     traverse_reached: usize,
+    /// Tracers that left through the open external os instead.
+    traverse_open: usize,
     /// First arrival at the outflow holes, s (the paper's "time to traverse").
     traverse_first_s: Option<f64>,
     /// Half of the tracers arrived, s.
@@ -756,6 +758,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
             volume_error_percent: 100.0 * (grid_ml / surf_ml - 1.0),
             traverse_released: 0,
             traverse_reached: 0,
+            traverse_open: 0,
             traverse_first_s: None,
             traverse_median_s: None,
         };
@@ -777,6 +780,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
         if let Some(t) = Particles::time_to_traverse(&run.scene, 1e-3, a.traverse_max_s) {
             row.traverse_released = t.released;
             row.traverse_reached = t.reached;
+            row.traverse_open = t.open;
             row.traverse_first_s = t.first_s;
             row.traverse_median_s = t.median_s;
         }
@@ -789,7 +793,8 @@ fn bench(a: &BenchArgs) -> Result<()> {
     println!(
         "scene {}, {} warm-up + {} timed steps at {} Hz, pump {} mmHg, rayon threads {}; \
          with vortices: {} ({:?}{}); time to traverse: valves fully open after {} steps, tracers \
-         from the inflow port, first arrival / half arrived (of released), at most {} s",
+         spread over the inflow port's fluid faces (a {}x{} sub-grid per face), first arrival / \
+         half arrived (of released), at most {} s",
         base.name,
         a.warmup,
         a.steps,
@@ -804,16 +809,27 @@ fn bench(a: &BenchArgs) -> Result<()> {
             ", a second run"
         },
         a.traverse_settle_steps,
+        TRAVERSE_SUBGRID,
+        TRAVERSE_SUBGRID,
         a.traverse_max_s
     );
     let opt = |x: Option<f64>| x.map_or("-".to_string(), |v| format!("{v:.2}"));
     println!("| voxel mm | box cells | fluid cells | fluid ms mean / p99 | fluid + {} vortices ms (+%) | CG its | max div h/U | voxelize full ms | voxelize incr. ms mean / p99 | replay us mean / p99 | step ms mean / p99 | grid vol ml | surface vol ml | vol err % | time to traverse s |", a.vortices);
     println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for r in &rows {
+        // No vortices asked: no vortex figures (the overhead would be 0/0).
+        let with_vortices = if a.vortices > 0 {
+            format!(
+                "{:.3} ({:+.0} %)",
+                r.fluid_with_vortices_ms_mean, r.vortex_overhead_percent
+            )
+        } else {
+            "-".to_string()
+        };
         println!(
-            "| {} | {} | {} | {:.3} / {:.3} | {:.3} ({:+.0} %) | {:.1} | {:.1e} | {:.3} | {:.3} / {:.3} | {:.1} / {:.1} | {:.3} / {:.3} | {:.3} | {:.3} | {:+.1} | {} / {} ({}/{}) |",
+            "| {} | {} | {} | {:.3} / {:.3} | {} | {:.1} | {:.1e} | {:.3} | {:.3} / {:.3} | {:.1} / {:.1} | {:.3} / {:.3} | {:.3} | {:.3} | {:+.1} | {} / {} ({}/{}) |",
             r.voxel_mm, r.box_cells, r.fluid_cells, r.fluid_ms_mean, r.fluid_ms_p99,
-            r.fluid_with_vortices_ms_mean, r.vortex_overhead_percent,
+            with_vortices,
             r.projection_iterations_mean, r.max_div_rel, r.voxelize_full_ms,
             r.voxelize_incremental_ms_mean, r.voxelize_incremental_ms_p99, r.replay_us_mean,
             r.replay_us_p99, r.step_ms_mean, r.step_ms_p99, r.grid_fluid_volume_ml,

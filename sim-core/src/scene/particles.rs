@@ -1207,17 +1207,15 @@ impl Kernel<'_> {
                         keep = false;
                         break;
                     }
-                    _ => {
-                        // Slide: revert one axis (the first that lands in fluid), else stay.
-                        for a in 0..3 {
-                            let mut r = q;
-                            r[a] = p[a];
-                            if self.kind_at(r) == VoxelKind::Fluid {
-                                p = r;
-                                break;
-                            }
+                    _ => match self.slide(p, q) {
+                        Slide::To(r) => p = r,
+                        Slide::Leave(f) => {
+                            fate[n] = f;
+                            keep = false;
+                            break;
                         }
-                    }
+                        Slide::Stay => {}
+                    },
                 }
             }
             pos[n] = p;
@@ -1228,6 +1226,45 @@ impl Kernel<'_> {
                 }
             }
         }
+    }
+}
+
+/// Where a substep that ended in a wall goes instead.
+enum Slide {
+    /// Along the axes of the move that stay in the fluid.
+    To([f32; 3]),
+    /// Through an outlet (the fate).
+    Leave(u8),
+    /// Nowhere.
+    Stay,
+}
+
+impl Kernel<'_> {
+    /// The move `p -> q` ended in a wall (or the scope, a port, outside the grid): keep as much
+    /// of it as lands in the fluid or an outlet. First one axis reverted (the first that works),
+    /// then two: a particle pressed into an edge or a corner by a field pointing into both walls
+    /// still moves along the one free axis (with one axis only it stayed, and in a frozen field
+    /// stayed forever).
+    #[inline(always)]
+    fn slide(&self, p: [f32; 3], q: [f32; 3]) -> Slide {
+        let tries = [
+            [false, true, true],
+            [true, false, true],
+            [true, true, false],
+            [true, false, false],
+            [false, true, false],
+            [false, false, true],
+        ];
+        for keep in tries {
+            let r: [f32; 3] = std::array::from_fn(|a| if keep[a] { q[a] } else { p[a] });
+            match self.kind_at(r) {
+                VoxelKind::Fluid => return Slide::To(r),
+                VoxelKind::Outflow => return Slide::Leave(OUTFLOW),
+                VoxelKind::Open => return Slide::Leave(OPEN),
+                _ => {}
+            }
+        }
+        Slide::Stay
     }
 }
 
@@ -1262,13 +1299,15 @@ pub struct Traverse {
     pub released: usize,
     /// Tracers that left through the outflow holes within the time limit.
     pub reached: usize,
+    /// Tracers that left through the open external os instead.
+    pub open: usize,
     /// Time of the first arrival, s.
     pub first_s: Option<f64>,
     /// Time by which half of the released tracers arrived, s.
     pub median_s: Option<f64>,
 }
 
-/// Releases one tracer (no slip) at each of `starts_m` into the solver's current (frozen)
+/// Releases one tracer (no slip) at each of `starts_m` (those in a fluid cell) into the solver's current (frozen)
 /// velocity and advances them with steps of `dt_s` until all left or `max_time_s`; reports when
 /// they leave through [`VoxelKind::Outflow`] cells (the paper's "time to traverse").
 pub fn time_to_traverse(
@@ -1289,6 +1328,7 @@ pub fn time_to_traverse(
     let mut out = Traverse {
         released: 0,
         reached: 0,
+        open: 0,
         first_s: None,
         median_s: None,
     };
@@ -1315,6 +1355,7 @@ pub fn time_to_traverse(
             out.median_s = Some(t);
         }
         out.reached = reached;
+        out.open = sys.counts().open.iter().sum::<u64>() as usize;
     }
     out
 }
@@ -1645,12 +1686,14 @@ impl Particles {
         }
     }
 
-    /// The paper's "time to traverse" in the scene's current flow: tracers released in the
-    /// fluid cells next to the inflow port (see [`time_to_traverse`]).
+    /// The paper's "time to traverse" in the scene's current flow: a cloud of tracers spread
+    /// evenly over the inflow port's fluid-facing area (see [`inflow_face_points`] and
+    /// [`time_to_traverse`]).
     pub fn time_to_traverse(scene: &Scene, dt_s: f64, max_time_s: f64) -> Option<Traverse> {
         let solver = scene.fluid.as_ref()?;
-        let mut starts = Vec::with_capacity(scene.inflow.len() * 6);
-        inflow_neighbours(scene, &mut starts);
+        let per_face = TRAVERSE_SUBGRID * TRAVERSE_SUBGRID;
+        let mut starts = Vec::with_capacity(scene.inflow.len() * 6 * per_face);
+        inflow_face_points(scene, TRAVERSE_SUBGRID, &mut starts);
         Some(time_to_traverse(
             solver,
             &scene.kinds,
@@ -1661,29 +1704,77 @@ impl Particles {
     }
 }
 
+/// Tracers of the time to traverse per inflow face and side: a regular 4 x 4 sub-grid.
+pub const TRAVERSE_SUBGRID: usize = 4;
+/// How far into the fluid the tracers start from the port's face, voxels.
+pub const TRAVERSE_OFFSET_VOXELS: f64 = 0.25;
+
+/// Calls `f` with the cell `(i, j, k)` of every inflow port cell and each of its faces
+/// (0..6, [`super::ports::FACE_NORMALS`]) that borders fluid.
+fn for_each_inflow_face(scene: &Scene, mut f: impl FnMut([usize; 3], usize)) {
+    let [nx, ny, _] = scene.cells.dims;
+    for b in &scene.inflow {
+        let n = b.cell as usize;
+        let ijk = [n % nx, (n / nx) % ny, n / (nx * ny)];
+        for face in 0..6 {
+            if b.faces >> face & 1 == 1 {
+                f(ijk, face);
+            }
+        }
+    }
+}
+
 /// Centres of the cells next to the inflow port's fluid faces, appended to `out` up to its
 /// capacity (no allocation).
 fn inflow_neighbours(scene: &Scene, out: &mut Vec<[f64; 3]>) {
     let c = &scene.cells;
-    let [nx, ny, nz] = c.dims;
-    for b in &scene.inflow {
-        let n = b.cell as usize;
-        let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-        for f in 0..6 {
-            if b.faces >> f & 1 == 0 {
-                continue;
-            }
-            let mut q = [i as i64, j as i64, k as i64];
-            q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
-            if q.iter()
-                .zip([nx, ny, nz])
-                .all(|(&x, d)| x >= 0 && (x as usize) < d)
-                && out.len() < out.capacity()
-            {
-                out.push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
+    for_each_inflow_face(scene, |ijk, f| {
+        let mut q = ijk.map(|x| x as i64);
+        q[f / 2] += if f % 2 == 1 { 1 } else { -1 };
+        if q.iter()
+            .zip(c.dims)
+            .all(|(&x, d)| x >= 0 && (x as usize) < d)
+            && out.len() < out.capacity()
+        {
+            out.push(c.centre_m(q[0] as usize, q[1] as usize, q[2] as usize));
+        }
+    });
+}
+
+/// Points spread over the inflow port's fluid-facing area: on every fluid face of a port cell
+/// that the inflow crosses (`d . n > 0`, `d` the scope's direction; the others carry no flux), a
+/// regular `side` x `side` sub-grid (the centres of the face's sub-squares), moved
+/// [`TRAVERSE_OFFSET_VOXELS`] into the fluid cell; appended to `out` up to its capacity.
+/// Deterministic, and as many points per face at every voxel size, so each face (the same
+/// area in voxels) carries the same weight.
+pub fn inflow_face_points(scene: &Scene, side: usize, out: &mut Vec<[f64; 3]>) {
+    let c = &scene.cells;
+    let h = c.spacing_m;
+    let Some(dir) = scene.scope().map(|sc| sc.dir) else {
+        return;
+    };
+    for_each_inflow_face(scene, |[i, j, k], f| {
+        let n = super::ports::FACE_NORMALS[f];
+        if dir[0] * n[0] + dir[1] * n[1] + dir[2] * n[2] <= 0.0 {
+            return;
+        }
+        let centre = c.centre_m(i, j, k);
+        let axis = f / 2;
+        let sign = if f % 2 == 1 { 1.0 } else { -1.0 };
+        let (t1, t2) = ((axis + 1) % 3, (axis + 2) % 3);
+        for a in 0..side {
+            for b in 0..side {
+                if out.len() >= out.capacity() {
+                    return;
+                }
+                let mut p = centre;
+                p[axis] += sign * (0.5 + TRAVERSE_OFFSET_VOXELS) * h;
+                p[t1] += ((a as f64 + 0.5) / side as f64 - 0.5) * h;
+                p[t2] += ((b as f64 + 0.5) / side as f64 - 0.5) * h;
+                out.push(p);
             }
         }
-    }
+    });
 }
 
 fn kind_at_m(scene: &Scene, p: [f64; 3]) -> VoxelKind {
