@@ -381,8 +381,18 @@ impl FluidSolver {
         self.pressure.resize();
         topology::open_row_ranges(&self.grid, &mut self.open_rows);
         self.outflow_faces.clear();
+        // The three components are independent: x and y here, z on the fork-join helper (the
+        // result does not depend on which thread builds which).
+        let (grid, layout, rows) = (&self.grid, &self.layout, &self.open_rows);
+        let [f0, f1, f2] = &mut self.faces;
+        crate::fork_join::join(
+            || {
+                f0.rebuild(grid, layout, 0, rows);
+                f1.rebuild(grid, layout, 1, rows);
+            },
+            || f2.rebuild(grid, layout, 2, rows),
+        );
         for c in 0..3 {
-            self.faces[c].rebuild(&self.grid, &self.layout, c, &self.open_rows);
             let n = self.faces[c].active.len();
             for v in [&mut self.compact[c], &mut self.ghost[c]] {
                 v.clear();

@@ -111,6 +111,7 @@ pub(crate) fn open_row_ranges(grid: &FluidGrid, out: &mut Vec<[u32; 2]>) {
     }
 }
 
+#[cfg(test)]
 fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
     match cell {
         Some(c) => {
@@ -138,6 +139,53 @@ pub(crate) fn face_cells(
     };
     // Periodic: face 0's upper is cell 0 (f itself), lower is cell n-1.
     (lower, upper)
+}
+
+/// Linear indices of the two cells beside face `f` of component `c` (lower, upper; NONE =
+/// outside), as [`face_cells`] finds them but by stride arithmetic: the rebuild asks this for every
+/// visited face and every tangential stencil neighbour.
+#[inline]
+fn face_cell_indices(dims: [usize; 3], periodic: [bool; 3], c: usize, f: [usize; 3]) -> (u32, u32) {
+    let stride = [1, dims[0], dims[0] * dims[1]][c];
+    // For the top face of a non-periodic axis this is one past the box along `c` (never read).
+    let at = f[0] + dims[0] * (f[1] + dims[1] * f[2]);
+    let upper = if f[c] < dims[c] { at as u32 } else { NONE };
+    let lower = if f[c] > 0 {
+        (at - stride) as u32
+    } else if periodic[c] {
+        // Periodic: face 0's lower cell is cell n-1.
+        (at + (dims[c] - 1) * stride) as u32
+    } else {
+        NONE
+    };
+    (lower, upper)
+}
+
+/// Label of the cell with linear index `cell`, Solid for NONE (outside the box).
+#[inline]
+fn label_or_solid(labels: &[CellLabel], cell: u32) -> CellLabel {
+    labels
+        .get(cell as usize)
+        .copied()
+        .unwrap_or(CellLabel::Solid)
+}
+
+/// Class of a face from the labels of its two cells: fixed between a wall and an open cell,
+/// active between non-walls of which one is fluid.
+#[inline]
+fn face_class(lower: CellLabel, upper: CellLabel) -> u8 {
+    let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
+    if lower.is_wall() || upper.is_wall() {
+        if open(lower) || open(upper) {
+            FIXED
+        } else {
+            OTHER
+        }
+    } else if lower == CellLabel::Fluid || upper == CellLabel::Fluid {
+        ACTIVE
+    } else {
+        OTHER
+    }
 }
 
 /// Index of the neighbour face of face `idx` (coordinates `f`, component c) along axis `d`,
@@ -254,8 +302,11 @@ impl FaceSet {
         self.ext_start.clear();
         self.ext_src.clear();
 
-        let [_, ny, nz] = grid.dims();
+        let cdims = grid.dims();
+        let [_, ny, nz] = cdims;
+        let labels = grid.labels();
         let periodic = layout.periodic;
+        let cell_periodic = grid.periodic();
         // The cell row beside face row (j, k) on the lower side along `c` (None: outside).
         let lower_row = |j: usize, k: usize| -> Option<usize> {
             match c {
@@ -295,22 +346,8 @@ impl FaceSet {
                 let base = d[0] * (fj + d[1] * fk);
                 for i in lo..hi {
                     let idx = base + i;
-                    let f = [i, fj, fk];
-                    let (lc, uc) = face_cells(grid, c, f);
-                    let (ll, li) = label_of(grid, lc);
-                    let (ul, ui) = label_of(grid, uc);
-                    let open = |l: CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);
-                    let class = if ll.is_wall() || ul.is_wall() {
-                        if open(ll) || open(ul) {
-                            FIXED
-                        } else {
-                            OTHER
-                        }
-                    } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
-                        ACTIVE
-                    } else {
-                        OTHER
-                    };
+                    let (li, ui) = face_cell_indices(cdims, cell_periodic, c, [i, fj, fk]);
+                    let class = face_class(label_or_solid(labels, li), label_or_solid(labels, ui));
                     self.class[idx] = class;
                     match class {
                         FIXED => self.fixed.push([idx as u32, li, ui]),
@@ -353,9 +390,9 @@ impl FaceSet {
                         }
                         continue;
                     }
-                    let (lo, up) = face_cells(grid, c, neighbour_coords(layout, c, f, d, dir));
-                    let (ll, li) = label_of(grid, lo);
-                    let (ul, ui) = label_of(grid, up);
+                    let g = neighbour_coords(layout, c, f, d, dir);
+                    let (li, ui) = face_cell_indices(cdims, cell_periodic, c, g);
+                    let (ll, ul) = (label_or_solid(labels, li), label_or_solid(labels, ui));
                     if ll.is_wall() && ul.is_wall() {
                         diag += 1.0;
                         self.ghosts.push([n as u32, li, ui, opposite()]);
