@@ -417,8 +417,8 @@ mod tests {
         // The sum of the field sizes equals the struct size: nothing hidden between fields.
         // 30 scalar 8-byte fields, 10 f64 in arrays, 8 u32 (2 at the start, 6 at the end), then
         // the 18 appended 8-byte hydraulic fields, then the 2 appended u32 link-down fields, then
-        // the scene's 2 + 3 * 7 + 3 8-byte fields.
-        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2 + 8 * (2 + 3 * 7 + 3);
+        // the scene's 2 + 3 * 7 + 3 8-byte fields, then the appended inflow port open fraction.
+        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2 + 8 * (2 + 3 * 7 + 3) + 8;
         assert_eq!(core::mem::size_of::<Status>(), fields);
         assert_eq!(core::mem::size_of::<Status>() % 8, 0);
         assert_eq!(core::mem::align_of::<Status>(), 8);
