@@ -736,6 +736,20 @@ impl FluidSolver {
         );
     }
 
+    /// `tmp = u` with the advected values of the active faces scattered in (the field a
+    /// second trace of the two-step schemes samples).
+    fn advected_into_tmp(
+        plan: &advection::Plan,
+        u: &[Vec<f32>; 3],
+        adv: &[f32],
+        tmp: &mut [Vec<f32>; 3],
+    ) {
+        for c in 0..3 {
+            tmp[c].copy_from_slice(&u[c]);
+        }
+        advection::scatter(plan, adv, tmp);
+    }
+
     /// Advects the face velocities by `dt_cells` (dt / h) through the centred velocity of the
     /// last [`FluidSolver::update_centred`] with `scheme` (a single-step scheme: a reflection
     /// scheme's half steps are its base scheme), leaving the compact result in `adv`.
@@ -764,10 +778,7 @@ impl FluidSolver {
                     [f0, f1, f2],
                     parallel,
                 );
-                for c in 0..3 {
-                    self.tmp[c].copy_from_slice(&self.u[c]);
-                }
-                advection::scatter(&self.plan, &self.adv, &mut self.tmp);
+                Self::advected_into_tmp(&self.plan, &self.u, &self.adv, &mut self.tmp);
                 let [t0, t1, t2] = &self.tmp;
                 // The forward trace is done: this pass only samples `tmp` at its feet.
                 let forward = advection::Pass {
@@ -791,10 +802,7 @@ impl FluidSolver {
                     parallel,
                 );
                 advection::gather(&self.plan, [u0, u1, u2], &mut self.adv_orig);
-                for c in 0..3 {
-                    self.tmp[c].copy_from_slice(&self.u[c]);
-                }
-                advection::scatter(&self.plan, &self.adv, &mut self.tmp);
+                Self::advected_into_tmp(&self.plan, &self.u, &self.adv, &mut self.tmp);
                 let [t0, t1, t2] = &self.tmp;
                 let forward = advection::Pass {
                     src: [t0, t1, t2],
