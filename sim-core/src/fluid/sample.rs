@@ -94,18 +94,7 @@ impl Layout {
             r11 + x0,
             r11 + x1,
         ];
-        let (sx, sy, sz) = (1.0 - tx, 1.0 - ty, 1.0 - tz);
-        let w = [
-            sx * sy * sz,
-            tx * sy * sz,
-            sx * ty * sz,
-            tx * ty * sz,
-            sx * sy * tz,
-            tx * sy * tz,
-            sx * ty * tz,
-            tx * ty * tz,
-        ];
-        (idx, w)
+        (idx, trilinear_weights([tx, ty, tz]))
     }
 
     /// Component `c` of `field` at `p`.
@@ -204,18 +193,7 @@ impl Layout {
                 base + sz + sy,
                 base + sz + sy + sx,
             ];
-            let (tx, ty, tz) = (t[0], t[1], t[2]);
-            let (ux, uy, uz) = (1.0 - tx, 1.0 - ty, 1.0 - tz);
-            let w = [
-                ux * uy * uz,
-                tx * uy * uz,
-                ux * ty * uz,
-                tx * ty * uz,
-                ux * uy * tz,
-                tx * uy * tz,
-                ux * ty * tz,
-                tx * ty * tz,
-            ];
+            let w = trilinear_weights(t);
             let field = u[c];
             for n in 0..8 {
                 v[c] += w[n] * field[idx[n]];
@@ -252,6 +230,24 @@ impl Layout {
             }
         })
     }
+}
+
+/// Trilinear weights of the corners `(0,0,0), (1,0,0), (0,1,0), (1,1,0), (0,0,1), ...` (x fastest)
+/// at the local coordinates `t` in the cell.
+#[inline(always)]
+fn trilinear_weights(t: [f32; 3]) -> [f32; 8] {
+    let [tx, ty, tz] = t;
+    let (sx, sy, sz) = (1.0 - tx, 1.0 - ty, 1.0 - tz);
+    [
+        sx * sy * sz,
+        tx * sy * sz,
+        sx * ty * sz,
+        tx * ty * sz,
+        sx * sy * tz,
+        tx * sy * tz,
+        sx * ty * tz,
+        tx * ty * tz,
+    ]
 }
 
 #[cfg(test)]
