@@ -8,6 +8,7 @@
 //! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
 //! - [`soak`]: the random stability soak of the fluid solver.
+//! - [`stage_bench`]: the cavity and particles the vortex and particle benchmarks share.
 
 // The harness files moved here from `fluid` and `fem` and still name the library's items through
 // `super::`; these imports are what `super::` finds.
@@ -19,6 +20,7 @@ use crate::fluid::{
 
 pub mod benchmark;
 pub mod soak;
+pub mod stage_bench;
 // Index loops mirror the mesh formulas, as in `fem`.
 #[allow(clippy::needless_range_loop)]
 pub mod testmesh;
