@@ -3,13 +3,17 @@
 //! Each level is a 7-point Poisson operator on the "fluid" cells of a label grid (0 = solid wall,
 //! Neumann; 1 = fluid, unknown; 2 = open, Dirichlet p = 0). A coarse cell is open if any child is
 //! open, else fluid if any child is fluid, else solid. Restriction sums the children's residuals
-//! (times a scale), prolongation injects the coarse value into every child (its transpose).
+//! (times a scale), prolongation injects the coarse value into every child (its transpose). Level 0
+//! couples neighbours with weight 1; a coarser level carries the Galerkin operator of that
+//! prolongation (`Level::galerkin`): per-face couplings that count the fine faces joining two
+//! coarse cells, so a thin or partly filled region is not coupled like a full one (on the scene's
+//! thin cavity this halved the MG-PCG iterations: 17.0 to 8.1 at 0.6 mm).
 //! Smoothing is red-black Gauss-Seidel, red then black before and black then red after the coarse
 //! correction, so the V-cycle is a symmetric operator and CG preconditioned by it stays valid.
 //!
 //! The levels are stored matrix-free on the dense box padded by one ghost layer per side: vectors
 //! hold zero on every non-fluid cell (solid walls contribute nothing, open cells are p = 0), the
-//! labels only decide the diagonal, so every kernel is a branch-free loop over contiguous spans of
+//! labels (and the couplings) only decide the diagonal, so every kernel is a branch-free loop over contiguous spans of
 //! cells with fixed strides that the compiler vectorises. Periodic axes fill their ghost layers from
 //! the opposite side before each stencil application (`halo`). A colour's half-sweep reads only the
 //! other colour, so it computes a chunk into a stack buffer and adds it back (exact Gauss-Seidel;
@@ -48,6 +52,36 @@ macro_rules! windows {
             &$v[c - sz..c - sz + n],
             &$v[c + sz..c + sz + n],
         )
+    }};
+}
+
+/// `for $q in 0..$n { let $nsum = sum of the neighbours of cell c+q; $body }` over the windows of
+/// `$v` at `$c`: the plain sum on a level with unit couplings (`$wt` `None`), the sum weighted by
+/// the face couplings `[x, y, z]` (coupling of a cell to its +axis neighbour) otherwise. The body is
+/// expanded once per case so both loops vectorise.
+macro_rules! for_nsum {
+    ($wt:expr, $v:expr, $c:expr, $n:expr, $sy:expr, $sz:expr, |$nsum:ident, $q:ident| $body:block) => {{
+        let (c, n, sy, sz) = ($c, $n, $sy, $sz);
+        let (xm, xp, ym, yp, zm, zp) = windows!($v, c, n, sy, sz);
+        match $wt {
+            None => {
+                for $q in 0..n {
+                    let $nsum = (xm[$q] + xp[$q]) + (ym[$q] + yp[$q]) + (zm[$q] + zp[$q]);
+                    $body
+                }
+            }
+            Some([w0, w1, w2]) => {
+                let (wxm, wxp) = (&w0[c - 1..c - 1 + n], &w0[c..c + n]);
+                let (wym, wyp) = (&w1[c - sy..c - sy + n], &w1[c..c + n]);
+                let (wzm, wzp) = (&w2[c - sz..c - sz + n], &w2[c..c + n]);
+                for $q in 0..n {
+                    let $nsum = (wxm[$q] * xm[$q] + wxp[$q] * xp[$q])
+                        + (wym[$q] * ym[$q] + wyp[$q] * yp[$q])
+                        + (wzm[$q] * zm[$q] + wzp[$q] * zp[$q]);
+                    $body
+                }
+            }
+        }
     }};
 }
 
@@ -244,6 +278,8 @@ impl<'a> SpanOp<'a> {
 struct SpanRun<'a> {
     op: SpanOp<'a>,
     spans: &'a [[u32; 2]],
+    /// The level's face couplings (`None`: unit couplings).
+    wt: Option<[&'a [f32]; 3]>,
     /// Padded index of element 0 of the outputs.
     off: usize,
     sy: usize,
@@ -257,7 +293,7 @@ impl pulp::WithSimd for SpanRun<'_> {
     // (and auto-vectorised) once for AVX2 + FMA and once for the SSE2 baseline.
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _simd: S) -> f64 {
-        let (sy, sz, off) = (self.sy, self.sz, self.off);
+        let (sy, sz, off, wt) = (self.sy, self.sz, self.off, self.wt);
         let spans = self.spans.iter().map(|&[s, e]| (s as usize, e as usize));
         match self.op {
             SpanOp::Init { x, b, inv } => {
@@ -279,7 +315,7 @@ impl pulp::WithSimd for SpanRun<'_> {
                 debug_assert_eq!(off, 0);
                 let mut acc = [0.0f64; LANES];
                 for (s, e) in spans {
-                    relax_span(x, b, diag, inv, s, e, sy, sz);
+                    relax_span(x, b, diag, inv, wt, s, e, sy, sz);
                     if dot {
                         dot_span(&mut acc, &b[s..e], &x[s..e]);
                     }
@@ -296,14 +332,11 @@ impl pulp::WithSimd for SpanRun<'_> {
             } => {
                 let mut acc = [0.0f64; LANES];
                 for (s, e) in spans {
-                    let n = e - s;
-                    let (xm, xp, ym, yp, zm, zp) = windows!(x, s, n, sy, sz);
                     let (x0, bb, dd, ii) = (&x[s..e], &b[s..e], &diag[s..e], &inv[s..e]);
                     let t = &mut t[s - off..e - off];
-                    for q in 0..n {
-                        let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+                    for_nsum!(wt, x, s, e - s, sy, sz, |nsum, q| {
                         t[q] = x0[q] + ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
-                    }
+                    });
                     if dot {
                         dot_span(&mut acc, bb, t);
                     }
@@ -318,7 +351,7 @@ impl pulp::WithSimd for SpanRun<'_> {
                 mask,
             } => {
                 for (s, e) in spans {
-                    stencil_span(&mut y[s - off..e - off], v, b, diag, mask, s, e, sy, sz);
+                    stencil_span(&mut y[s - off..e - off], v, b, diag, mask, wt, s, e, sy, sz);
                 }
                 0.0
             }
@@ -333,7 +366,7 @@ impl pulp::WithSimd for SpanRun<'_> {
                 let mut acc = [0.0f64; LANES];
                 for (s, e) in spans {
                     let y = &mut y[s - off..e - off];
-                    stencil_span(y, v, None, diag, mask, s, e, sy, sz);
+                    stencil_span(y, v, None, diag, mask, wt, s, e, sy, sz);
                     dot_span(&mut acc, &v[s..e], y);
                 }
                 acc.iter().sum()
@@ -396,6 +429,7 @@ fn dispatch(level: &Level, spans: &[[u32; 2]], off: usize, op: SpanOp<'_>) -> f6
     pulp::Arch::new().dispatch(SpanRun {
         op,
         spans,
+        wt: level.couplings(),
         off,
         sy: level.sy,
         sz: level.sz,
@@ -463,6 +497,12 @@ pub(crate) fn max_abs_spans(level: &Level, v: &[f64]) -> f64 {
     ra.max(rb)
 }
 
+/// Padded index of interior cell (i, j, k) in a box of strides `sy`, `sz` with one ghost layer.
+#[inline]
+fn pad_index(sy: usize, sz: usize, i: usize, j: usize, k: usize) -> usize {
+    (i + 1) + sy * (j + 1) + sz * (k + 1)
+}
+
 /// One multigrid level.
 #[derive(Default, Debug)]
 pub(crate) struct Level {
@@ -501,6 +541,10 @@ pub(crate) struct Level {
     pub ddiag: Vec<f32>,
     pub mask: Vec<f32>,
     pub inv: [Vec<f32>; 2],
+    /// Face couplings of a Galerkin coarse level (dense, per axis: the coupling of a cell to its
+    /// +axis neighbour); empty on level 0 and on periodic levels, whose couplings are 1 between
+    /// unknowns (and to open cells, in the diagonal).
+    pub wt: [Vec<f32>; 3],
     /// Dense unknowns, right-hand side and residual.
     pub x: Vec<f32>,
     pub b: Vec<f32>,
@@ -508,6 +552,101 @@ pub(crate) struct Level {
 }
 
 impl Level {
+    /// The face couplings the kernels weight the neighbours by (`None`: unit couplings).
+    fn couplings(&self) -> Option<[&[f32]; 3]> {
+        let [a, b, c] = &self.wt;
+        (!a.is_empty()).then_some([&a[..], &b[..], &c[..]])
+    }
+
+    /// Coupling between the fluid-or-open cells at padded index `p` and `p + e_axis`: the
+    /// level's weight, or 1 with unit couplings.
+    fn coupling(&self, axis: usize, p: usize) -> f32 {
+        match self.couplings() {
+            Some(w) => w[axis][p],
+            None => 1.0,
+        }
+    }
+
+    /// The Galerkin operator of piecewise-constant prolongation on the coarse level `coarse`
+    /// (labels and dense form built): every fine face between a fluid child and a fluid or open
+    /// cell of another coarse cell adds its coupling, over the number of fine faces a full coarse
+    /// face holds, to the coupling of the two coarse cells (so a fully fluid region keeps unit
+    /// couplings), and the diagonal is the sum of a cell's couplings. Unlike the rediscretised
+    /// operator of the coarse labels (a coarse cell with one fluid child coupled like a full
+    /// one), thin and partly filled regions keep the strength of their fine connections.
+    /// Periodic levels keep unit couplings.
+    fn galerkin(&self, coarse: &mut Level) {
+        if self.any_periodic() || coarse.any_periodic() {
+            for w in &mut coarse.wt {
+                w.clear();
+            }
+            return;
+        }
+        let len = coarse.mask.len();
+        for w in &mut coarse.wt {
+            w.clear();
+            w.resize(len, 0.0);
+        }
+        let [nx, ny, nz] = self.dims;
+        let ratio: [f32; 3] = std::array::from_fn(|a| if self.dims[a] > 1 { 2.0 } else { 1.0 });
+        let faces_per_face: [f32; 3] =
+            std::array::from_fn(|a| (0..3).filter(|&b| b != a).map(|b| ratio[b]).product());
+        let lab = |i: usize, j: usize, k: usize| self.label[i + nx * (j + ny * k)];
+        let (csy, csz) = (coarse.sy, coarse.sz);
+        let parent = |c: [usize; 3]| pad_index(csy, csz, c[0] / 2, c[1] / 2, c[2] / 2);
+        for &[j, k, i0, i1] in &self.row_spans {
+            let (j, k) = (j as usize, k as usize);
+            for i in i0 as usize..i1 as usize {
+                if lab(i, j, k) != L_FLUID {
+                    continue;
+                }
+                let c = [i, j, k];
+                let pc = parent(c);
+                for a in 0..3 {
+                    let n = [nx, ny, nz][a];
+                    // +axis face (fluid or open neighbour), and -axis face to an open neighbour
+                    // (a fluid one is counted from its own +axis face).
+                    if c[a] + 1 < n {
+                        let mut q = c;
+                        q[a] += 1;
+                        if matches!(lab(q[0], q[1], q[2]), L_FLUID | L_OPEN) {
+                            let pq = parent(q);
+                            if pq != pc {
+                                let w = self.coupling(a, self.pad(i, j, k));
+                                coarse.wt[a][pc] += w / faces_per_face[a];
+                            }
+                        }
+                    }
+                    if c[a] > 0 {
+                        let mut q = c;
+                        q[a] -= 1;
+                        if lab(q[0], q[1], q[2]) == L_OPEN {
+                            let pq = parent(q);
+                            if pq != pc {
+                                let w = self.coupling(a, self.pad(q[0], q[1], q[2]));
+                                coarse.wt[a][pq] += w / faces_per_face[a];
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let (sy, sz) = (coarse.sy, coarse.sz);
+        for &[j, k, i0, i1] in &coarse.row_spans {
+            let (j, k) = (j as usize, k as usize);
+            for i in i0 as usize..i1 as usize {
+                let p = coarse.pad(i, j, k);
+                if coarse.mask[p] == 0.0 {
+                    continue;
+                }
+                let w = &coarse.wt;
+                let d = w[0][p] + w[0][p - 1] + w[1][p] + w[1][p - sy] + w[2][p] + w[2][p - sz];
+                coarse.ddiag[p] = d;
+                coarse.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
+            }
+        }
+    }
+
     /// Compressed rows (fluid cells).
     pub fn rows(&self) -> usize {
         self.cell_of_row.len()
@@ -539,7 +678,7 @@ impl Level {
     /// Padded index of interior cell (i, j, k).
     #[inline]
     pub fn pad(&self, i: usize, j: usize, k: usize) -> usize {
-        (i + 1) + self.sy * (j + 1) + self.sz * (k + 1)
+        pad_index(self.sy, self.sz, i, j, k)
     }
 
     /// Number of fluid or open neighbours of a fluid cell.
@@ -879,6 +1018,7 @@ fn relax_span(
     b: &[f32],
     diag: &[f32],
     inv: &[f32],
+    wt: Option<[&[f32]; 3]>,
     s: usize,
     e: usize,
     sy: usize,
@@ -889,14 +1029,12 @@ fn relax_span(
     while c < e {
         let n = (e - c).min(CHUNK);
         {
-            let (xm, xp, ym, yp, zm, zp) = windows!(x, c, n, sy, sz);
             let x0 = &x[c..c + n];
             let (bb, dd, ii) = (&b[c..c + n], &diag[c..c + n], &inv[c..c + n]);
             let t = &mut t[..n];
-            for q in 0..n {
-                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+            for_nsum!(wt, x, c, n, sy, sz, |nsum, q| {
                 t[q] = ii[q] * (bb[q] + nsum - dd[q] * x0[q]);
-            }
+            });
         }
         for (xv, &tv) in x[c..c + n].iter_mut().zip(&t[..n]) {
             *xv += tv;
@@ -915,28 +1053,26 @@ fn stencil_span(
     b: Option<&[f32]>,
     diag: &[f32],
     mask: &[f32],
+    wt: Option<[&[f32]; 3]>,
     s: usize,
     e: usize,
     sy: usize,
     sz: usize,
 ) {
     let n = e - s;
-    let (xm, xp, ym, yp, zm, zp) = windows!(v, s, n, sy, sz);
     let (v0, dd, mm) = (&v[s..e], &diag[s..e], &mask[s..e]);
     let y = &mut y[..n];
     match b {
         Some(b) => {
             let b = &b[s..e];
-            for q in 0..n {
-                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+            for_nsum!(wt, v, s, n, sy, sz, |nsum, q| {
                 y[q] = mm[q] * (b[q] + nsum - dd[q] * v0[q]);
-            }
+            });
         }
         None => {
-            for q in 0..n {
-                let nsum = (xm[q] + xp[q]) + (ym[q] + yp[q]) + (zm[q] + zp[q]);
+            for_nsum!(wt, v, s, n, sy, sz, |nsum, q| {
                 y[q] = mm[q] * (dd[q] * v0[q] - nsum);
-            }
+            });
         }
     }
 }
@@ -1073,6 +1209,7 @@ impl Multigrid {
                 break;
             }
             coarse[0].build_dense();
+            fine[l - 1].galerkin(&mut coarse[0]);
             self.used += 1;
         }
     }
@@ -1231,6 +1368,89 @@ mod tests {
             // Nothing leaks onto non-fluid cells.
             let fluid_sum: f32 = l.pad_of_row.iter().map(|&p| y[p as usize].abs()).sum();
             assert_eq!(y.iter().map(|v| v.abs()).sum::<f32>(), fluid_sum);
+        }
+    }
+
+    /// Every coarse level is the Galerkin operator `P^T A P / 4` of the level above it (`P` the
+    /// piecewise-constant prolongation onto the fluid children of fluid coarse cells), checked
+    /// column by column through the levels' own dense stencils: on the ball (odd sizes, so blocks
+    /// are cut by the box) and on random labels with solid, fluid and open cells.
+    #[test]
+    fn coarse_levels_are_the_galerkin_operator_of_the_level_above() {
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut random_labels = |n: usize| {
+            let mut l = Level {
+                dims: [n, n - 2, n + 3],
+                ..Default::default()
+            };
+            l.label = (0..n * (n - 2) * (n + 3))
+                .map(|_| {
+                    seed ^= seed << 13;
+                    seed ^= seed >> 7;
+                    seed ^= seed << 17;
+                    match seed % 20 {
+                        0 => L_OPEN,
+                        1..=5 => L_SOLID,
+                        _ => L_FLUID,
+                    }
+                })
+                .collect();
+            l.build_rows();
+            l
+        };
+        for level0 in [ball(9, [false; 3]), ball(12, [false; 3]), random_labels(11)] {
+            let mut m = Multigrid {
+                levels: vec![level0],
+                ..Default::default()
+            };
+            m.build_hierarchy();
+            assert!(m.used >= 3, "levels: {}", m.used);
+            for l in 1..m.used {
+                let (fine, coarse) = (&m.levels[l - 1], &m.levels[l]);
+                let cells = |lv: &Level| {
+                    let mut v = Vec::new();
+                    for &[j, k, i0, i1] in &lv.row_spans {
+                        for i in i0..i1 {
+                            let c = [i as usize, j as usize, k as usize];
+                            if lv.mask[lv.pad(c[0], c[1], c[2])] == 1.0 {
+                                v.push(c);
+                            }
+                        }
+                    }
+                    v
+                };
+                let (fine_cells, coarse_cells) = (cells(fine), cells(coarse));
+                let parent = |c: [usize; 3]| coarse.pad(c[0] / 2, c[1] / 2, c[2] / 2);
+                for &cj in &coarse_cells {
+                    let pj = coarse.pad(cj[0], cj[1], cj[2]);
+                    // A_f P e_J, then P^T of it / 4.
+                    let mut v = vec![0.0f32; fine.x.len()];
+                    for &c in &fine_cells {
+                        if parent(c) == pj {
+                            v[fine.pad(c[0], c[1], c[2])] = 1.0;
+                        }
+                    }
+                    let mut y = vec![0.0f32; v.len()];
+                    fine.apply(&v, &mut y);
+                    let mut galerkin = vec![0.0f32; coarse.x.len()];
+                    for &c in &fine_cells {
+                        galerkin[parent(c)] += y[fine.pad(c[0], c[1], c[2])] / 4.0;
+                    }
+                    let mut e = vec![0.0f32; coarse.x.len()];
+                    e[pj] = 1.0;
+                    let mut column = vec![0.0f32; e.len()];
+                    coarse.apply(&e, &mut column);
+                    for &ci in &coarse_cells {
+                        let pi = coarse.pad(ci[0], ci[1], ci[2]);
+                        assert!(
+                            (column[pi] - galerkin[pi]).abs() <= 1e-6 * galerkin[pi].abs().max(1.0),
+                            "level {l}, row {ci:?}, column {cj:?}: {} vs Galerkin {}",
+                            column[pi],
+                            galerkin[pi]
+                        );
+                    }
+                }
+            }
         }
     }
 
