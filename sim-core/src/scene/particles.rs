@@ -18,7 +18,7 @@ use super::clarity::{ClarityTracker, View, ViewSpec};
 use super::random::SeededRng;
 use super::vortices::cross;
 use super::{Scene, VoxelKind};
-use crate::fluid::{CellLabel, FluidGrid, FluidSolver};
+use crate::fluid::{v4, CellLabel, FluidGrid, FluidSolver, V4};
 
 /// Gravity's magnitude, m/s^2.
 pub const GRAVITY_M_S2: f64 = 9.81;
@@ -506,8 +506,8 @@ pub struct ParticleSystem {
     slip: Vec<[f32; 3]>,
     class: Vec<u8>,
     birth_s: Vec<f32>,
-    /// Cell-centred velocity, cells/s (4 lanes).
-    field: Vec<[f32; 4]>,
+    /// Cell-centred velocity, cells/s (4 lanes, the fourth unused).
+    field: Vec<V4>,
     /// The cell kinds `field`'s cell lists were built for.
     field_kinds: Vec<VoxelKind>,
     /// Fluid and open cells: `(cell, lowest x face, lowest y face)` (the z face is the cell's).
@@ -518,6 +518,10 @@ pub struct ParticleSystem {
     class_step: Vec<([f32; 3], f32, f32)>,
     /// Per particle, this step: KEEP or how it left.
     fate: Vec<u8>,
+    /// Per parallel task: its sums of the clarity's cone weights per class.
+    task_sums: Vec<ClassSums>,
+    /// Particles `[0, settled)` ended the last step in fluid cells of `field_kinds`.
+    settled: usize,
     counts: ParticleCounts,
     time_s: f64,
 }
@@ -556,12 +560,14 @@ impl ParticleSystem {
             slip: Vec::with_capacity(capacity),
             class: Vec::with_capacity(capacity),
             birth_s: Vec::with_capacity(capacity),
-            field: vec![[0.0; 4]; grid.cell_count()],
+            field: vec![v4::zero(); grid.cell_count()],
             field_kinds: Vec::new(),
             centred_cells: Vec::new(),
             prescribed_cells: Vec::new(),
             class_step: Vec::with_capacity(256),
             fate: Vec::with_capacity(capacity),
+            task_sums: vec![[0.0; 256]; PARALLEL_TASKS],
+            settled: 0,
             counts: ParticleCounts::default(),
             time_s: 0.0,
         }
@@ -611,9 +617,14 @@ impl ParticleSystem {
     /// Velocity of particle `n`, m/s: the fluid's at its position (as of the last step) plus
     /// its slip.
     pub fn velocity_m_per_s(&self, n: usize) -> [f64; 3] {
-        let u = Self::sample(&self.field, self.dims, self.pos[n]);
+        let u = self.fluid_velocity(n);
         let slip = self.slip[n];
         std::array::from_fn(|a| f64::from(u[a] + slip[a]) * self.h)
+    }
+    /// The cell-centred field of the last step at particle `n`, cells/s.
+    fn fluid_velocity(&self, n: usize) -> [f32; 4] {
+        let p = self.pos[n];
+        v4::lanes(Sampler::new(&self.field, self.dims).sample(v4::new(p[0], p[1], p[2])))
     }
     /// Time since particle `n` was emitted, s.
     pub fn age_s(&self, n: usize) -> f64 {
@@ -633,6 +644,7 @@ impl ParticleSystem {
         self.slip.clear();
         self.class.clear();
         self.birth_s.clear();
+        self.settled = 0;
     }
 
     /// The cell (linear index) of a position in grid units, if inside the grid.
@@ -671,16 +683,16 @@ impl ParticleSystem {
     }
 
     /// Rebuilds the lists of cells whose velocity `build_field` writes when the kinds changed
-    /// (the cavity moved); the other cells' velocity is zero.
-    fn sync_kinds(&mut self, kinds: &[VoxelKind]) {
+    /// (the cavity moved; returns whether they did); the other cells' velocity is zero.
+    fn sync_kinds(&mut self, kinds: &[VoxelKind]) -> bool {
         let cells = self.field.len();
         let kinds = &kinds[..cells.min(kinds.len())];
-        if self.field_kinds.as_slice() == kinds {
-            return;
+        if kind_bytes(&self.field_kinds) == kind_bytes(kinds) {
+            return false;
         }
         self.field_kinds.clear();
         self.field_kinds.extend_from_slice(kinds);
-        self.field.fill([0.0; 4]);
+        self.field.fill(v4::zero());
         self.centred_cells.clear();
         self.prescribed_cells.clear();
         let [nx, ny, _] = self.dims;
@@ -699,17 +711,19 @@ impl ParticleSystem {
                 _ => {}
             }
         }
+        true
     }
 
     /// Builds the cell-centred velocity (cells/s): the mean of the faces in fluid and open
     /// cells (plus the overlay's), the prescribed velocity in port and wall cells, zero elsewhere.
+    /// Returns whether the kinds changed since the last build.
     fn build_field(
         &mut self,
         solver: &FluidSolver,
         kinds: &[VoxelKind],
         overlay: Option<[&[f32]; 3]>,
-    ) {
-        self.sync_kinds(kinds);
+    ) -> bool {
+        let changed = self.sync_kinds(kinds);
         let [nx, ny, _] = self.dims;
         let inv_h = (1.0 / self.h) as f32;
         let half = 0.5 * inv_h;
@@ -725,7 +739,7 @@ impl ParticleSystem {
                 for &[n, a, b] in &self.centred_cells {
                     let (n, a, b) = (n as usize, a as usize, b as usize);
                     let s = centred(faces, n, a, b);
-                    field[n] = [s[0] * half, s[1] * half, s[2] * half, 0.0];
+                    field[n] = v4::new(s[0] * half, s[1] * half, s[2] * half);
                 }
             }
             Some(o) => {
@@ -733,25 +747,19 @@ impl ParticleSystem {
                     let (n, a, b) = (n as usize, a as usize, b as usize);
                     let s = centred(faces, n, a, b);
                     let t = centred(o, n, a, b);
-                    field[n] = [
+                    field[n] = v4::new(
                         (s[0] + t[0]) * half,
                         (s[1] + t[1]) * half,
                         (s[2] + t[2]) * half,
-                        0.0,
-                    ];
+                    );
                 }
             }
         }
         for &n in &self.prescribed_cells {
             let p = grid.velocity_at(n as usize);
-            field[n as usize] = [p[0] * inv_h, p[1] * inv_h, p[2] * inv_h, 0.0];
+            field[n as usize] = v4::new(p[0] * inv_h, p[1] * inv_h, p[2] * inv_h);
         }
-    }
-
-    /// Trilinear interpolation of the cell-centred field at `p` (grid units), cells/s.
-    fn sample(field: &[[f32; 4]], dims: [usize; 3], p: [f32; 3]) -> [f32; 3] {
-        let v = Sampler::new(field, dims).sample(p);
-        [v[0], v[1], v[2]]
+        changed
     }
 
     /// Advances every particle by `dt_s` in the solver's current velocity (plus the overlay's
@@ -767,9 +775,9 @@ impl ParticleSystem {
     ) -> Option<f64> {
         self.time_s += dt_s;
         if !self.pos.is_empty() && dt_s > 0.0 && kinds.len() >= self.field.len() {
-            self.build_field(solver, kinds, overlay);
+            let kinds_changed = self.build_field(solver, kinds, overlay);
             let cone = view.map(|v| Cone::new(v, self.origin, self.h));
-            let sums = self.advance(kinds, dt_s, cone);
+            let sums = self.advance(kinds, kinds_changed, dt_s, cone);
             return view.map(|v| self.clarity_from(v, &sums));
         }
         view.map(|v| self.clarity(v))
@@ -777,7 +785,13 @@ impl ParticleSystem {
 
     /// Moves every particle; returns the clarity's sums per class over the particles that stay
     /// (zero without a cone).
-    fn advance(&mut self, kinds: &[VoxelKind], dt_s: f64, cone: Option<Cone>) -> ClassSums {
+    fn advance(
+        &mut self,
+        kinds: &[VoxelKind],
+        kinds_changed: bool,
+        dt_s: f64,
+        cone: Option<Cone>,
+    ) -> ClassSums {
         let inv_h = 1.0 / self.h;
         for (c, s) in self.classes.iter().zip(&mut self.class_step) {
             let e = if c.tau_s > 0.0 {
@@ -792,78 +806,86 @@ impl ParticleSystem {
         let k = Kernel {
             field: Sampler::new(&self.field, self.dims),
             kinds,
-            dims: self.dims,
+            // Lane 3 (zero in positions) passes the bounds test.
+            fdims: v4::add(
+                v4::new(
+                    self.dims[0] as f32,
+                    self.dims[1] as f32,
+                    self.dims[2] as f32,
+                ),
+                lane::new4(0.0, 0.0, 0.0, 1.0),
+            ),
+            check_from: if kinds_changed { 0 } else { self.settled },
             class_step: &self.class_step,
             dt: dt_s as f32,
-            max_sub: self.max_substeps as i32,
+            max_sub: self.max_substeps as u32,
             cone,
         };
         let n = self.pos.len();
+        let classes = self.classes.len();
         // The fate of every particle this step (KEEP, or the outlet), then a compaction.
         self.fate.clear();
         self.fate.resize(n, KEEP);
         let mut sums = [0.0f32; 256];
-        if n >= PARALLEL_MIN {
+        let left = if n >= PARALLEL_MIN {
             use rayon::prelude::*;
             let chunk = n.div_ceil(PARALLEL_TASKS);
-            sums = self
+            let left = self
                 .pos
                 .par_chunks_mut(chunk)
                 .zip(self.slip.par_chunks_mut(chunk))
                 .zip(self.class.par_chunks(chunk))
                 .zip(self.fate.par_chunks_mut(chunk))
-                .map(|(((p, w), c), f)| {
-                    let mut s = [0.0f32; 256];
-                    k.run(p, w, c, f, &mut s);
-                    s
+                .zip(self.task_sums.par_iter_mut())
+                .enumerate()
+                .map(|(t, ((((p, w), c), f), s))| {
+                    s[..classes].fill(0.0);
+                    k.run(t * chunk, p, w, c, f, s)
                 })
-                .reduce(
-                    || [0.0f32; 256],
-                    |mut a, b| {
-                        for (x, y) in a.iter_mut().zip(b) {
-                            *x += y;
-                        }
-                        a
-                    },
-                );
+                .sum();
+            for t in &self.task_sums[..n.div_ceil(chunk)] {
+                for (x, y) in sums[..classes].iter_mut().zip(t) {
+                    *x += y;
+                }
+            }
+            left
         } else {
             k.run(
+                0,
                 &mut self.pos,
                 &mut self.slip,
                 &self.class,
                 &mut self.fate,
                 &mut sums,
-            );
-        }
-        // Compaction (order kept, from the first particle that left) and the counters.
-        let Some(first) = self.fate.iter().position(|&f| f != KEEP) else {
-            return sums;
+            )
         };
-        let mut out = first;
-        for i in first..n {
+        if left > 0 {
+            self.remove_left();
+        }
+        self.settled = self.pos.len();
+        sums
+    }
+
+    /// Removes the particles whose fate is not KEEP (the last particle fills each hole, so the
+    /// cost is the scan of the fates plus O(left)) and counts them.
+    fn remove_left(&mut self) {
+        let mut i = 0;
+        while let Some(next) = next_left(&self.fate, i) {
+            i = next;
             let f = self.fate[i];
-            if f == KEEP {
-                if out != i {
-                    self.pos[out] = self.pos[i];
-                    self.slip[out] = self.slip[i];
-                    self.class[out] = self.class[i];
-                    self.birth_s[out] = self.birth_s[i];
-                }
-                out += 1;
-                continue;
-            }
             let kind = self.classes[self.class[i] as usize].kind as usize;
             match f {
                 OUTFLOW => self.counts.outflow[kind] += 1,
                 OPEN => self.counts.open[kind] += 1,
                 _ => self.counts.lost[kind] += 1,
             }
+            // The last particle moves here and is looked at next.
+            self.fate.swap_remove(i);
+            self.pos.swap_remove(i);
+            self.slip.swap_remove(i);
+            self.class.swap_remove(i);
+            self.birth_s.swap_remove(i);
         }
-        self.pos.truncate(out);
-        self.slip.truncate(out);
-        self.class.truncate(out);
-        self.birth_s.truncate(out);
-        sums
     }
 
     /// The clarity of `view` (see [`View`]): `exp(-mean optical depth over the view cone)`.
@@ -889,7 +911,7 @@ impl ParticleSystem {
     /// the vortex overlay, sampled at the particle) plus its slip. Zero before the first step
     /// that moved particles.
     pub fn velocity_m_s(&self, n: usize) -> [f64; 3] {
-        let v = Self::sample(&self.field, self.dims, self.pos[n]);
+        let v = self.fluid_velocity(n);
         let w = self.slip[n];
         std::array::from_fn(|a| (v[a] + w[a]) as f64 * self.h)
     }
@@ -1009,6 +1031,8 @@ const LOST: u8 = 3;
 const PARALLEL_MIN: usize = 4096;
 /// ... this many (a few per core, so a slow chunk does not hold the step).
 const PARALLEL_TASKS: usize = 8;
+/// Particles the kernel moves together (their independent samples overlap in the CPU).
+const GROUP: usize = 4;
 /// Longest substep along any axis, cells.
 const SUBSTEP_CELLS: f32 = 0.9;
 
@@ -1054,53 +1078,191 @@ impl Cone {
 /// Trilinear interpolation of the cell-centred field (4 lanes, one SIMD lerp per pair).
 #[derive(Clone, Copy)]
 struct Sampler<'a> {
-    field: &'a [[f32; 4]],
-    /// Largest sample position along each axis (`n - 1`).
-    smax: [f32; 3],
-    /// Largest lower sample index along each axis (`n - 2`, 0 for one cell).
-    imax: [i32; 3],
+    field: &'a [V4],
+    /// Largest sample position along each axis (`n - 1`; lane 3 zero).
+    smax: V4,
+    /// Largest lower sample index along each axis (`n - 2`, 0 for one cell; lane 3 zero).
+    imax: V4,
+    /// Index strides `[1, nx, nx ny, 0]` (as floats: exact below 2^24 cells).
+    stride: V4,
     /// Index step to the upper sample along each axis (0 for one cell).
     step: [usize; 3],
-    /// Index strides.
-    stride: [usize; 2],
 }
 
 impl<'a> Sampler<'a> {
-    fn new(field: &'a [[f32; 4]], dims: [usize; 3]) -> Self {
-        let stride = [dims[0], dims[0] * dims[1]];
+    fn new(field: &'a [V4], dims: [usize; 3]) -> Self {
+        let stride = [1, dims[0], dims[0] * dims[1]];
+        let f = |v: [usize; 3]| v4::new(v[0] as f32, v[1] as f32, v[2] as f32);
         Self {
             field,
-            smax: dims.map(|n| n.saturating_sub(1) as f32),
-            imax: dims.map(|n| n.saturating_sub(2) as i32),
-            step: std::array::from_fn(|a| usize::from(dims[a] > 1) * [1, stride[0], stride[1]][a]),
-            stride,
+            smax: f(dims.map(|n| n.saturating_sub(1))),
+            imax: f(dims.map(|n| n.saturating_sub(2))),
+            stride: f(stride),
+            step: std::array::from_fn(|a| usize::from(dims[a] > 1) * stride[a]),
         }
     }
 
     #[inline(always)]
-    fn sample(&self, p: [f32; 3]) -> [f32; 4] {
-        let mut i = [0usize; 3];
-        let mut t = [0.0f32; 3];
-        for a in 0..3 {
-            // max/min (not clamp) so a NaN position lands on sample 0; i32 conversions compile
-            // to one instruction.
-            let s = (p[a] - 0.5).max(0.0).min(self.smax[a]);
-            let i0 = (s as i32).min(self.imax[a]);
-            i[a] = i0 as usize;
-            t[a] = s - i0 as f32;
-        }
-        #[inline(always)]
-        fn lerp(a: [f32; 4], b: [f32; 4], t: f32) -> [f32; 4] {
-            std::array::from_fn(|l| a[l] + t * (b[l] - a[l]))
-        }
-        let f = self.field;
+    fn sample(&self, p: V4) -> V4 {
+        let (b, t) = lane::locate(p, self.smax, self.imax, self.stride);
         let [sx, sy, sz] = self.step;
-        let b = i[0] + self.stride[0] * i[1] + self.stride[1] * i[2];
-        let c00 = lerp(f[b], f[b + sx], t[0]);
-        let c10 = lerp(f[b + sy], f[b + sy + sx], t[0]);
-        let c01 = lerp(f[b + sz], f[b + sz + sx], t[0]);
-        let c11 = lerp(f[b + sz + sy], f[b + sz + sy + sx], t[0]);
-        lerp(lerp(c00, c10, t[1]), lerp(c01, c11, t[1]), t[2])
+        // The eight samples are b + {0, sx} + {0, sy} + {0, sz}, the largest b + sx + sy + sz:
+        // one check for all (always true: the lower index is at most n - 2 along each axis).
+        let f = match self.field.get(b..=b + sx + sy + sz) {
+            Some(f) => f,
+            None => return v4::zero(),
+        };
+        // SAFETY: every index below is at most sx + sy + sz, the last of `f`.
+        let at = |n: usize| unsafe { *f.get_unchecked(n) };
+        let c00 = lane::lerp(at(0), at(sx), t[0]);
+        let c10 = lane::lerp(at(sy), at(sy + sx), t[0]);
+        let c01 = lane::lerp(at(sz), at(sz + sx), t[0]);
+        let c11 = lane::lerp(at(sz + sy), at(sz + sy + sx), t[0]);
+        lane::lerp(lane::lerp(c00, c10, t[1]), lane::lerp(c01, c11, t[1]), t[2])
+    }
+}
+
+/// The few four-lane operations of the particle kernel beyond [`v4`]'s: SSE2 (the x86-64
+/// baseline) there, so the three axes of a position take one instruction; element-wise elsewhere.
+#[cfg(target_arch = "x86_64")]
+mod lane {
+    use std::arch::x86_64::*;
+
+    use crate::fluid::V4;
+
+    // SAFETY (every `unsafe` below): SSE2 is part of the x86-64 baseline, and these intrinsics
+    // take no pointers.
+
+    /// `[a, b, c, d]`.
+    #[inline(always)]
+    pub fn new4(a: f32, b: f32, c: f32, d: f32) -> V4 {
+        unsafe { _mm_set_ps(d, c, b, a) }
+    }
+    /// `[x, x, x, x]`.
+    #[inline(always)]
+    pub fn splat(x: f32) -> V4 {
+        unsafe { _mm_set1_ps(x) }
+    }
+    /// `a b + c`.
+    #[inline(always)]
+    pub fn mul_add(a: V4, b: V4, c: V4) -> V4 {
+        unsafe { _mm_add_ps(_mm_mul_ps(a, b), c) }
+    }
+    /// `a + t (b - a)`, `t` the same in every lane.
+    #[inline(always)]
+    pub fn lerp(a: V4, b: V4, t: V4) -> V4 {
+        unsafe { _mm_add_ps(a, _mm_mul_ps(t, _mm_sub_ps(b, a))) }
+    }
+    /// Largest `|a| + |b|` over the lanes.
+    #[inline(always)]
+    pub fn max_abs_sum(a: V4, b: V4) -> f32 {
+        unsafe {
+            let m = _mm_castsi128_ps(_mm_set1_epi32(0x7fff_ffff));
+            let s = _mm_add_ps(_mm_and_ps(a, m), _mm_and_ps(b, m));
+            let s = _mm_max_ps(s, _mm_movehl_ps(s, s));
+            _mm_cvtss_f32(_mm_max_ss(s, _mm_shuffle_ps::<0b01>(s, s)))
+        }
+    }
+    /// `sum_a x_a s_a` as an index (`x` whole numbers, the sum below 2^24).
+    #[inline(always)]
+    fn index(x: V4, stride: V4) -> usize {
+        unsafe {
+            let d = _mm_mul_ps(x, stride);
+            let d = _mm_add_ps(d, _mm_movehl_ps(d, d));
+            let d = _mm_add_ss(d, _mm_shuffle_ps::<0b01>(d, d));
+            _mm_cvttss_si32(d) as u32 as usize
+        }
+    }
+    /// The cell of `p` (grid units) if it lies in `[0, dims)` (lane 3 of `p` zero, of `dims`
+    /// positive; a NaN lane fails).
+    #[inline(always)]
+    pub fn cell(p: V4, dims: V4, stride: V4) -> Option<usize> {
+        unsafe {
+            let ok = _mm_and_ps(_mm_cmpge_ps(p, _mm_setzero_ps()), _mm_cmplt_ps(p, dims));
+            if _mm_movemask_ps(ok) != 0b1111 {
+                return None;
+            }
+            // In [0, dims): truncation is the floor.
+            Some(index(_mm_cvtepi32_ps(_mm_cvttps_epi32(p)), stride))
+        }
+    }
+    /// The lower corner (index) of the cell-centred samples around `p` and the weights of the
+    /// upper ones, each broadcast: positions clamp to the outermost samples, a NaN lane lands on
+    /// sample 0.
+    #[inline(always)]
+    pub fn locate(p: V4, smax: V4, imax: V4, stride: V4) -> (usize, [V4; 3]) {
+        unsafe {
+            // max returns its second operand for a NaN.
+            let s = _mm_min_ps(
+                _mm_max_ps(_mm_sub_ps(p, _mm_set1_ps(0.5)), _mm_setzero_ps()),
+                smax,
+            );
+            // s >= 0: truncation is the floor.
+            let i = _mm_min_ps(_mm_cvtepi32_ps(_mm_cvttps_epi32(s)), imax);
+            let t = _mm_sub_ps(s, i);
+            (
+                index(i, stride),
+                [
+                    _mm_shuffle_ps::<0b00_00_00_00>(t, t),
+                    _mm_shuffle_ps::<0b01_01_01_01>(t, t),
+                    _mm_shuffle_ps::<0b10_10_10_10>(t, t),
+                ],
+            )
+        }
+    }
+}
+
+/// The few four-lane operations of the particle kernel beyond [`v4`]'s (portable fallback).
+#[cfg(not(target_arch = "x86_64"))]
+mod lane {
+    use crate::fluid::V4;
+
+    /// `[a, b, c, d]`.
+    #[inline(always)]
+    pub fn new4(a: f32, b: f32, c: f32, d: f32) -> V4 {
+        [a, b, c, d]
+    }
+    /// `[x, x, x, x]`.
+    #[inline(always)]
+    pub fn splat(x: f32) -> V4 {
+        [x; 4]
+    }
+    /// `a b + c`.
+    #[inline(always)]
+    pub fn mul_add(a: V4, b: V4, c: V4) -> V4 {
+        std::array::from_fn(|l| a[l] * b[l] + c[l])
+    }
+    /// `a + t (b - a)`, `t` the same in every lane.
+    #[inline(always)]
+    pub fn lerp(a: V4, b: V4, t: V4) -> V4 {
+        std::array::from_fn(|l| a[l] + t[l] * (b[l] - a[l]))
+    }
+    /// Largest `|a| + |b|` over the lanes.
+    #[inline(always)]
+    pub fn max_abs_sum(a: V4, b: V4) -> f32 {
+        (0..4).fold(0.0, |m: f32, l| m.max(a[l].abs() + b[l].abs()))
+    }
+    /// The cell of `p` (grid units) if it lies in `[0, dims)`.
+    #[inline(always)]
+    pub fn cell(p: V4, dims: V4, stride: V4) -> Option<usize> {
+        if !(0..3).all(|a| p[a] >= 0.0 && p[a] < dims[a]) {
+            return None;
+        }
+        Some((0..3).map(|a| (p[a] as usize) * stride[a] as usize).sum())
+    }
+    /// The lower corner (index) of the cell-centred samples around `p` and the weights of the
+    /// upper ones, each broadcast.
+    #[inline(always)]
+    pub fn locate(p: V4, smax: V4, imax: V4, stride: V4) -> (usize, [V4; 3]) {
+        let mut b = 0;
+        let mut t = [[0.0; 4]; 3];
+        for a in 0..3 {
+            let s = (p[a] - 0.5).max(0.0).min(smax[a]);
+            let i = s.floor().min(imax[a]);
+            b += i as usize * stride[a] as usize;
+            t[a] = [s - i; 4];
+        }
+        (b, t)
     }
 }
 
@@ -1108,124 +1270,253 @@ impl<'a> Sampler<'a> {
 struct Kernel<'a> {
     field: Sampler<'a>,
     kinds: &'a [VoxelKind],
-    dims: [usize; 3],
+    /// The grid's dimensions as floats (lane 3: 1).
+    fdims: V4,
+    /// The particles from this index on start in a cell that may not be fluid (all when the
+    /// kinds changed; else those emitted since the last step, which ends each particle in a
+    /// fluid cell).
+    check_from: usize,
     class_step: &'a [([f32; 3], f32, f32)],
     dt: f32,
-    max_sub: i32,
+    max_sub: u32,
     cone: Option<Cone>,
 }
 
 impl Kernel<'_> {
     #[inline(always)]
-    fn kind_at(&self, p: [f32; 3]) -> VoxelKind {
-        let d = self.dims;
-        if !(p[0] >= 0.0 && p[1] >= 0.0 && p[2] >= 0.0) {
-            return VoxelKind::Solid;
-        }
-        // Non-negative here: the i32 conversion truncates (and saturates far outside).
-        let (i, j, k) = (
-            p[0] as i32 as usize,
-            p[1] as i32 as usize,
-            p[2] as i32 as usize,
-        );
-        if i < d[0] && j < d[1] && k < d[2] {
-            self.kinds[i + d[0] * (j + d[1] * k)]
-        } else {
-            VoxelKind::Solid
-        }
+    fn kind_at(&self, p: V4) -> VoxelKind {
+        lane::cell(p, self.fdims, self.field.stride)
+            .and_then(|n| self.kinds.get(n))
+            .copied()
+            .unwrap_or(VoxelKind::Solid)
     }
 
+    /// Moves the particles of one task (the first is particle `offset`); returns how many left
+    /// (their fate is not KEEP).
     fn run(
         &self,
+        offset: usize,
         pos: &mut [[f32; 3]],
         slip: &mut [[f32; 3]],
         class: &[u8],
         fate: &mut [u8],
         sums: &mut ClassSums,
-    ) {
-        let (dt, field) = (self.dt, &self.field);
-        for n in 0..pos.len() {
-            let mut p = pos[n];
-            // A cell that stopped being fluid: leave through an outlet, or move to a fluid
-            // neighbour, or be lost.
+    ) -> usize {
+        #[cfg(target_arch = "x86_64")]
+        if crate::fluid::avx2::available() {
+            // SAFETY: the CPU has AVX2 and FMA (checked above).
+            return unsafe { self.run_avx2(offset, pos, slip, class, fate, sums) };
+        }
+        self.run_portable(offset, pos, slip, class, fate, sums)
+    }
+
+    /// [`Kernel::run_portable`] compiled for AVX2 and FMA (the fluid stages' SIMD style: the
+    /// same portable code, a second time with the wider instruction set).
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2,fma")]
+    fn run_avx2(
+        &self,
+        offset: usize,
+        pos: &mut [[f32; 3]],
+        slip: &mut [[f32; 3]],
+        class: &[u8],
+        fate: &mut [u8],
+        sums: &mut ClassSums,
+    ) -> usize {
+        self.run_portable(offset, pos, slip, class, fate, sums)
+    }
+
+    #[inline(always)]
+    fn run_portable(
+        &self,
+        offset: usize,
+        pos: &mut [[f32; 3]],
+        slip: &mut [[f32; 3]],
+        class: &[u8],
+        fate: &mut [u8],
+        sums: &mut ClassSums,
+    ) -> usize {
+        let mut left = 0;
+        let n = pos.len().min(slip.len()).min(class.len()).min(fate.len());
+        let mut done = |n: usize, f: u8, pos: &[[f32; 3]], fate: &mut [u8]| {
+            fate[n] = f;
+            if f == KEEP {
+                if let Some(cone) = &self.cone {
+                    sums[class[n] as usize] += cone.weight(pos[n]);
+                }
+            } else {
+                left += 1;
+            }
+        };
+        // Groups of GROUP particles whose starts need no check: the common case (one substep
+        // into a fluid cell) for all of them at once, so the independent samples overlap; the
+        // others, and any particle of a group that needs more, one at a time.
+        let groups = if offset + n <= self.check_from {
+            n / GROUP
+        } else {
+            self.check_from.saturating_sub(offset) / GROUP
+        };
+        for g in 0..groups {
+            let first = g * GROUP;
+            let moved = self.advance_group(
+                &mut pos[first..first + GROUP],
+                &mut slip[first..first + GROUP],
+                &class[first..first + GROUP],
+            );
+            for l in 0..GROUP {
+                let n = first + l;
+                let f = if moved & (1 << l) != 0 {
+                    KEEP
+                } else {
+                    self.advance_one(&mut pos[n], &mut slip[n], class[n], false)
+                };
+                done(n, f, pos, fate);
+            }
+        }
+        for n in groups * GROUP..n {
+            let check = offset + n >= self.check_from;
+            let f = self.advance_one(&mut pos[n], &mut slip[n], class[n], check);
+            done(n, f, pos, fate);
+        }
+        left
+    }
+
+    /// The slip displacement over the step (grid units) and the slip at its end.
+    #[inline(always)]
+    fn slip_step(&self, class: u8, w0: [f32; 3]) -> (V4, [f32; 3]) {
+        // Slip: w(t) = wt + (w0 - wt) e^(-t/tau), integrated exactly over the step.
+        let (wt, e, disp) = self
+            .class_step
+            .get(class as usize)
+            .copied()
+            .unwrap_or(([0.0; 3], 0.0, 0.0));
+        let mut slip_d = [0.0f32; 3];
+        let mut w1 = [0.0f32; 3];
+        for a in 0..3 {
+            slip_d[a] = wt[a] * self.dt + (w0[a] - wt[a]) * disp;
+            w1[a] = wt[a] + (w0[a] - wt[a]) * e;
+        }
+        (v4::new(slip_d[0], slip_d[1], slip_d[2]), w1)
+    }
+
+    /// Substeps of a particle whose fluid velocity at the start is `k1` and whose slip
+    /// displacement is `sd`: at most SUBSTEP_CELLS along any axis each, at most `max_sub`.
+    #[inline(always)]
+    fn substeps(&self, k1: V4, sd: V4) -> u32 {
+        let travel = lane::max_abs_sum(lane::mul_add(k1, lane::splat(self.dt), v4::zero()), sd);
+        // max/min: a NaN travel takes one substep.
+        let x = (travel * (1.0 / SUBSTEP_CELLS))
+            .max(1.0)
+            .min(self.max_sub as f32);
+        // SAFETY: `x` is finite and in [1, max_sub] here.
+        unsafe { x.ceil().to_int_unchecked::<u32>() }
+    }
+
+    /// Up to GROUP particles that start in fluid cells: each that takes one substep into a fluid
+    /// cell is moved (bit `l` of the result set); the others are left as they were.
+    #[inline(always)]
+    fn advance_group(&self, pos: &mut [[f32; 3]], slip: &mut [[f32; 3]], class: &[u8]) -> u32 {
+        let field = &self.field;
+        let mut p = [v4::zero(); GROUP];
+        let mut k1 = [v4::zero(); GROUP];
+        let mut sd = [v4::zero(); GROUP];
+        let mut w1 = [[0.0f32; 3]; GROUP];
+        let mut one = [false; GROUP];
+        for l in 0..GROUP.min(pos.len()).min(slip.len()).min(class.len()) {
+            p[l] = v4::new(pos[l][0], pos[l][1], pos[l][2]);
+            (sd[l], w1[l]) = self.slip_step(class[l], slip[l]);
+            one[l] = true;
+        }
+        for l in 0..GROUP {
+            k1[l] = field.sample(p[l]);
+        }
+        let dt = lane::splat(self.dt);
+        let half_dt = lane::splat(0.5 * self.dt);
+        let mut q = [v4::zero(); GROUP];
+        for l in 0..GROUP {
+            one[l] &= self.substeps(k1[l], sd[l]) == 1;
+            // The midpoint rule's one substep as in `advance_one` (the same operations).
+            let half_sd = lane::mul_add(sd[l], lane::splat(0.5), v4::zero());
+            let mid = lane::mul_add(half_dt, k1[l], v4::add(p[l], half_sd));
+            q[l] = lane::mul_add(
+                dt,
+                field.sample(mid),
+                v4::add(p[l], lane::mul_add(sd[l], lane::splat(1.0), v4::zero())),
+            );
+        }
+        let mut moved = 0;
+        for l in 0..GROUP {
+            if one[l] && self.kind_at(q[l]) == VoxelKind::Fluid {
+                let r = v4::lanes(q[l]);
+                pos[l] = [r[0], r[1], r[2]];
+                slip[l] = w1[l];
+                moved |= 1 << l;
+            }
+        }
+        moved
+    }
+
+    /// One particle's step; returns its fate.
+    #[inline(always)]
+    fn advance_one(&self, pos: &mut [f32; 3], slip: &mut [f32; 3], class: u8, check: bool) -> u8 {
+        let field = &self.field;
+        let mut p = v4::new(pos[0], pos[1], pos[2]);
+        // A cell that stopped being fluid: leave through an outlet, or move to a fluid
+        // neighbour, or be lost.
+        if check {
             match self.kind_at(p) {
                 VoxelKind::Fluid => {}
-                VoxelKind::Outflow => {
-                    fate[n] = OUTFLOW;
-                    continue;
-                }
-                VoxelKind::Open => {
-                    fate[n] = OPEN;
-                    continue;
-                }
-                _ => match relocate(p, &|q| self.kind_at(q)) {
-                    Some(q) => p = q,
-                    None => {
-                        fate[n] = LOST;
-                        continue;
-                    }
+                VoxelKind::Outflow => return OUTFLOW,
+                VoxelKind::Open => return OPEN,
+                _ => match relocate(*pos, &|q| self.kind_at(v4::new(q[0], q[1], q[2]))) {
+                    Some(q) => p = v4::new(q[0], q[1], q[2]),
+                    None => return LOST,
                 },
             }
-            // Slip: w(t) = wt + (w0 - wt) e^(-t/tau), integrated exactly over the step.
-            let c = class[n];
-            let (wt, e, disp) = self.class_step[c as usize];
-            let w0 = slip[n];
-            let mut slip_d = [0.0f32; 3];
-            let mut w1 = [0.0f32; 3];
-            for a in 0..3 {
-                slip_d[a] = wt[a] * dt + (w0[a] - wt[a]) * disp;
-                w1[a] = wt[a] + (w0[a] - wt[a]) * e;
+        }
+        let (sdv, w1) = self.slip_step(class, *slip);
+        *slip = w1;
+        let mut k1 = field.sample(p);
+        let subs = self.substeps(k1, sdv);
+        let inv = 1.0 / subs as f32;
+        let hs = lane::splat(self.dt * inv);
+        let half_hs = lane::splat(0.5 * self.dt * inv);
+        let sd = lane::mul_add(sdv, lane::splat(inv), v4::zero());
+        let half_sd = lane::mul_add(sdv, lane::splat(0.5 * inv), v4::zero());
+        let mut fate = KEEP;
+        for sub in 0..subs {
+            if sub > 0 {
+                k1 = field.sample(p);
             }
-            // Substeps: the particle's own displacement, at most SUBSTEP_CELLS along any axis.
-            let mut k1 = field.sample(p);
-            let mut travel = 0.0f32;
-            for a in 0..3 {
-                travel = travel.max(k1[a].abs() * dt + slip_d[a].abs());
-            }
-            let x = travel * (1.0 / SUBSTEP_CELLS);
-            let whole = x as i32;
-            let subs = (whole + i32::from((whole as f32) < x)).clamp(1, self.max_sub);
-            let hs = dt / subs as f32;
-            let sd = slip_d.map(|d| d / subs as f32);
-            let mut keep = true;
-            for sub in 0..subs {
-                if sub > 0 {
-                    k1 = field.sample(p);
+            let mid = lane::mul_add(half_hs, k1, v4::add(p, half_sd));
+            let k2 = field.sample(mid);
+            let q = lane::mul_add(hs, k2, v4::add(p, sd));
+            match self.kind_at(q) {
+                VoxelKind::Fluid => p = q,
+                VoxelKind::Outflow => {
+                    fate = OUTFLOW;
+                    break;
                 }
-                let mid = std::array::from_fn(|a| p[a] + 0.5 * hs * k1[a] + 0.5 * sd[a]);
-                let k2 = field.sample(mid);
-                let q: [f32; 3] = std::array::from_fn(|a| p[a] + hs * k2[a] + sd[a]);
-                match self.kind_at(q) {
-                    VoxelKind::Fluid => p = q,
-                    VoxelKind::Outflow => {
-                        fate[n] = OUTFLOW;
-                        keep = false;
-                        break;
-                    }
-                    VoxelKind::Open => {
-                        fate[n] = OPEN;
-                        keep = false;
-                        break;
-                    }
-                    _ => match self.slide(p, q) {
-                        Slide::To(r) => p = r,
+                VoxelKind::Open => {
+                    fate = OPEN;
+                    break;
+                }
+                _ => {
+                    let (pa, qa) = (v4::lanes(p), v4::lanes(q));
+                    match self.slide([pa[0], pa[1], pa[2]], [qa[0], qa[1], qa[2]]) {
+                        Slide::To(r) => p = v4::new(r[0], r[1], r[2]),
                         Slide::Leave(f) => {
-                            fate[n] = f;
-                            keep = false;
+                            fate = f;
                             break;
                         }
                         Slide::Stay => {}
-                    },
-                }
-            }
-            pos[n] = p;
-            slip[n] = w1;
-            if keep {
-                if let Some(cone) = &self.cone {
-                    sums[c as usize] += cone.weight(p);
+                    }
                 }
             }
         }
+        let p = v4::lanes(p);
+        *pos = [p[0], p[1], p[2]];
+        fate
     }
 }
 
@@ -1257,7 +1548,7 @@ impl Kernel<'_> {
         ];
         for keep in tries {
             let r: [f32; 3] = std::array::from_fn(|a| if keep[a] { q[a] } else { p[a] });
-            match self.kind_at(r) {
+            match self.kind_at(v4::new(r[0], r[1], r[2])) {
                 VoxelKind::Fluid => return Slide::To(r),
                 VoxelKind::Outflow => return Slide::Leave(OUTFLOW),
                 VoxelKind::Open => return Slide::Leave(OPEN),
@@ -1788,6 +2079,30 @@ fn kind_at_m(scene: &Scene, p: [f64; 3]) -> VoxelKind {
         idx[a] = x as usize;
     }
     scene.kinds[c.index(idx[0], idx[1], idx[2])]
+}
+
+/// The first particle from `from` on whose fate is not KEEP (eight fates a comparison).
+fn next_left(fate: &[u8], from: usize) -> Option<usize> {
+    let rest = fate.get(from..)?;
+    let mut words = rest.chunks_exact(8);
+    let mut skipped = 0;
+    for w in words.by_ref() {
+        if w.iter().any(|&f| f != KEEP) {
+            break;
+        }
+        skipped += 8;
+    }
+    rest[skipped..]
+        .iter()
+        .position(|&f| f != KEEP)
+        .map(|k| from + skipped + k)
+}
+
+/// The kinds as bytes (one comparison of memory when the field checks whether they changed).
+fn kind_bytes(kinds: &[VoxelKind]) -> &[u8] {
+    // SAFETY: `VoxelKind` is `repr(u8)`, so a slice of them is a slice of initialised bytes of
+    // the same length.
+    unsafe { std::slice::from_raw_parts(kinds.as_ptr().cast::<u8>(), kinds.len()) }
 }
 
 fn unit(a: [f64; 3]) -> [f64; 3] {
