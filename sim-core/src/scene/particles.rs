@@ -1352,11 +1352,10 @@ impl<'a> Kernel<'a> {
     ) -> usize {
         let mut left = 0;
         let n = pos.len().min(slip.len()).min(class.len()).min(fate.len());
-        let mut done = |n: usize, f: u8, pos: &[[f32; 3]], fate: &mut [u8]| {
-            fate[n] = f;
+        let mut done = |f: u8, class: u8, p: [f32; 3]| {
             if f == KEEP {
                 if let Some(cone) = &self.cone {
-                    sums[class[n] as usize] += cone.weight(pos[n]);
+                    sums[class as usize] += cone.weight(p);
                 }
             } else {
                 left += 1;
@@ -1365,32 +1364,39 @@ impl<'a> Kernel<'a> {
         // Groups of GROUP particles whose starts need no check: the common case (one substep
         // into a fluid cell) for all of them at once, so the independent samples overlap; the
         // others, and any particle of a group that needs more, one at a time.
-        let groups = if offset + n <= self.check_from {
-            n / GROUP
+        let grouped = if offset + n <= self.check_from {
+            n
         } else {
-            self.check_from.saturating_sub(offset) / GROUP
-        };
-        for g in 0..groups {
-            let first = g * GROUP;
-            let moved = self.advance_group(
-                &mut pos[first..first + GROUP],
-                &mut slip[first..first + GROUP],
-                &class[first..first + GROUP],
-            );
+            self.check_from.saturating_sub(offset).min(n)
+        } / GROUP
+            * GROUP;
+        let (pos, pos_rest) = pos[..n].split_at_mut(grouped);
+        let (slip, slip_rest) = slip[..n].split_at_mut(grouped);
+        let (class, class_rest) = class[..n].split_at(grouped);
+        let (fate, fate_rest) = fate[..n].split_at_mut(grouped);
+        for (((p, w), c), f) in pos
+            .as_chunks_mut::<GROUP>()
+            .0
+            .iter_mut()
+            .zip(slip.as_chunks_mut::<GROUP>().0)
+            .zip(class.as_chunks::<GROUP>().0)
+            .zip(fate.as_chunks_mut::<GROUP>().0)
+        {
+            *f = self.advance_group(p, w, c);
             for l in 0..GROUP {
-                let n = first + l;
-                let f = if moved & (1 << l) != 0 {
-                    KEEP
-                } else {
-                    self.advance_one(&mut pos[n], &mut slip[n], class[n], false)
-                };
-                done(n, f, pos, fate);
+                done(f[l], c[l], p[l]);
             }
         }
-        for n in groups * GROUP..n {
-            let check = offset + n >= self.check_from;
-            let f = self.advance_one(&mut pos[n], &mut slip[n], class[n], check);
-            done(n, f, pos, fate);
+        for (m, (((p, w), &c), f)) in pos_rest
+            .iter_mut()
+            .zip(slip_rest)
+            .zip(class_rest)
+            .zip(fate_rest)
+            .enumerate()
+        {
+            let check = offset + grouped + m >= self.check_from;
+            *f = self.advance_one(p, w, c, check);
+            done(*f, c, *p);
         }
         left
     }
@@ -1426,20 +1432,26 @@ impl<'a> Kernel<'a> {
         unsafe { x.ceil().to_int_unchecked::<u32>() }
     }
 
-    /// Up to GROUP particles that start in fluid cells: each that takes one substep into a fluid
-    /// cell is moved (bit `l` of the result set); the others are left as they were.
+    /// GROUP particles that start in fluid cells: the samples, slips and one-substep moves of all
+    /// of them first (independent, so they overlap in the CPU), then the particles that need more
+    /// substeps or whose move ended outside a fluid cell continue one at a time from their start.
+    /// Returns their fates.
     #[inline(always)]
-    fn advance_group(&self, pos: &mut [[f32; 3]], slip: &mut [[f32; 3]], class: &[u8]) -> u32 {
+    fn advance_group(
+        &self,
+        pos: &mut [[f32; 3]; GROUP],
+        slip: &mut [[f32; 3]; GROUP],
+        class: &[u8; GROUP],
+    ) -> [u8; GROUP] {
         let field = &self.field;
         let mut p = [v4::zero(); GROUP];
         let mut k1 = [v4::zero(); GROUP];
         let mut sd = [v4::zero(); GROUP];
         let mut w1 = [[0.0f32; 3]; GROUP];
-        let mut one = [false; GROUP];
-        for l in 0..GROUP.min(pos.len()).min(slip.len()).min(class.len()) {
+        let mut one = [true; GROUP];
+        for l in 0..GROUP {
             p[l] = v4::new(pos[l][0], pos[l][1], pos[l][2]);
             (sd[l], w1[l]) = self.slip_step(class[l], slip[l]);
-            one[l] = true;
         }
         for l in 0..GROUP {
             k1[l] = field.sample(p[l]);
@@ -1458,22 +1470,26 @@ impl<'a> Kernel<'a> {
                 v4::add(p[l], lane::mul_add(sd[l], lane::splat(1.0), v4::zero())),
             );
         }
-        let mut moved = 0;
+        let mut fate = [KEEP; GROUP];
         for l in 0..GROUP {
-            if one[l] && self.kind_at(q[l]) == VoxelKind::Fluid {
-                let r = v4::lanes(q[l]);
-                pos[l] = [r[0], r[1], r[2]];
-                slip[l] = w1[l];
-                moved |= 1 << l;
-            }
+            let end = if one[l] && self.kind_at(q[l]) == VoxelKind::Fluid {
+                q[l]
+            } else {
+                // More substeps, or a wall or an outlet: from the start, with the samples taken.
+                let (end, f) = self.substeps_from(p[l], k1[l], sd[l]);
+                fate[l] = f;
+                end
+            };
+            let r = v4::lanes(end);
+            pos[l] = [r[0], r[1], r[2]];
+            slip[l] = w1[l];
         }
-        moved
+        fate
     }
 
     /// One particle's step; returns its fate.
     #[inline(always)]
     fn advance_one(&self, pos: &mut [f32; 3], slip: &mut [f32; 3], class: u8, check: bool) -> u8 {
-        let field = &self.field;
         let mut p = v4::new(pos[0], pos[1], pos[2]);
         // A cell that stopped being fluid: leave through an outlet, or move to a fluid
         // neighbour, or be lost.
@@ -1490,7 +1506,17 @@ impl<'a> Kernel<'a> {
         }
         let (sdv, w1) = self.slip_step(class, *slip);
         *slip = w1;
-        let mut k1 = field.sample(p);
+        let (p, fate) = self.substeps_from(p, self.field.sample(p), sdv);
+        let p = v4::lanes(p);
+        *pos = [p[0], p[1], p[2]];
+        fate
+    }
+
+    /// The substeps of a particle at `p` (in a fluid cell) whose fluid velocity there is `k1` and
+    /// slip displacement over the step `sdv`: where it ends and its fate.
+    #[inline(always)]
+    fn substeps_from(&self, mut p: V4, mut k1: V4, sdv: V4) -> (V4, u8) {
+        let field = &self.field;
         let subs = self.substeps(k1, sdv);
         let inv = 1.0 / subs as f32;
         let hs = lane::splat(self.dt * inv);
@@ -1528,9 +1554,7 @@ impl<'a> Kernel<'a> {
                 }
             }
         }
-        let p = v4::lanes(p);
-        *pos = [p[0], p[1], p[2]];
-        fate
+        (p, fate)
     }
 }
 
