@@ -1139,6 +1139,16 @@ mod lane {
     pub fn mul_add(a: V4, b: V4, c: V4) -> V4 {
         unsafe { _mm_add_ps(_mm_mul_ps(a, b), c) }
     }
+    /// `a b`.
+    #[inline(always)]
+    pub fn mul(a: V4, b: V4) -> V4 {
+        unsafe { _mm_mul_ps(a, b) }
+    }
+    /// `a - b`.
+    #[inline(always)]
+    pub fn sub(a: V4, b: V4) -> V4 {
+        unsafe { _mm_sub_ps(a, b) }
+    }
     /// `a + t (b - a)`, `t` the same in every lane.
     #[inline(always)]
     pub fn lerp(a: V4, b: V4, t: V4) -> V4 {
@@ -1222,6 +1232,16 @@ mod lane {
     #[inline(always)]
     pub fn mul_add(a: V4, b: V4, c: V4) -> V4 {
         std::array::from_fn(|l| a[l] * b[l] + c[l])
+    }
+    /// `a b`.
+    #[inline(always)]
+    pub fn mul(a: V4, b: V4) -> V4 {
+        std::array::from_fn(|l| a[l] * b[l])
+    }
+    /// `a - b`.
+    #[inline(always)]
+    pub fn sub(a: V4, b: V4) -> V4 {
+        std::array::from_fn(|l| a[l] - b[l])
     }
     /// `a + t (b - a)`, `t` the same in every lane.
     #[inline(always)]
@@ -1410,13 +1430,12 @@ impl<'a> Kernel<'a> {
             .get(class as usize)
             .copied()
             .unwrap_or(([0.0; 3], 0.0, 0.0));
-        let mut slip_d = [0.0f32; 3];
-        let mut w1 = [0.0f32; 3];
-        for a in 0..3 {
-            slip_d[a] = wt[a] * self.dt + (w0[a] - wt[a]) * disp;
-            w1[a] = wt[a] + (w0[a] - wt[a]) * e;
-        }
-        (v4::new(slip_d[0], slip_d[1], slip_d[2]), w1)
+        let (wt, w0) = (v4::new(wt[0], wt[1], wt[2]), v4::new(w0[0], w0[1], w0[2]));
+        let dw = lane::sub(w0, wt);
+        // wt dt + (w0 - wt) disp and wt + (w0 - wt) e.
+        let slip_d = lane::mul_add(dw, lane::splat(disp), lane::mul(wt, lane::splat(self.dt)));
+        let w1 = v4::lanes(lane::mul_add(dw, lane::splat(e), wt));
+        (slip_d, [w1[0], w1[1], w1[2]])
     }
 
     /// Substeps of a particle whose fluid velocity at the start is `k1` and whose slip
