@@ -1078,18 +1078,26 @@ struct Sampler<'a> {
     stride: V4,
     /// Index step to the upper sample along each axis (0 for one cell).
     step: [usize; 3],
+    /// Byte offsets of the eight samples from the lower one, `{0, x} + {0, y} + {0, z}` in the
+    /// order `000, x00, 0y0, xy0, 00z, x0z, 0yz, xyz` (bytes: no shift per address).
+    corner_bytes: [usize; 8],
 }
 
 impl<'a> Sampler<'a> {
     fn new(field: &'a [V4], dims: [usize; 3]) -> Self {
         let stride = [1, dims[0], dims[0] * dims[1]];
         let f = |v: [usize; 3]| v4::new(v[0] as f32, v[1] as f32, v[2] as f32);
+        let step: [usize; 3] = std::array::from_fn(|a| usize::from(dims[a] > 1) * stride[a]);
+        let size = std::mem::size_of::<V4>();
         Self {
             field,
             smax: f(dims.map(|n| n.saturating_sub(1))),
             imax: f(dims.map(|n| n.saturating_sub(2))),
             stride: f(stride),
-            step: std::array::from_fn(|a| usize::from(dims[a] > 1) * stride[a]),
+            step,
+            corner_bytes: std::array::from_fn(|c| {
+                (0..3).map(|a| (c >> a & 1) * step[a]).sum::<usize>() * size
+            }),
         }
     }
 
@@ -1103,12 +1111,14 @@ impl<'a> Sampler<'a> {
             Some(f) => f,
             None => return v4::zero(),
         };
-        // SAFETY: every index below is at most sx + sy + sz, the last of `f`.
-        let at = |n: usize| unsafe { *f.get_unchecked(n) };
-        let c00 = lane::lerp(at(0), at(sx), t[0]);
-        let c10 = lane::lerp(at(sy), at(sy + sx), t[0]);
-        let c01 = lane::lerp(at(sz), at(sz + sx), t[0]);
-        let c11 = lane::lerp(at(sz + sy), at(sz + sy + sx), t[0]);
+        let (first, o) = (f.as_ptr(), &self.corner_bytes);
+        // SAFETY: every corner is `first` plus at most sx + sy + sz whole elements, the last of
+        // `f` (so in bounds and aligned).
+        let at = |c: usize| unsafe { first.byte_add(o[c]).read() };
+        let c00 = lane::lerp(at(0), at(1), t[0]);
+        let c10 = lane::lerp(at(2), at(3), t[0]);
+        let c01 = lane::lerp(at(4), at(5), t[0]);
+        let c11 = lane::lerp(at(6), at(7), t[0]);
         lane::lerp(lane::lerp(c00, c10, t[1]), lane::lerp(c01, c11, t[1]), t[2])
     }
 }
