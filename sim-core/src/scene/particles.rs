@@ -1074,8 +1074,8 @@ struct Sampler<'a> {
     smax: V4,
     /// Largest lower sample index along each axis (`n - 2`, 0 for one cell; lane 3 zero).
     imax: V4,
-    /// Index strides `[1, nx, nx ny, 0]` (as floats: exact below 2^24 cells).
-    stride: V4,
+    /// Index strides `[1, nx, nx ny]`.
+    stride: [usize; 3],
     /// Index step to the upper sample along each axis (0 for one cell).
     step: [usize; 3],
     /// Byte offsets of the eight samples from the lower one, `{0, x} + {0, y} + {0, z}` in the
@@ -1093,7 +1093,7 @@ impl<'a> Sampler<'a> {
             field,
             smax: f(dims.map(|n| n.saturating_sub(1))),
             imax: f(dims.map(|n| n.saturating_sub(2))),
-            stride: f(stride),
+            stride,
             step,
             corner_bytes: std::array::from_fn(|c| {
                 (0..3).map(|a| (c >> a & 1) * step[a]).sum::<usize>() * size
@@ -1174,34 +1174,35 @@ mod lane {
             _mm_cvtss_f32(_mm_max_ss(s, _mm_shuffle_ps::<0b01>(s, s)))
         }
     }
-    /// `sum_a x_a s_a` as an index (`x` whole numbers, the sum below 2^24).
+    /// `sum_a x_a s_a` as an index (`x` whole numbers in `[0, 2^31)`).
     #[inline(always)]
-    fn index(x: V4, stride: V4) -> usize {
+    fn index(x: V4, stride: [usize; 3]) -> usize {
         unsafe {
-            let d = _mm_mul_ps(x, stride);
-            let d = _mm_add_ps(d, _mm_movehl_ps(d, d));
-            let d = _mm_add_ss(d, _mm_shuffle_ps::<0b01>(d, d));
-            _mm_cvttss_si32(d) as u32 as usize
+            let i = _mm_cvttps_epi32(x);
+            let at = |l: __m128i| _mm_cvtsi128_si32(l) as u32 as usize;
+            at(i) * stride[0]
+                + at(_mm_shuffle_epi32::<0b01>(i)) * stride[1]
+                + at(_mm_shuffle_epi32::<0b10>(i)) * stride[2]
         }
     }
     /// The cell of `p` (grid units) if it lies in `[0, dims)` (lane 3 of `p` zero, of `dims`
     /// positive; a NaN lane fails).
     #[inline(always)]
-    pub fn cell(p: V4, dims: V4, stride: V4) -> Option<usize> {
+    pub fn cell(p: V4, dims: V4, stride: [usize; 3]) -> Option<usize> {
         unsafe {
             let ok = _mm_and_ps(_mm_cmpge_ps(p, _mm_setzero_ps()), _mm_cmplt_ps(p, dims));
             if _mm_movemask_ps(ok) != 0b1111 {
                 return None;
             }
             // In [0, dims): truncation is the floor.
-            Some(index(_mm_cvtepi32_ps(_mm_cvttps_epi32(p)), stride))
+            Some(index(p, stride))
         }
     }
     /// The lower corner (index) of the cell-centred samples around `p` and the weights of the
     /// upper ones, each broadcast: positions clamp to the outermost samples, a NaN lane lands on
     /// sample 0.
     #[inline(always)]
-    pub fn locate(p: V4, smax: V4, imax: V4, stride: V4) -> (usize, [V4; 3]) {
+    pub fn locate(p: V4, smax: V4, imax: V4, stride: [usize; 3]) -> (usize, [V4; 3]) {
         unsafe {
             // max returns its second operand for a NaN.
             let s = _mm_min_ps(
@@ -1265,22 +1266,22 @@ mod lane {
     }
     /// The cell of `p` (grid units) if it lies in `[0, dims)`.
     #[inline(always)]
-    pub fn cell(p: V4, dims: V4, stride: V4) -> Option<usize> {
+    pub fn cell(p: V4, dims: V4, stride: [usize; 3]) -> Option<usize> {
         if !(0..3).all(|a| p[a] >= 0.0 && p[a] < dims[a]) {
             return None;
         }
-        Some((0..3).map(|a| (p[a] as usize) * stride[a] as usize).sum())
+        Some((0..3).map(|a| (p[a] as usize) * stride[a]).sum())
     }
     /// The lower corner (index) of the cell-centred samples around `p` and the weights of the
     /// upper ones, each broadcast.
     #[inline(always)]
-    pub fn locate(p: V4, smax: V4, imax: V4, stride: V4) -> (usize, [V4; 3]) {
+    pub fn locate(p: V4, smax: V4, imax: V4, stride: [usize; 3]) -> (usize, [V4; 3]) {
         let mut b = 0;
         let mut t = [[0.0; 4]; 3];
         for a in 0..3 {
             let s = (p[a] - 0.5).max(0.0).min(smax[a]);
             let i = s.floor().min(imax[a]);
-            b += i as usize * stride[a] as usize;
+            b += i as usize * stride[a];
             t[a] = [s - i; 4];
         }
         (b, t)
