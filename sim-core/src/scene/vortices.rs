@@ -617,7 +617,7 @@ impl VortexField {
             origin: self.origin,
             h: self.h,
         };
-        let (lower, upper) = rayon::join(
+        let (lower, upper) = crate::fork_join::join(
             || slab.potential(0..self.split_k, 0, [p0a, p1a, p2a]),
             || slab.potential(self.split_k..self.dims[2] + 1, at, [p0b, p1b, p2b]),
         );
@@ -655,7 +655,7 @@ impl VortexField {
                 }
             }
         };
-        rayon::join(|| run([a0, a1, a2]), || run([b0, b1, b2]));
+        crate::fork_join::join(|| run([a0, a1, a2]), || run([b0, b1, b2]));
     }
 
     /// Adds the change of the field since the last injection to the solver's face velocities
