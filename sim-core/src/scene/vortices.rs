@@ -775,8 +775,9 @@ impl Slab<'_> {
                     let s0 = (dy * v.axis[1] + dz * v.axis[2]) as f32;
                     let e0 = (dy * dy + dz * dz) as f32;
                     let x_ia = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
-                    // The row's stretch within the cylinder r < cutoff (a node of margin).
-                    let Some((ia, ib)) = row_span(ia, ib, x_ia, [s0, e0, n[0]], r2max, inv_hf)
+                    // The row's stretch within the support (the cutoff cylinder and the axial
+                    // window).
+                    let Some((ia, ib)) = row_span(ia, ib, x_ia, [s0, e0, n[0]], [r2max, end], inv_hf)
                     else {
                         continue;
                     };
@@ -822,40 +823,50 @@ impl Slab<'_> {
 }
 
 /// The nodes `ia..=ib` of a row (along x; the first at `x_ia` from the vortex's centre, `s0`
-/// and `e0` the row's axial offset and squared distance in y and z, `n0` the axis's x
-/// component) that can lie within `r^2 < r2max` of the axis, with a node of margin each side;
-/// `None` when none can. (Rows nearly along the axis are not narrowed.)
+/// and `e0` the row's axial offset and squared distance in y and z, `n0` the axis's x component)
+/// that can lie in the vortex's support: within `r^2 < r2max` of the axis and `|s| < end` of the
+/// centre plane. The margin is a thousandth of a cell (the f32 roots' error is far smaller, and the
+/// potential vanishes with zero slope at both edges); the per-node test decides. `None` when no
+/// node can.
 #[inline]
 fn row_span(
     ia: usize,
     ib: usize,
     x_ia: f32,
     [s0, e0, n0]: [f32; 3],
-    r2max: f32,
+    [r2max, end]: [f32; 2],
     inv_h: f32,
 ) -> Option<(usize, usize)> {
-    // r^2(x) = (1 - n0^2) x^2 - 2 s0 n0 x + e0 - s0^2.
+    // Along the row, x from the centre: r^2(x) = (1 - n0^2) x^2 - 2 s0 n0 x + e0 - s0^2 and
+    // s(x) = s0 + n0 x. Rows nearly along the axis are narrowed by the axial window alone.
+    let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
     let a = 1.0 - n0 * n0;
-    if a <= 1e-3 {
-        return Some((ia, ib));
+    if a > 1e-3 {
+        let b = -2.0 * s0 * n0;
+        let c = e0 - s0 * s0 - r2max;
+        let disc = b * b - 4.0 * a * c;
+        if disc.is_nan() || disc < 0.0 {
+            return None;
+        }
+        let (sq, inv_2a) = (disc.sqrt(), 0.5 / a);
+        (lo, hi) = ((-b - sq) * inv_2a, (-b + sq) * inv_2a);
     }
-    let b = -2.0 * s0 * n0;
-    let c = e0 - s0 * s0 - r2max;
-    let disc = b * b - 4.0 * a * c;
-    if disc.is_nan() || disc < 0.0 {
+    if n0.abs() > 1e-6 {
+        let (x1, x2) = ((-end - s0) / n0, (end - s0) / n0);
+        lo = lo.max(x1.min(x2));
+        hi = hi.min(x1.max(x2));
+    } else if s0.abs() >= end {
         return None;
     }
-    let (sq, inv_2a) = (disc.sqrt(), 0.5 / a);
-    let first = ((-b - sq) * inv_2a - x_ia) * inv_h - 1.0;
-    let last = ((-b + sq) * inv_2a - x_ia) * inv_h + 1.0;
+    const MARGIN_CELLS: f32 = 1e-3;
+    let first = ((lo - x_ia) * inv_h - MARGIN_CELLS).ceil();
+    let last = ((hi - x_ia) * inv_h + MARGIN_CELLS).floor();
     let span = (ib - ia) as f32;
-    if !(last >= 0.0 && first <= span) {
+    if !(last >= 0.0 && first <= span && first <= last) {
         return None;
     }
     // Non-negative and at most `span` here: the conversions truncate.
-    let first = ia + first.max(0.0) as usize;
-    let last = ia + last.min(span) as usize;
-    (first <= last).then_some((first, last))
+    Some((ia + first.max(0.0) as usize, ia + last.min(span) as usize))
 }
 
 /// The vortex stage of a scene.
