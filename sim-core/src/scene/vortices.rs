@@ -285,6 +285,9 @@ pub struct VortexField {
     fluid_cells: Vec<u32>,
     /// Per component: every face of a fluid cell once, as `(face, its lowest node)`.
     fluid_faces: [Vec<[u32; 2]>; 3],
+    /// The same faces as runs along x: `(first face, its lowest node, length)` (a run's faces and
+    /// their nodes are consecutive, so the curl over a run is a loop over slices).
+    face_runs: [Vec<[u32; 3]>; 3],
     /// Node-centred vector potential, per component, m^2/s.
     pot: [Vec<f32>; 3],
     /// The field's face velocities, m/s (the solver's layout).
@@ -337,6 +340,7 @@ impl VortexField {
             node_mask: vec![0; nodes],
             fluid_cells: Vec::new(),
             fluid_faces: std::array::from_fn(|_| Vec::new()),
+            face_runs: std::array::from_fn(|_| Vec::new()),
             pot: std::array::from_fn(|_| vec![0.0; nodes]),
             injected: faces.clone(),
             faces,
@@ -490,6 +494,14 @@ impl VortexField {
                 }
             }
             list.sort_unstable();
+            let runs = &mut self.face_runs[c];
+            runs.clear();
+            for &[f, base] in list.iter() {
+                match runs.last_mut() {
+                    Some([f0, b0, len]) if *f0 + *len == f && *b0 + *len == base => *len += 1,
+                    _ => runs.push([f, base, 1]),
+                }
+            }
         }
         // Vortices now outside the fluid respawn on the next step.
     }
@@ -626,32 +638,40 @@ impl VortexField {
     }
 
     /// Face velocities of the fluid cells' faces from the node potential (each component's
-    /// faces in two halves, on two tasks).
+    /// runs in two halves, on two tasks).
     fn curl_faces(&mut self) {
         let [nx, ny, _] = self.dims;
         let stride = [1, nx + 1, (nx + 1) * (ny + 1)];
         let inv = (0.5 / self.h) as f32;
         let pot = &self.pot;
-        type Part<'a> = (&'a [[u32; 2]], &'a mut [f32], usize);
+        type Part<'a> = (&'a [[u32; 3]], &'a mut [f32], usize);
         let [f0, f1, f2] = &mut self.faces;
         let parts: [[Part; 2]; 3] = [(0, f0), (1, f1), (2, f2)].map(|(c, out)| {
-            let list = &self.fluid_faces[c][..];
-            let (la, lb) = list.split_at(list.len() / 2);
-            let at = lb.first().map_or(out.len(), |f| f[0] as usize);
+            let runs = &self.face_runs[c][..];
+            let (ra, rb) = runs.split_at(runs.len() / 2);
+            let at = rb.first().map_or(out.len(), |r| r[0] as usize);
             let (oa, ob) = out.split_at_mut(at);
-            [(la, oa, 0), (lb, ob, at)]
+            [(ra, oa, 0), (rb, ob, at)]
         });
         let [[a0, b0], [a1, b1], [a2, b2]] = parts;
         let run = |parts: [Part; 3]| {
-            for (c, (list, out, offset)) in parts.into_iter().enumerate() {
+            for (c, (runs, out, offset)) in parts.into_iter().enumerate() {
                 let (a, b) = ((c + 1) % 3, (c + 2) % 3);
                 let (sa, sb) = (stride[a], stride[b]);
                 let (na, nb) = (&pot[a][..], &pot[b][..]);
-                for &[f, base] in list {
-                    let base = base as usize;
-                    let u = (nb[base + sa] + nb[base + sa + sb] - nb[base] - nb[base + sb])
-                        - (na[base + sb] + na[base + sa + sb] - na[base] - na[base + sa]);
-                    out[f as usize - offset] = u * inv;
+                for &[f, base, len] in runs {
+                    let (f, base, len) = (f as usize - offset, base as usize, len as usize);
+                    fn window(p: &[f32], at: usize, len: usize) -> &[f32] {
+                        &p[at..at + len]
+                    }
+                    let at = |p, o| window(p, base + o, len);
+                    let (b00, b10, b01, b11) = (at(nb, 0), at(nb, sa), at(nb, sb), at(nb, sa + sb));
+                    let (a00, a10, a01, a11) = (at(na, 0), at(na, sa), at(na, sb), at(na, sa + sb));
+                    for (i, o) in out[f..f + len].iter_mut().enumerate() {
+                        let u = (b10[i] + b11[i] - b00[i] - b01[i])
+                            - (a01[i] + a11[i] - a00[i] - a10[i]);
+                        *o = u * inv;
+                    }
                 }
             }
         };
@@ -777,7 +797,8 @@ impl Slab<'_> {
                     let x_ia = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
                     // The row's stretch within the support (the cutoff cylinder and the axial
                     // window).
-                    let Some((ia, ib)) = row_span(ia, ib, x_ia, [s0, e0, n[0]], [r2max, end], inv_hf)
+                    let Some((ia, ib)) =
+                        row_span(ia, ib, x_ia, [s0, e0, n[0]], [r2max, end], inv_hf)
                     else {
                         continue;
                     };
@@ -859,14 +880,16 @@ fn row_span(
         return None;
     }
     const MARGIN_CELLS: f32 = 1e-3;
-    let first = ((lo - x_ia) * inv_h - MARGIN_CELLS).ceil();
-    let last = ((hi - x_ia) * inv_h + MARGIN_CELLS).floor();
-    let span = (ib - ia) as f32;
-    if !(last >= 0.0 && first <= span && first <= last) {
+    let first = ((lo - x_ia) * inv_h - MARGIN_CELLS).max(0.0);
+    let last = ((hi - x_ia) * inv_h + MARGIN_CELLS).min((ib - ia) as f32);
+    if !(last >= 0.0 && first <= last) {
         return None;
     }
-    // Non-negative and at most `span` here: the conversions truncate.
-    Some((ia + first.max(0.0) as usize, ia + last.min(span) as usize))
+    // Both in `[0, ib - ia]` here: the conversions truncate (floor), the first rounds up (no
+    // libm call for ceil on the baseline target).
+    let (f, l) = (first as usize, last as usize);
+    let f = f + usize::from((f as f32) < first);
+    (f <= l).then_some((ia + f, ia + l))
 }
 
 /// The vortex stage of a scene.
