@@ -288,6 +288,9 @@ pub struct VortexField {
     /// The same faces as runs along x: `(first face, its lowest node, length)` (a run's faces and
     /// their nodes are consecutive, so the curl over a run is a loop over slices).
     face_runs: [Vec<[u32; 3]>; 3],
+    /// Scratch of the face lists' build: the lower and the upper faces (each in index order).
+    face_lower: Vec<[u32; 2]>,
+    face_upper: Vec<[u32; 2]>,
     /// Node-centred vector potential, per component, m^2/s.
     pot: [Vec<f32>; 3],
     /// The field's face velocities, m/s (the solver's layout).
@@ -341,6 +344,8 @@ impl VortexField {
             fluid_cells: Vec::new(),
             fluid_faces: std::array::from_fn(|_| Vec::new()),
             face_runs: std::array::from_fn(|_| Vec::new()),
+            face_lower: Vec::new(),
+            face_upper: Vec::new(),
             pot: std::array::from_fn(|_| vec![0.0; nodes]),
             injected: faces.clone(),
             faces,
@@ -419,46 +424,33 @@ impl VortexField {
                 self.fluid_cells.push(n as u32);
             }
         }
-        // A node is in `node_mask` when its eight cells are fluid: count the fluid cells around
-        // each corner of the fluid cells in `node_mask` itself, list the nodes that reach 8
-        // (marked 9), zero the other counters, then set the listed nodes to 1.
+        // A node is in `node_mask` when its eight cells are fluid. Each such node is the upper
+        // corner of exactly one of them (its lowest), so walking the fluid cells in index order
+        // lists the nodes in index order too (no sort).
         let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
-        let corners = |n: u32| {
-            let n = n as usize;
-            let base = n % nx + sx * ((n / nx) % ny) + sy * (n / (nx * ny));
-            (0..8).map(move |b| base + (b & 1) + sx * (b >> 1 & 1) + sy * (b >> 2))
-        };
-        for &n in &self.fluid_cells {
-            for node in corners(n) {
-                self.node_mask[node] += 1;
-            }
-        }
+        let (cy, cz) = (nx, nx * ny);
         self.fluid_nodes.clear();
         self.row_nodes.fill((1, 0));
         for &n in &self.fluid_cells {
-            for node in corners(n) {
-                match self.node_mask[node] {
-                    // All eight cells are fluid, so the node is inside the grid.
-                    8 => {
-                        self.node_mask[node] = 9;
-                        self.fluid_nodes.push(node as u32);
-                        let (i, row) = ((node % sx) as u32, node / sx);
-                        let r = &mut self.row_nodes[row];
-                        *r = if r.0 > r.1 {
-                            (i, i)
-                        } else {
-                            (r.0.min(i), r.1.max(i))
-                        };
-                    }
-                    9 => {}
-                    _ => self.node_mask[node] = 0,
-                }
+            let n = n as usize;
+            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+            if i + 1 >= nx || j + 1 >= ny || k + 1 >= nz {
+                continue;
+            }
+            let upper = [1, cy, cy + 1, cz, cz + 1, cz + cy, cz + cy + 1];
+            if upper.iter().all(|&d| fluid(n + d)) {
+                let node = (i + 1) + sx * (j + 1) + sy * (k + 1);
+                self.node_mask[node] = 1;
+                self.fluid_nodes.push(node as u32);
+                let (i, row) = ((i + 1) as u32, node / sx);
+                let r = &mut self.row_nodes[row];
+                *r = if r.0 > r.1 {
+                    (i, i)
+                } else {
+                    (r.0.min(i), r.1.max(i))
+                };
             }
         }
-        for &n in &self.fluid_nodes {
-            self.node_mask[n as usize] = 1;
-        }
-        self.fluid_nodes.sort_unstable();
         let layer = sy;
         self.split_k = self
             .fluid_nodes
@@ -466,15 +458,17 @@ impl VortexField {
             .map_or(0, |&n| n as usize / layer);
         // The faces of the fluid cells, each once (the upper face only where the next cell is
         // not fluid), in index order; only those with a corner node in `node_mask` (the others'
-        // circulation is zero).
+        // circulation is zero). The lower faces and the upper faces each come in index order
+        // from the cells in index order: one merge, no sort.
         let node_stride = [1, sx, sy];
         let cell_stride = [1, nx, nx * ny];
         for c in 0..3 {
             let mut fd = [nx, ny, nz];
             fd[c] += 1;
             let (sa, sb) = (node_stride[(c + 1) % 3], node_stride[(c + 2) % 3]);
-            let list = &mut self.fluid_faces[c];
-            list.clear();
+            let (lower, upper) = (&mut self.face_lower, &mut self.face_upper);
+            lower.clear();
+            upper.clear();
             for &n in &self.fluid_cells {
                 let n = n as usize;
                 let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
@@ -489,11 +483,24 @@ impl VortexField {
                     let node = f[0] + sx * f[1] + sy * f[2];
                     let corners = [node, node + sa, node + sb, node + sa + sb];
                     if corners.iter().any(|&m| self.node_mask[m] != 0) {
-                        list.push([idx as u32, node as u32]);
+                        [&mut *lower, &mut *upper][up].push([idx as u32, node as u32]);
                     }
                 }
             }
-            list.sort_unstable();
+            let list = &mut self.fluid_faces[c];
+            list.clear();
+            let (mut a, mut b) = (lower.iter().peekable(), upper.iter().peekable());
+            while let (Some(&&x), Some(&&y)) = (a.peek(), b.peek()) {
+                if x[0] < y[0] {
+                    list.push(x);
+                    a.next();
+                } else {
+                    list.push(y);
+                    b.next();
+                }
+            }
+            list.extend(a);
+            list.extend(b);
             let runs = &mut self.face_runs[c];
             runs.clear();
             for &[f, base] in list.iter() {
