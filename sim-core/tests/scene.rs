@@ -429,14 +429,13 @@ fn a_bleed_in_the_scene_obscures_the_view_until_the_flow_carries_it_out_of_the_o
 }
 
 /// The acceptance (the view clears faster with the outflow open wider, monotone in a
-/// sweep) on the real scene. It does not hold yet, so the test is ignored rather than loosened:
-/// with the pump at 100 mmHg a wider outflow lowers the cavity pressure (89, 78, 50 mmHg at 0.25,
-/// 0.5, 1.0), the fundus in front of the scope keeps fewer fluid cells (4, 1, 0 within 6 mm of
-/// the source at 1.2 mm; 47, 35, 6 at 0.6 mm) and blood released there stays in stagnant one-cell
-/// channels in the view (cell speeds under 1 mm/s): time to clear 5.0, 1.5, 7.8 s at 1.2 mm.
-/// Holding the cavity at ~80 mmHg (pump regulated) the widest outflow (443 ml/min through) still
-/// left 60 % of the blood stagnant in the view after 9 s while 0.5 (126 ml/min) cleared in 1.5 s
-/// (docs/particles.md, "View clarity").
+/// sweep) on the real scene. It does not hold yet, so the test is ignored rather than loosened.
+/// With the pump at 100 mmHg a wider outflow lowers the cavity pressure (89, 78, 50 mmHg at 0.25,
+/// 0.5, 1.0). Without eddy dispersion the blood stayed in stagnant one-cell channels at the
+/// fundus (5.0, 1.5, 7.8 s); with it (session 7) those empty, and the times are 9.6, 3.4, 6.1 s
+/// (15.7, 3.2, 3.9 s with the cavity held at 80 mmHg): the resolved flow more than 10 mm in front
+/// of the tip, where the blood is, does not speed up with the through-flow (docs/particles.md,
+/// "View clarity").
 #[test]
 #[ignore = "not monotone in the scene yet (see the doc comment); run: cargo nextest run -p hydrometra-sim --test scene --run-ignored only -E 'test(the_view_clears)'"]
 fn the_view_clears_faster_after_a_bleed_with_the_outflow_open_wider() {

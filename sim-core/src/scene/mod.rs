@@ -32,6 +32,7 @@
 pub mod clarity;
 pub mod counters;
 pub mod desc;
+pub mod dispersion;
 pub mod particles;
 mod ports;
 pub mod prepare;

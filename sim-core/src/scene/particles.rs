@@ -15,6 +15,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::clarity::{ClarityTracker, View, ViewSpec};
+use super::dispersion;
 use super::random::SeededRng;
 use super::vortices::cross;
 use super::{Scene, VoxelKind};
@@ -257,6 +258,8 @@ pub struct ParticleSpec {
     pub fragments: Vec<FragmentSpec>,
     /// The clarity figure's view.
     pub view: ViewSpec,
+    /// The inflow jet's turbulent mixing as a random walk (`scene::dispersion`).
+    pub eddy_dispersion: bool,
 }
 
 impl Default for ParticleSpec {
@@ -272,6 +275,7 @@ impl Default for ParticleSpec {
             bubbles: BubbleSpec::default(),
             fragments: Vec::new(),
             view: ViewSpec::default(),
+            eddy_dispersion: true,
         }
     }
 }
@@ -524,6 +528,10 @@ pub struct ParticleSystem {
     settled: usize,
     counts: ParticleCounts,
     time_s: f64,
+    /// Eddy diffusivity of the sub-grid turbulent mixing, m^2/s (0: none; `scene::dispersion`).
+    eddy_diffusivity_m2_s: f64,
+    /// The random walk's generator (seeded per system: runs repeat).
+    walk_rng: fastrand::Rng,
 }
 
 /// A cell kind per cell from a solver grid's labels (fluid, solid -> wall, velocity -> wall,
@@ -570,6 +578,48 @@ impl ParticleSystem {
             settled: 0,
             counts: ParticleCounts::default(),
             time_s: 0.0,
+            eddy_diffusivity_m2_s: 0.0,
+            walk_rng: fastrand::Rng::with_seed(0x5eed_d15c),
+        }
+    }
+
+    /// Sets the eddy diffusivity of the random walk every later step adds to the advection,
+    /// m^2/s (0, the default: none; `scene::dispersion`).
+    pub fn set_eddy_diffusivity(&mut self, d_m2_s: f64) {
+        self.eddy_diffusivity_m2_s = if d_m2_s.is_finite() {
+            d_m2_s.max(0.0)
+        } else {
+            0.0
+        };
+    }
+
+    /// The eddy dispersion's random walk over `dt_s` (`scene::dispersion::walk`).
+    fn disperse(&mut self, kinds: &[VoxelKind], dt_s: f64) {
+        let Some(plan) = dispersion::walk_plan(self.eddy_diffusivity_m2_s, dt_s, self.h) else {
+            return;
+        };
+        let n = self.pos.len();
+        let entered_outlet = if n >= PARALLEL_MIN {
+            // The advection's chunks, each with its own generator seeded from the system's (the
+            // same draws whatever the thread count).
+            use rayon::prelude::*;
+            let chunk = n.div_ceil(PARALLEL_TASKS);
+            let mut seeds = [0u64; PARALLEL_TASKS];
+            seeds.iter_mut().for_each(|s| *s = self.walk_rng.u64(..));
+            let (dims, pos) = (self.dims, &mut self.pos);
+            pos.par_chunks_mut(chunk)
+                .zip(seeds.par_iter())
+                .map(|(p, &seed)| {
+                    let mut rng = fastrand::Rng::with_seed(seed);
+                    dispersion::walk(p, kinds, dims, plan, &mut rng)
+                })
+                .reduce(|| false, |a, b| a || b)
+        } else {
+            dispersion::walk(&mut self.pos, kinds, self.dims, plan, &mut self.walk_rng)
+        };
+        if entered_outlet {
+            // Particles moved into an outlet no longer start in fluid cells.
+            self.settled = 0;
         }
     }
 
@@ -776,6 +826,7 @@ impl ParticleSystem {
         self.time_s += dt_s;
         if !self.pos.is_empty() && dt_s > 0.0 && kinds.len() >= self.field.len() {
             let kinds_changed = self.build_field(solver, kinds, overlay);
+            self.disperse(kinds, dt_s);
             let cone = view.map(|v| Cone::new(v, self.origin, self.h));
             let sums = self.advance(kinds, kinds_changed, dt_s, cone);
             return view.map(|v| self.clarity_from(v, &sums));
@@ -1903,6 +1954,14 @@ impl Particles {
         let Some(sys) = self.system.as_mut() else {
             return false;
         };
+        sys.set_eddy_diffusivity(if self.spec.eddy_dispersion {
+            dispersion::jet_eddy_diffusivity_m2_s(
+                scene.hydraulic_state.flows.inflow_m3_per_s,
+                scene.desc.scope.inflow_channel_area_mm2 * 1e-6,
+            )
+        } else {
+            0.0
+        });
         self.clarity = sys.step(solver, &scene.kinds, overlay, dt_s, view.as_ref());
         let bleed_end = self
             .spec

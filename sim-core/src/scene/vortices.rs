@@ -285,6 +285,12 @@ pub struct VortexField {
     fluid_cells: Vec<u32>,
     /// Per component: every face of a fluid cell once, as `(face, its lowest node)`.
     fluid_faces: [Vec<[u32; 2]>; 3],
+    /// The same faces as runs along x: `(first face, its lowest node, length)` (a run's faces and
+    /// their nodes are consecutive, so the curl over a run is a loop over slices).
+    face_runs: [Vec<[u32; 3]>; 3],
+    /// Scratch of the face lists' build: the lower and the upper faces (each in index order).
+    face_lower: Vec<[u32; 2]>,
+    face_upper: Vec<[u32; 2]>,
     /// Node-centred vector potential, per component, m^2/s.
     pot: [Vec<f32>; 3],
     /// The field's face velocities, m/s (the solver's layout).
@@ -337,6 +343,9 @@ impl VortexField {
             node_mask: vec![0; nodes],
             fluid_cells: Vec::new(),
             fluid_faces: std::array::from_fn(|_| Vec::new()),
+            face_runs: std::array::from_fn(|_| Vec::new()),
+            face_lower: Vec::new(),
+            face_upper: Vec::new(),
             pot: std::array::from_fn(|_| vec![0.0; nodes]),
             injected: faces.clone(),
             faces,
@@ -415,46 +424,33 @@ impl VortexField {
                 self.fluid_cells.push(n as u32);
             }
         }
-        // A node is in `node_mask` when its eight cells are fluid: count the fluid cells around
-        // each corner of the fluid cells in `node_mask` itself, list the nodes that reach 8
-        // (marked 9), zero the other counters, then set the listed nodes to 1.
+        // A node is in `node_mask` when its eight cells are fluid. Each such node is the upper
+        // corner of exactly one of them (its lowest), so walking the fluid cells in index order
+        // lists the nodes in index order too (no sort).
         let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
-        let corners = |n: u32| {
-            let n = n as usize;
-            let base = n % nx + sx * ((n / nx) % ny) + sy * (n / (nx * ny));
-            (0..8).map(move |b| base + (b & 1) + sx * (b >> 1 & 1) + sy * (b >> 2))
-        };
-        for &n in &self.fluid_cells {
-            for node in corners(n) {
-                self.node_mask[node] += 1;
-            }
-        }
+        let (cy, cz) = (nx, nx * ny);
         self.fluid_nodes.clear();
         self.row_nodes.fill((1, 0));
         for &n in &self.fluid_cells {
-            for node in corners(n) {
-                match self.node_mask[node] {
-                    // All eight cells are fluid, so the node is inside the grid.
-                    8 => {
-                        self.node_mask[node] = 9;
-                        self.fluid_nodes.push(node as u32);
-                        let (i, row) = ((node % sx) as u32, node / sx);
-                        let r = &mut self.row_nodes[row];
-                        *r = if r.0 > r.1 {
-                            (i, i)
-                        } else {
-                            (r.0.min(i), r.1.max(i))
-                        };
-                    }
-                    9 => {}
-                    _ => self.node_mask[node] = 0,
-                }
+            let n = n as usize;
+            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+            if i + 1 >= nx || j + 1 >= ny || k + 1 >= nz {
+                continue;
+            }
+            let upper = [1, cy, cy + 1, cz, cz + 1, cz + cy, cz + cy + 1];
+            if upper.iter().all(|&d| fluid(n + d)) {
+                let node = (i + 1) + sx * (j + 1) + sy * (k + 1);
+                self.node_mask[node] = 1;
+                self.fluid_nodes.push(node as u32);
+                let (i, row) = ((i + 1) as u32, node / sx);
+                let r = &mut self.row_nodes[row];
+                *r = if r.0 > r.1 {
+                    (i, i)
+                } else {
+                    (r.0.min(i), r.1.max(i))
+                };
             }
         }
-        for &n in &self.fluid_nodes {
-            self.node_mask[n as usize] = 1;
-        }
-        self.fluid_nodes.sort_unstable();
         let layer = sy;
         self.split_k = self
             .fluid_nodes
@@ -462,15 +458,17 @@ impl VortexField {
             .map_or(0, |&n| n as usize / layer);
         // The faces of the fluid cells, each once (the upper face only where the next cell is
         // not fluid), in index order; only those with a corner node in `node_mask` (the others'
-        // circulation is zero).
+        // circulation is zero). The lower faces and the upper faces each come in index order
+        // from the cells in index order: one merge, no sort.
         let node_stride = [1, sx, sy];
         let cell_stride = [1, nx, nx * ny];
         for c in 0..3 {
             let mut fd = [nx, ny, nz];
             fd[c] += 1;
             let (sa, sb) = (node_stride[(c + 1) % 3], node_stride[(c + 2) % 3]);
-            let list = &mut self.fluid_faces[c];
-            list.clear();
+            let (lower, upper) = (&mut self.face_lower, &mut self.face_upper);
+            lower.clear();
+            upper.clear();
             for &n in &self.fluid_cells {
                 let n = n as usize;
                 let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
@@ -485,11 +483,32 @@ impl VortexField {
                     let node = f[0] + sx * f[1] + sy * f[2];
                     let corners = [node, node + sa, node + sb, node + sa + sb];
                     if corners.iter().any(|&m| self.node_mask[m] != 0) {
-                        list.push([idx as u32, node as u32]);
+                        [&mut *lower, &mut *upper][up].push([idx as u32, node as u32]);
                     }
                 }
             }
-            list.sort_unstable();
+            let list = &mut self.fluid_faces[c];
+            list.clear();
+            let (mut a, mut b) = (lower.iter().peekable(), upper.iter().peekable());
+            while let (Some(&&x), Some(&&y)) = (a.peek(), b.peek()) {
+                if x[0] < y[0] {
+                    list.push(x);
+                    a.next();
+                } else {
+                    list.push(y);
+                    b.next();
+                }
+            }
+            list.extend(a);
+            list.extend(b);
+            let runs = &mut self.face_runs[c];
+            runs.clear();
+            for &[f, base] in list.iter() {
+                match runs.last_mut() {
+                    Some([f0, b0, len]) if *f0 + *len == f && *b0 + *len == base => *len += 1,
+                    _ => runs.push([f, base, 1]),
+                }
+            }
         }
         // Vortices now outside the fluid respawn on the next step.
     }
@@ -617,7 +636,7 @@ impl VortexField {
             origin: self.origin,
             h: self.h,
         };
-        let (lower, upper) = rayon::join(
+        let (lower, upper) = crate::fork_join::join(
             || slab.potential(0..self.split_k, 0, [p0a, p1a, p2a]),
             || slab.potential(self.split_k..self.dims[2] + 1, at, [p0b, p1b, p2b]),
         );
@@ -626,36 +645,44 @@ impl VortexField {
     }
 
     /// Face velocities of the fluid cells' faces from the node potential (each component's
-    /// faces in two halves, on two tasks).
+    /// runs in two halves, on two tasks).
     fn curl_faces(&mut self) {
         let [nx, ny, _] = self.dims;
         let stride = [1, nx + 1, (nx + 1) * (ny + 1)];
         let inv = (0.5 / self.h) as f32;
         let pot = &self.pot;
-        type Part<'a> = (&'a [[u32; 2]], &'a mut [f32], usize);
+        type Part<'a> = (&'a [[u32; 3]], &'a mut [f32], usize);
         let [f0, f1, f2] = &mut self.faces;
         let parts: [[Part; 2]; 3] = [(0, f0), (1, f1), (2, f2)].map(|(c, out)| {
-            let list = &self.fluid_faces[c][..];
-            let (la, lb) = list.split_at(list.len() / 2);
-            let at = lb.first().map_or(out.len(), |f| f[0] as usize);
+            let runs = &self.face_runs[c][..];
+            let (ra, rb) = runs.split_at(runs.len() / 2);
+            let at = rb.first().map_or(out.len(), |r| r[0] as usize);
             let (oa, ob) = out.split_at_mut(at);
-            [(la, oa, 0), (lb, ob, at)]
+            [(ra, oa, 0), (rb, ob, at)]
         });
         let [[a0, b0], [a1, b1], [a2, b2]] = parts;
         let run = |parts: [Part; 3]| {
-            for (c, (list, out, offset)) in parts.into_iter().enumerate() {
+            for (c, (runs, out, offset)) in parts.into_iter().enumerate() {
                 let (a, b) = ((c + 1) % 3, (c + 2) % 3);
                 let (sa, sb) = (stride[a], stride[b]);
                 let (na, nb) = (&pot[a][..], &pot[b][..]);
-                for &[f, base] in list {
-                    let base = base as usize;
-                    let u = (nb[base + sa] + nb[base + sa + sb] - nb[base] - nb[base + sb])
-                        - (na[base + sb] + na[base + sa + sb] - na[base] - na[base + sa]);
-                    out[f as usize - offset] = u * inv;
+                for &[f, base, len] in runs {
+                    let (f, base, len) = (f as usize - offset, base as usize, len as usize);
+                    fn window(p: &[f32], at: usize, len: usize) -> &[f32] {
+                        &p[at..at + len]
+                    }
+                    let at = |p, o| window(p, base + o, len);
+                    let (b00, b10, b01, b11) = (at(nb, 0), at(nb, sa), at(nb, sb), at(nb, sa + sb));
+                    let (a00, a10, a01, a11) = (at(na, 0), at(na, sa), at(na, sb), at(na, sa + sb));
+                    for (i, o) in out[f..f + len].iter_mut().enumerate() {
+                        let u = (b10[i] + b11[i] - b00[i] - b01[i])
+                            - (a01[i] + a11[i] - a00[i] - a10[i]);
+                        *o = u * inv;
+                    }
                 }
             }
         };
-        rayon::join(|| run([a0, a1, a2]), || run([b0, b1, b2]));
+        crate::fork_join::join(|| run([a0, a1, a2]), || run([b0, b1, b2]));
     }
 
     /// Adds the change of the field since the last injection to the solver's face velocities
@@ -775,8 +802,10 @@ impl Slab<'_> {
                     let s0 = (dy * v.axis[1] + dz * v.axis[2]) as f32;
                     let e0 = (dy * dy + dz * dz) as f32;
                     let x_ia = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
-                    // The row's stretch within the cylinder r < cutoff (a node of margin).
-                    let Some((ia, ib)) = row_span(ia, ib, x_ia, [s0, e0, n[0]], r2max, inv_hf)
+                    // The row's stretch within the support (the cutoff cylinder and the axial
+                    // window).
+                    let Some((ia, ib)) =
+                        row_span(ia, ib, x_ia, [s0, e0, n[0]], [r2max, end], inv_hf)
                     else {
                         continue;
                     };
@@ -822,40 +851,52 @@ impl Slab<'_> {
 }
 
 /// The nodes `ia..=ib` of a row (along x; the first at `x_ia` from the vortex's centre, `s0`
-/// and `e0` the row's axial offset and squared distance in y and z, `n0` the axis's x
-/// component) that can lie within `r^2 < r2max` of the axis, with a node of margin each side;
-/// `None` when none can. (Rows nearly along the axis are not narrowed.)
+/// and `e0` the row's axial offset and squared distance in y and z, `n0` the axis's x component)
+/// that can lie in the vortex's support: within `r^2 < r2max` of the axis and `|s| < end` of the
+/// centre plane. The margin is a thousandth of a cell (the f32 roots' error is far smaller, and the
+/// potential vanishes with zero slope at both edges); the per-node test decides. `None` when no
+/// node can.
 #[inline]
 fn row_span(
     ia: usize,
     ib: usize,
     x_ia: f32,
     [s0, e0, n0]: [f32; 3],
-    r2max: f32,
+    [r2max, end]: [f32; 2],
     inv_h: f32,
 ) -> Option<(usize, usize)> {
-    // r^2(x) = (1 - n0^2) x^2 - 2 s0 n0 x + e0 - s0^2.
+    // Along the row, x from the centre: r^2(x) = (1 - n0^2) x^2 - 2 s0 n0 x + e0 - s0^2 and
+    // s(x) = s0 + n0 x. Rows nearly along the axis are narrowed by the axial window alone.
+    let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
     let a = 1.0 - n0 * n0;
-    if a <= 1e-3 {
-        return Some((ia, ib));
+    if a > 1e-3 {
+        let b = -2.0 * s0 * n0;
+        let c = e0 - s0 * s0 - r2max;
+        let disc = b * b - 4.0 * a * c;
+        if disc.is_nan() || disc < 0.0 {
+            return None;
+        }
+        let (sq, inv_2a) = (disc.sqrt(), 0.5 / a);
+        (lo, hi) = ((-b - sq) * inv_2a, (-b + sq) * inv_2a);
     }
-    let b = -2.0 * s0 * n0;
-    let c = e0 - s0 * s0 - r2max;
-    let disc = b * b - 4.0 * a * c;
-    if disc.is_nan() || disc < 0.0 {
+    if n0.abs() > 1e-6 {
+        let (x1, x2) = ((-end - s0) / n0, (end - s0) / n0);
+        lo = lo.max(x1.min(x2));
+        hi = hi.min(x1.max(x2));
+    } else if s0.abs() >= end {
         return None;
     }
-    let (sq, inv_2a) = (disc.sqrt(), 0.5 / a);
-    let first = ((-b - sq) * inv_2a - x_ia) * inv_h - 1.0;
-    let last = ((-b + sq) * inv_2a - x_ia) * inv_h + 1.0;
-    let span = (ib - ia) as f32;
-    if !(last >= 0.0 && first <= span) {
+    const MARGIN_CELLS: f32 = 1e-3;
+    let first = ((lo - x_ia) * inv_h - MARGIN_CELLS).max(0.0);
+    let last = ((hi - x_ia) * inv_h + MARGIN_CELLS).min((ib - ia) as f32);
+    if !(last >= 0.0 && first <= last) {
         return None;
     }
-    // Non-negative and at most `span` here: the conversions truncate.
-    let first = ia + first.max(0.0) as usize;
-    let last = ia + last.min(span) as usize;
-    (first <= last).then_some((first, last))
+    // Both in `[0, ib - ia]` here: the conversions truncate (floor), the first rounds up (no
+    // libm call for ceil on the baseline target).
+    let (f, l) = (first as usize, last as usize);
+    let f = f + usize::from((f as f32) < first);
+    (f <= l).then_some((ia + f, ia + l))
 }
 
 /// The vortex stage of a scene.
