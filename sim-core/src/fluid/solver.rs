@@ -344,21 +344,24 @@ impl FluidSolver {
     }
 
     fn rebuild_topology(&mut self) {
+        // The rows' open ranges bound every cell that is fluid or open on level 0 and every face
+        // that can be active or fixed: the builds below visit only them.
+        topology::open_row_ranges(&self.grid, &mut self.open_rows);
         let g = &self.grid;
         let mg = &mut self.pressure.mg;
         if mg.levels.is_empty() {
             mg.levels.push(Default::default());
         }
         let l0 = &mut mg.levels[0];
-        l0.dims = g.dims();
-        l0.periodic = g.periodic();
-        l0.label.clear();
-        l0.label.extend(g.labels().iter().map(|l| match l {
-            CellLabel::Fluid => L_FLUID,
-            CellLabel::Outflow => L_OPEN,
-            _ => L_SOLID,
-        }));
-        l0.build_rows();
+        let labels = g.labels();
+        l0.set_labels(g.dims(), g.periodic(), &self.open_rows, |c| {
+            match labels[c] {
+                CellLabel::Fluid => L_FLUID,
+                CellLabel::Outflow => L_OPEN,
+                _ => L_SOLID,
+            }
+        });
+        l0.build_rows_in_extents();
         // Keep the pressure of cells that stay fluid for the warm start across relabelling (it
         // is zero outside the fluid cells, so only the previous spans can hold stale values).
         let len = l0.mask.len();
@@ -379,7 +382,6 @@ impl FluidSolver {
         }
         mg.build_hierarchy();
         self.pressure.resize();
-        topology::open_row_ranges(&self.grid, &mut self.open_rows);
         self.outflow_faces.clear();
         // The three components are independent: x and y here, z on the fork-join helper (the
         // result does not depend on which thread builds which).
