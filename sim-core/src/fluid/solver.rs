@@ -407,11 +407,11 @@ impl FluidSolver {
             });
             self.run_cells[c].clear();
             self.run_cells[c].extend(cells);
-            for &idx in &self.faces[c].active {
-                let f = self.layout.face_coords(c, idx as usize);
-                let (lo, up) = topology::face_cells(&self.grid, c, f);
-                let outflow = |cell: Option<[usize; 3]>| {
-                    cell.filter(|&x| self.grid.label(x) == Some(CellLabel::Outflow))
+            let set = &self.faces[c];
+            for (&idx, &[lo, up]) in set.active.iter().zip(set.active_cells()) {
+                let outflow = |cell: u32| {
+                    (cell != NONE && self.grid.label_at(cell as usize) == CellLabel::Outflow)
+                        .then(|| self.grid.coords(cell as usize))
                 };
                 let (cell, sign) = match (outflow(lo), outflow(up)) {
                     (_, Some(x)) => (x, 1.0),
