@@ -838,4 +838,104 @@ mod tests {
             }
         }
     }
+
+    /// The stencils and extrapolation layers by the definitions, face by face over the whole
+    /// array (cells by [`face_cells`], neighbours by [`neighbour_index`] and
+    /// [`neighbour_coords`]): the reference for the rebuild's shortcuts (kept cells shifted to a
+    /// tangential neighbour, plain offsets off the array's ends, layers found from the inside).
+    #[test]
+    fn stencils_and_layers_match_their_definitions() {
+        for (periodic, dims) in [
+            ([false; 3], [12, 10, 9]),
+            ([true, false, true], [10, 9, 8]),
+            ([false, true, true], [9, 11, 10]),
+        ] {
+            let mut rng = fastrand::Rng::with_seed(17);
+            let mut grid = FluidGrid::new(dims, 1e-3, [0.0; 3], periodic).unwrap();
+            for n in 0..grid.cell_count() {
+                let l = if rng.f32() < 0.3 {
+                    CellLabel::Fluid
+                } else {
+                    [CellLabel::Solid, CellLabel::Velocity, CellLabel::Outflow][rng.usize(..3)]
+                };
+                grid.set_label(grid.coords(n), l).unwrap();
+            }
+            let layout = Layout::new(dims, periodic);
+            for c in 0..3 {
+                let set = fresh(&grid, &layout, c);
+                let labels_of = |f: [usize; 3]| {
+                    let (lo, up) = face_cells(&grid, c, f);
+                    (label_of(&grid, lo), label_of(&grid, up))
+                };
+                let nf = layout.face_count(c);
+                for (n, &idx) in set.active.iter().enumerate() {
+                    let idx = idx as usize;
+                    let f = layout.face_coords(c, idx);
+                    let (mut st, mut diag) = ([NONE; 6], 6.0f32);
+                    for slot in 0..6 {
+                        let (d, dir) = (slot / 2, if slot % 2 == 0 { -1 } else { 1 });
+                        let Some(gi) = neighbour_index(&layout, c, f, idx, d, dir) else {
+                            diag += 1.0;
+                            continue;
+                        };
+                        let cl = set.class[gi];
+                        let entry = |cl| match cl {
+                            ACTIVE => set.compact[gi],
+                            _ => CONST_BIT | gi as u32,
+                        };
+                        if d == c {
+                            match cl {
+                                ACTIVE | FIXED => st[slot] = entry(cl),
+                                _ => diag -= 1.0,
+                            }
+                            continue;
+                        }
+                        let ((ll, _), (ul, _)) = labels_of(neighbour_coords(&layout, c, f, d, dir));
+                        if ll.is_wall() && ul.is_wall() {
+                            diag += 1.0;
+                        } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
+                            st[slot] = entry(cl);
+                        } else {
+                            diag -= 1.0;
+                        }
+                    }
+                    assert_eq!(set.stencil[n], st, "stencil of face {idx}, c {c}");
+                    assert_eq!(set.diag[n], diag, "diagonal of face {idx}, c {c}");
+                }
+                // Layers: faces neither active nor fixed beside the layer inside, in index order,
+                // with their sources in slot order.
+                let nbrs = |idx: usize| {
+                    let f = layout.face_coords(c, idx);
+                    (0..6).filter_map(move |slot| {
+                        let dir = if slot % 2 == 0 { -1 } else { 1 };
+                        neighbour_index(&layout, c, f, idx, slot / 2, dir)
+                    })
+                };
+                let tracked = |i: usize| matches!(set.class[i], ACTIVE | FIXED);
+                let ext1: Vec<u32> = (0..nf)
+                    .filter(|&i| !tracked(i) && nbrs(i).any(|g| set.class[g] == ACTIVE))
+                    .map(|i| i as u32)
+                    .collect();
+                let in1 = |i: usize| ext1.binary_search(&(i as u32)).is_ok();
+                let ext2: Vec<u32> = (0..nf)
+                    .filter(|&i| !tracked(i) && !in1(i) && nbrs(i).any(in1))
+                    .map(|i| i as u32)
+                    .collect();
+                assert_eq!(set.ext1, ext1, "ext1, c {c}, {periodic:?}");
+                assert_eq!(set.ext2, ext2, "ext2, c {c}, {periodic:?}");
+                let mut src = Vec::new();
+                let mut start = vec![0u32];
+                for &i in &ext1 {
+                    src.extend(nbrs(i as usize).filter(|&g| tracked(g)).map(|g| g as u32));
+                    start.push(src.len() as u32);
+                }
+                for &i in &ext2 {
+                    src.extend(nbrs(i as usize).filter(|&g| in1(g)).map(|g| g as u32));
+                    start.push(src.len() as u32);
+                }
+                assert_eq!(set.ext_src, src, "sources, c {c}, {periodic:?}");
+                assert_eq!(set.ext_start, start, "source starts, c {c}, {periodic:?}");
+            }
+        }
+    }
 }
