@@ -442,7 +442,7 @@ impl FaceSet {
             let nbs = neighbours(layout, c, f, idx, fstride);
             let mut st = [NONE; 6];
             let mut diag = 6.0f32;
-            for d in 0..3 {
+            for (d, &cs) in cstride.iter().enumerate() {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
                     let slot = 2 * d + s;
                     let opposite = || {
@@ -465,7 +465,7 @@ impl FaceSet {
                         continue;
                     }
                     let (li, ui) = if interior {
-                        let o = cstride[d];
+                        let o = cs;
                         let step = |x: u32| match x {
                             NONE => NONE,
                             x if dir < 0 => x - o as u32,
@@ -872,7 +872,7 @@ mod tests {
                     let idx = idx as usize;
                     let f = layout.face_coords(c, idx);
                     let (mut st, mut diag) = ([NONE; 6], 6.0f32);
-                    for slot in 0..6 {
+                    for (slot, entry_of_slot) in st.iter_mut().enumerate() {
                         let (d, dir) = (slot / 2, if slot % 2 == 0 { -1 } else { 1 });
                         let Some(gi) = neighbour_index(&layout, c, f, idx, d, dir) else {
                             diag += 1.0;
@@ -885,7 +885,7 @@ mod tests {
                         };
                         if d == c {
                             match cl {
-                                ACTIVE | FIXED => st[slot] = entry(cl),
+                                ACTIVE | FIXED => *entry_of_slot = entry(cl),
                                 _ => diag -= 1.0,
                             }
                             continue;
@@ -894,7 +894,7 @@ mod tests {
                         if ll.is_wall() && ul.is_wall() {
                             diag += 1.0;
                         } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
-                            st[slot] = entry(cl);
+                            *entry_of_slot = entry(cl);
                         } else {
                             diag -= 1.0;
                         }
