@@ -536,6 +536,10 @@ pub(crate) struct Level {
     pub parallel: bool,
     /// Interior rows holding fluid: `[j, k, i_first, i_end)`.
     pub row_spans: Vec<[u32; 4]>,
+    /// Per row `j + ny k`, an x range `[first, end)` outside which every cell of the row is solid
+    /// (`[0, 0]`: the whole row is). The builds visit only these ranges and clear only the last
+    /// ones, so a relabelling costs the fluid region, not the box.
+    pub row_ext: Vec<[u32; 2]>,
     /// Dense diagonal (fluid cells; 0 elsewhere), fluid mask, and the inverse diagonal on red
     /// (`inv[0]`, even i+j+k) and black (`inv[1]`) fluid cells only.
     pub ddiag: Vec<f32>,
@@ -696,18 +700,89 @@ impl Level {
         diag
     }
 
+    /// Sets level 0's box and its labels: `label(cell)` inside the row ranges `rows` (per row
+    /// `j + ny k`, `[first, end)`), solid everywhere else. When the box is unchanged only the
+    /// ranges of the last call and of this one are written.
+    pub fn set_labels(
+        &mut self,
+        dims: [usize; 3],
+        periodic: [bool; 3],
+        rows: &[[u32; 2]],
+        label: impl Fn(usize) -> u8,
+    ) {
+        let [nx, ny, nz] = dims;
+        debug_assert_eq!(rows.len(), ny * nz);
+        let same = self.dims == dims
+            && self.periodic == periodic
+            && self.label.len() == nx * ny * nz
+            && self.row_ext.len() == rows.len();
+        self.dims = dims;
+        self.periodic = periodic;
+        if !same {
+            self.label.clear();
+            self.label.resize(nx * ny * nz, L_SOLID);
+            self.row_ext.clear();
+            self.row_ext.resize(rows.len(), [0, 0]);
+        }
+        for (r, (old, &new)) in self.row_ext.iter_mut().zip(rows).enumerate() {
+            let base = r * nx;
+            self.label[base + old[0] as usize..base + old[1] as usize].fill(L_SOLID);
+            for c in base + new[0] as usize..base + new[1] as usize {
+                self.label[c] = label(c);
+            }
+            *old = new;
+        }
+    }
+
+    /// Row ranges of the non-solid cells of `label` (a scan of the box; [`Level::set_labels`]
+    /// keeps them without one).
+    #[cfg(test)]
+    fn scan_row_ext(&mut self) {
+        let nx = self.dims[0];
+        self.row_ext.clear();
+        for row in self.label.chunks_exact(nx) {
+            let ext = match row.iter().position(|&l| l != L_SOLID) {
+                Some(a) => {
+                    let b = row.iter().rposition(|&l| l != L_SOLID).unwrap_or(a); // ok: `a` is
+                    [a as u32, b as u32 + 1]
+                }
+                None => [0, 0],
+            };
+            self.row_ext.push(ext);
+        }
+    }
+
     /// Builds the compressed rows of level 0 (and then its dense form) from `label`, `dims`,
-    /// `periodic`.
+    /// `periodic`, scanning the box for the rows' ranges (the reference the solver's
+    /// [`Level::set_labels`] and [`Level::build_rows_in_extents`] must match).
+    #[cfg(test)]
     pub fn build_rows(&mut self) {
-        let [nx, ny, _] = self.dims;
+        self.scan_row_ext();
+        self.build_rows_in_extents();
+    }
+
+    /// [`Level::build_rows`] within the row ranges `row_ext` (which [`Level::set_labels`] keeps):
+    /// the result is the same, its cost that of the ranges.
+    pub fn build_rows_in_extents(&mut self) {
+        let [nx, ny, nz] = self.dims;
+        debug_assert_eq!(self.row_ext.len(), ny * nz);
         let ncell = self.label.len();
-        self.row_of_cell.clear();
-        self.row_of_cell.resize(ncell, NONE);
+        // `row_of_cell` is NONE but at the cells of the last rows.
+        if self.row_of_cell.len() == ncell {
+            for &c in &self.cell_of_row {
+                self.row_of_cell[c as usize] = NONE;
+            }
+        } else {
+            self.row_of_cell.clear();
+            self.row_of_cell.resize(ncell, NONE);
+        }
         self.cell_of_row.clear();
-        for (i, &l) in self.label.iter().enumerate() {
-            if l == L_FLUID {
-                self.row_of_cell[i] = self.cell_of_row.len() as u32;
-                self.cell_of_row.push(i as u32);
+        for (r, &[a, b]) in self.row_ext.iter().enumerate() {
+            for c in r * nx + a as usize..r * nx + b as usize {
+                if self.label[c] == L_FLUID {
+                    self.row_of_cell[c] = self.cell_of_row.len() as u32;
+                    self.cell_of_row.push(c as u32);
+                }
             }
         }
         self.nbr.clear();
@@ -780,11 +855,13 @@ impl Level {
         self.spans.clear();
         self.row_spans.clear();
         self.fluid = 0;
+        debug_assert_eq!(self.row_ext.len(), ny * nz);
         for k in 0..nz {
             for j in 0..ny {
                 let mut first = None;
                 let mut end = 0;
-                for i in 0..nx {
+                let [a, b] = self.row_ext[j + ny * k];
+                for i in a as usize..b as usize {
                     let c = i + nx * (j + ny * k);
                     if self.label[c] != L_FLUID {
                         continue;
@@ -835,21 +912,49 @@ impl Level {
             }
         }
         let cd: [usize; 3] = std::array::from_fn(|a| self.dims[a].div_ceil(2));
-        coarse.dims = cd;
-        coarse.periodic = std::array::from_fn(|a| self.periodic[a] && cd[a] > 1);
-        coarse.label.clear();
-        coarse.label.resize(cd[0] * cd[1] * cd[2], L_SOLID);
+        let periodic = std::array::from_fn(|a| self.periodic[a] && cd[a] > 1);
+        let (ncell, nrow) = (cd[0] * cd[1] * cd[2], cd[1] * cd[2]);
+        if coarse.dims == cd
+            && coarse.periodic == periodic
+            && coarse.label.len() == ncell
+            && coarse.row_ext.len() == nrow
+        {
+            // Only the last ranges can hold non-solid cells.
+            for (r, &[a, b]) in coarse.row_ext.iter().enumerate() {
+                coarse.label[r * cd[0] + a as usize..r * cd[0] + b as usize].fill(L_SOLID);
+            }
+            coarse.row_ext.fill([0, 0]);
+        } else {
+            coarse.dims = cd;
+            coarse.periodic = periodic;
+            coarse.label.clear();
+            coarse.label.resize(ncell, L_SOLID);
+            coarse.row_ext.clear();
+            coarse.row_ext.resize(nrow, [0, 0]);
+        }
         let [nx, ny, nz] = self.dims;
         for k in 0..nz {
             for j in 0..ny {
-                for i in 0..nx {
+                let [a, b] = self.row_ext[j + ny * k];
+                if a >= b {
+                    continue;
+                }
+                let crow = j / 2 + cd[1] * (k / 2);
+                let base = cd[0] * crow;
+                for i in a as usize..b as usize {
                     let l = self.label[i + nx * (j + ny * k)];
-                    let p = i / 2 + cd[0] * (j / 2 + cd[1] * (k / 2));
-                    let cl = &mut coarse.label[p];
+                    let cl = &mut coarse.label[base + i / 2];
                     if l == L_OPEN || (l == L_FLUID && *cl == L_SOLID) {
                         *cl = l;
                     }
                 }
+                let ext = &mut coarse.row_ext[crow];
+                let (ca, cb) = (a / 2, (b - 1) / 2 + 1);
+                *ext = if ext[0] < ext[1] {
+                    [ext[0].min(ca), ext[1].max(cb)]
+                } else {
+                    [ca, cb]
+                };
             }
         }
         true
@@ -1550,5 +1655,94 @@ mod tests {
             .map(|(p, q)| (p - q).abs())
             .fold(0.0f32, f32::max);
         assert!(err < 0.1, "error after two V-cycles: {err}");
+    }
+
+    /// Level 0 relabelled through `set_labels` (which clears only the last row ranges) and the
+    /// hierarchy rebuilt over the row ranges, after any sequence of relabellings, equal a
+    /// hierarchy built from scratch by scanning the box, level by level and field by field.
+    #[test]
+    fn a_relabelled_hierarchy_equals_one_built_from_scratch() {
+        fn hierarchy(m: &mut Multigrid) {
+            m.coarse_scale = 0.5;
+            m.sweeps = 1;
+            m.coarsest_sweeps = 1;
+            m.build_hierarchy();
+        }
+        for (dims, periodic) in [
+            ([13, 9, 10], [false; 3]),
+            ([12, 8, 10], [true, false, true]),
+            ([10, 7, 6], [false, true, false]),
+        ] {
+            let mut rng = fastrand::Rng::with_seed(5);
+            let [nx, ny, nz] = dims;
+            let mut labels = vec![L_SOLID; nx * ny * nz];
+            let mut rows = Vec::new();
+            let mut kept = Multigrid::default();
+            for round in 0..30 {
+                // A moving blob of fluid with open and solid cells sprinkled in, now and then
+                // emptied (no fluid at all) or filling whole rows.
+                let centre = [rng.usize(..nx), rng.usize(..ny), rng.usize(..nz)];
+                let radius = if round % 7 == 3 { 0 } else { rng.usize(1..nx) };
+                for (c, l) in labels.iter_mut().enumerate() {
+                    let p = [c % nx, (c / nx) % ny, c / (nx * ny)];
+                    let d2: usize = (0..3).map(|a| p[a].abs_diff(centre[a]).pow(2)).sum();
+                    *l = if d2 >= radius * radius {
+                        L_SOLID
+                    } else {
+                        [L_FLUID, L_FLUID, L_FLUID, L_OPEN, L_SOLID][rng.usize(..5)]
+                    };
+                }
+                rows.clear();
+                for row in labels.chunks_exact(nx) {
+                    let open = |l: &u8| *l != L_SOLID;
+                    rows.push(
+                        match (row.iter().position(open), row.iter().rposition(open)) {
+                            (Some(a), Some(b)) => [a as u32, b as u32 + 1],
+                            _ => [0, 0],
+                        },
+                    );
+                }
+                if kept.levels.is_empty() {
+                    kept.levels.push(Level::default());
+                }
+                kept.levels[0].set_labels(dims, periodic, &rows, |c| labels[c]);
+                kept.levels[0].build_rows_in_extents();
+                hierarchy(&mut kept);
+                let mut fresh = Multigrid::default();
+                fresh.levels.push(Level {
+                    dims,
+                    periodic,
+                    label: labels.clone(),
+                    ..Default::default()
+                });
+                fresh.levels[0].build_rows();
+                hierarchy(&mut fresh);
+                assert_eq!(kept.used, fresh.used, "levels, round {round}");
+                for (l, (a, b)) in kept.levels.iter().zip(&fresh.levels).enumerate() {
+                    if l >= fresh.used {
+                        break;
+                    }
+                    let at = format!("level {l}, round {round}, {periodic:?}");
+                    assert_eq!(a.dims, b.dims, "{at}");
+                    assert_eq!(a.periodic, b.periodic, "{at}");
+                    assert_eq!(a.label, b.label, "{at}");
+                    assert_eq!(a.row_of_cell, b.row_of_cell, "{at}");
+                    assert_eq!(a.cell_of_row, b.cell_of_row, "{at}");
+                    assert_eq!(a.nbr, b.nbr, "{at}");
+                    assert_eq!(a.diag, b.diag, "{at}");
+                    assert_eq!(a.inv_diag, b.inv_diag, "{at}");
+                    assert_eq!(a.pad_of_row, b.pad_of_row, "{at}");
+                    assert_eq!((a.sy, a.sz, a.fluid), (b.sy, b.sz, b.fluid), "{at}");
+                    assert_eq!(a.spans, b.spans, "{at}");
+                    assert_eq!(a.split_span, b.split_span, "{at}");
+                    assert_eq!(a.row_spans, b.row_spans, "{at}");
+                    assert_eq!(a.ddiag, b.ddiag, "{at}");
+                    assert_eq!(a.mask, b.mask, "{at}");
+                    assert_eq!(a.inv, b.inv, "{at}");
+                    assert_eq!(a.wt, b.wt, "{at}");
+                    assert_eq!((&a.x, &a.b, &a.r), (&b.x, &b.b, &b.r), "{at}");
+                }
+            }
+        }
     }
 }

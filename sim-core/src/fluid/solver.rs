@@ -219,6 +219,50 @@ pub struct FluidSolver {
     time_s: f64,
 }
 
+/// Level 0 of the pressure solver from the grid's labels within the rows' open ranges `rows`,
+/// the levels under it and the solver's vectors; the pressure of cells that stay fluid is kept
+/// for the warm start across the relabelling (the rest is zeroed).
+fn build_pressure_levels(
+    grid: &FluidGrid,
+    rows: &[[u32; 2]],
+    pressure: &mut PressureSolver,
+    pressure_pa: &mut Vec<f64>,
+    p_lag: &mut Vec<f64>,
+) {
+    let mg = &mut pressure.mg;
+    if mg.levels.is_empty() {
+        mg.levels.push(Default::default());
+    }
+    let l0 = &mut mg.levels[0];
+    let labels = grid.labels();
+    l0.set_labels(grid.dims(), grid.periodic(), rows, |c| match labels[c] {
+        CellLabel::Fluid => L_FLUID,
+        CellLabel::Outflow => L_OPEN,
+        _ => L_SOLID,
+    });
+    l0.build_rows_in_extents();
+    // The pressure is zero outside the fluid cells, so only the previous spans can hold stale
+    // values.
+    let len = l0.mask.len();
+    let whole = pressure_pa.len() != len || l0.old_spans.is_none();
+    pressure_pa.resize(len, 0.0);
+    p_lag.resize(len, 0.0);
+    let ranges: &[[u32; 2]] = match &l0.old_spans {
+        Some(old) if !whole => old,
+        _ => &[[0, len as u32]],
+    };
+    for &[s, e] in ranges {
+        let r = s as usize..e as usize;
+        for (p, &m) in pressure_pa[r.clone()].iter_mut().zip(&l0.mask[r]) {
+            if m == 0.0 {
+                *p = 0.0;
+            }
+        }
+    }
+    mg.build_hierarchy();
+    pressure.resize();
+}
+
 impl FluidSolver {
     /// A solver on `grid` with all velocities zero.
     pub fn new(grid: FluidGrid, params: FluidParams) -> Result<Self, FluidError> {
@@ -346,53 +390,26 @@ impl FluidSolver {
     }
 
     fn rebuild_topology(&mut self) {
-        let g = &self.grid;
-        let mg = &mut self.pressure.mg;
-        if mg.levels.is_empty() {
-            mg.levels.push(Default::default());
-        }
-        let l0 = &mut mg.levels[0];
-        l0.dims = g.dims();
-        l0.periodic = g.periodic();
-        l0.label.clear();
-        l0.label.extend(g.labels().iter().map(|l| match l {
-            CellLabel::Fluid => L_FLUID,
-            CellLabel::Outflow => L_OPEN,
-            _ => L_SOLID,
-        }));
-        l0.build_rows();
-        // Keep the pressure of cells that stay fluid for the warm start across relabelling (it
-        // is zero outside the fluid cells, so only the previous spans can hold stale values).
-        let len = l0.mask.len();
-        let whole = self.pressure_pa.len() != len || l0.old_spans.is_none();
-        self.pressure_pa.resize(len, 0.0);
-        self.p_lag.resize(len, 0.0);
-        let ranges: &[[u32; 2]] = match &l0.old_spans {
-            Some(old) if !whole => old,
-            _ => &[[0, len as u32]],
-        };
-        for &[s, e] in ranges {
-            let r = s as usize..e as usize;
-            for (p, &m) in self.pressure_pa[r.clone()].iter_mut().zip(&l0.mask[r]) {
-                if m == 0.0 {
-                    *p = 0.0;
-                }
-            }
-        }
-        mg.build_hierarchy();
-        self.pressure.resize();
+        // The rows' open ranges bound every cell that is fluid or open on level 0 and every face
+        // that can be active or fixed: the builds below visit only them.
         topology::open_row_ranges(&self.grid, &mut self.open_rows);
         self.outflow_faces.clear();
-        // The three components are independent: x and y here, z on the fork-join helper (the
-        // result does not depend on which thread builds which).
+        // The three face sets and the pressure levels are independent: the x and y faces here,
+        // the z faces and the pressure levels on the fork-join helper (the result does not depend
+        // on which thread builds which).
         let (grid, layout, rows) = (&self.grid, &self.layout, &self.open_rows);
         let [f0, f1, f2] = &mut self.faces;
+        let (pressure, pressure_pa, p_lag) =
+            (&mut self.pressure, &mut self.pressure_pa, &mut self.p_lag);
         crate::fork_join::join(
             || {
                 f0.rebuild(grid, layout, 0, rows);
                 f1.rebuild(grid, layout, 1, rows);
             },
-            || f2.rebuild(grid, layout, 2, rows),
+            || {
+                f2.rebuild(grid, layout, 2, rows);
+                build_pressure_levels(grid, rows, pressure, pressure_pa, p_lag);
+            },
         );
         for c in 0..3 {
             let n = self.faces[c].active.len();
@@ -407,11 +424,11 @@ impl FluidSolver {
             });
             self.run_cells[c].clear();
             self.run_cells[c].extend(cells);
-            for &idx in &self.faces[c].active {
-                let f = self.layout.face_coords(c, idx as usize);
-                let (lo, up) = topology::face_cells(&self.grid, c, f);
-                let outflow = |cell: Option<[usize; 3]>| {
-                    cell.filter(|&x| self.grid.label(x) == Some(CellLabel::Outflow))
+            let set = &self.faces[c];
+            for (&idx, &[lo, up]) in set.active.iter().zip(set.active_cells()) {
+                let outflow = |cell: u32| {
+                    (cell != NONE && self.grid.label_at(cell as usize) == CellLabel::Outflow)
+                        .then(|| self.grid.coords(cell as usize))
                 };
                 let (cell, sign) = match (outflow(lo), outflow(up)) {
                     (_, Some(x)) => (x, 1.0),

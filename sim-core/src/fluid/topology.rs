@@ -89,6 +89,44 @@ pub(crate) struct FaceSet {
     fixed_scratch: Vec<[u32; 3]>,
     /// Coordinates of each active face (scratch of the rebuild: no index division per face).
     active_coords: Vec<[u32; 3]>,
+    /// The cells beside each active face (lower, upper; NONE = outside), from the classification.
+    active_cells: Vec<[u32; 2]>,
+    /// Coordinates of the faces of `ext1`, of a layer's faces, and of a layer's faces in the order
+    /// found, with the sort keys (full index, position found) that put them in index order.
+    ext1_coords: Vec<[u32; 3]>,
+    layer_coords: Vec<[u32; 3]>,
+    found_coords: Vec<[u32; 3]>,
+    found_keys: Vec<u64>,
+}
+
+/// The six neighbours of face `idx` (coordinates `f`, component `c`) in stencil-slot order
+/// (-x, +x, -y, +y, -z, +z), as [`neighbour_index`] finds them; `strides` are the face array's.
+/// A face off every end of the array takes the plain offsets without a test per slot.
+#[inline(always)]
+fn neighbours(
+    layout: &Layout,
+    c: usize,
+    f: [usize; 3],
+    idx: usize,
+    strides: [usize; 3],
+) -> [Option<usize>; 6] {
+    let fd = layout.fdims[c];
+    if (0..3).all(|a| f[a] > 0 && f[a] + 1 < fd[a]) {
+        let [sx, sy, sz] = strides;
+        [
+            Some(idx - sx),
+            Some(idx + sx),
+            Some(idx - sy),
+            Some(idx + sy),
+            Some(idx - sz),
+            Some(idx + sz),
+        ]
+    } else {
+        std::array::from_fn(|slot| {
+            let dir = if slot % 2 == 0 { -1 } else { 1 };
+            neighbour_index(layout, c, f, idx, slot / 2, dir)
+        })
+    }
 }
 
 /// The x range `[first, end)` of the open (fluid or outflow) cells of every cell row `(j, k)`
@@ -122,8 +160,10 @@ fn label_of(grid: &FluidGrid, cell: Option<[usize; 3]>) -> (CellLabel, u32) {
     }
 }
 
-/// The two cells beside face `f` of component `c` (None = outside).
-pub(crate) fn face_cells(
+/// The two cells beside face `f` of component `c` (None = outside): the reference the rebuild's
+/// stride arithmetic must match.
+#[cfg(test)]
+fn face_cells(
     grid: &FluidGrid,
     c: usize,
     f: [usize; 3],
@@ -263,6 +303,12 @@ pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
 }
 
 impl FaceSet {
+    /// The cells beside each active face (lower, upper; NONE = outside), as [`face_cells`] finds
+    /// them, in the order of `active`.
+    pub fn active_cells(&self) -> &[[u32; 2]] {
+        &self.active_cells
+    }
+
     /// Rebuilds this component's face set from the labels, visiting only the faces of the cell
     /// rows that hold open cells (`rows`, from [`open_row_ranges`]) and resetting only the faces
     /// the last rebuild tracked: the class and compact arrays stay box-sized and all-OTHER/NONE
@@ -288,6 +334,7 @@ impl FaceSet {
         }
         self.active.clear();
         self.active_coords.clear();
+        self.active_cells.clear();
         self.fixed.clear();
         self.stencil.clear();
         self.diag.clear();
@@ -355,6 +402,7 @@ impl FaceSet {
                             self.compact[idx] = self.active.len() as u32;
                             self.active.push(idx as u32);
                             self.active_coords.push([i as u32, fj as u32, fk as u32]);
+                            self.active_cells.push([li, ui]);
                         }
                         _ => {}
                     }
@@ -362,21 +410,47 @@ impl FaceSet {
             }
         }
 
-        // Viscous stencils.
+        // Viscous stencils. A tangential neighbour's cells are the face's own shifted by one cell
+        // along that axis (wrapped on a periodic one).
+        let fstride = [1, d[0], d[0] * d[1]];
+        let [cnx, cny, cnz] = cdims;
+        let cstride = [1, cnx, cnx * cny];
+        let shift = |cell: u32, a: usize, dir: i32| -> u32 {
+            if cell == NONE {
+                return NONE;
+            }
+            let (cell, n) = (cell as usize, [cnx, cny, cnz][a]);
+            let at = (cell / cstride[a]) % n;
+            let to = if dir < 0 {
+                if at == 0 {
+                    cell + (n - 1) * cstride[a]
+                } else {
+                    cell - cstride[a]
+                }
+            } else if at + 1 == n {
+                cell - (n - 1) * cstride[a]
+            } else {
+                cell + cstride[a]
+            };
+            to as u32
+        };
         for n in 0..self.active.len() {
             let idx = self.active[n] as usize;
             let f = self.active_coords[n].map(|x| x as usize);
+            let [li0, ui0] = self.active_cells[n];
+            let interior = (0..3).all(|a| f[a] > 0 && f[a] + 1 < d[a]);
+            let nbs = neighbours(layout, c, f, idx, fstride);
             let mut st = [NONE; 6];
             let mut diag = 6.0f32;
-            for d in 0..3 {
+            for (d, &cs) in cstride.iter().enumerate() {
                 for (s, dir) in [-1i32, 1].into_iter().enumerate() {
                     let slot = 2 * d + s;
                     let opposite = || {
-                        neighbour_index(layout, c, f, idx, d, -dir)
+                        nbs[slot ^ 1]
                             .filter(|&o| matches!(self.class[o], ACTIVE | FIXED))
                             .map_or(NONE, |o| o as u32)
                     };
-                    let Some(gi) = neighbour_index(layout, c, f, idx, d, dir) else {
+                    let Some(gi) = nbs[slot] else {
                         // Beyond a non-periodic tangential boundary: wall at rest.
                         diag += 1.0;
                         self.ghosts.push([n as u32, NONE, NONE, opposite()]);
@@ -390,8 +464,17 @@ impl FaceSet {
                         }
                         continue;
                     }
-                    let g = neighbour_coords(layout, c, f, d, dir);
-                    let (li, ui) = face_cell_indices(cdims, cell_periodic, c, g);
+                    let (li, ui) = if interior {
+                        let o = cs;
+                        let step = |x: u32| match x {
+                            NONE => NONE,
+                            x if dir < 0 => x - o as u32,
+                            x => x + o as u32,
+                        };
+                        (step(li0), step(ui0))
+                    } else {
+                        (shift(li0, d, dir), shift(ui0, d, dir))
+                    };
                     let (ll, ul) = (label_or_solid(labels, li), label_or_solid(labels, ui));
                     if ll.is_wall() && ul.is_wall() {
                         diag += 1.0;
@@ -493,53 +576,67 @@ impl FaceSet {
             .count();
 
         // Extrapolation layers: the OTHER faces next to a face of the layer inside, in index
-        // order (as a scan of the whole array would find them).
+        // order (as a scan of the whole array would find them). Faces carry their coordinates
+        // (no index division per face), found ones are put in order by a sort of keys.
         let mut layer_faces = std::mem::take(&mut self.layer_scratch);
+        let mut layer_coords = std::mem::take(&mut self.layer_coords);
         for (layer, from) in [(EXT1, ACTIVE), (EXT2, EXT1)] {
-            layer_faces.clear();
-            let inside = if layer == EXT1 {
-                &self.active
+            self.found_coords.clear();
+            self.found_keys.clear();
+            let (inside, inside_coords) = if layer == EXT1 {
+                (&self.active, &self.active_coords)
             } else {
-                &self.ext1
+                (&self.ext1, &self.ext1_coords)
             };
-            for &idx in inside {
-                let f = layout.face_coords(c, idx as usize);
-                for slot in 0..6 {
-                    let dir = if slot % 2 == 0 { -1 } else { 1 };
-                    let idx = idx as usize;
-                    if let Some(gi) = neighbour_index(layout, c, f, idx, slot / 2, dir) {
-                        if self.class[gi] == OTHER {
-                            self.class[gi] = layer;
-                            layer_faces.push(gi as u32);
-                        }
+            for (&idx, f) in inside.iter().zip(inside_coords) {
+                let f = f.map(|x| x as usize);
+                for (slot, gi) in neighbours(layout, c, f, idx as usize, fstride)
+                    .into_iter()
+                    .enumerate()
+                {
+                    let Some(gi) = gi else { continue };
+                    if self.class[gi] == OTHER {
+                        self.class[gi] = layer;
+                        let dir = if slot % 2 == 0 { -1 } else { 1 };
+                        let g = neighbour_coords(layout, c, f, slot / 2, dir);
+                        let key = (gi as u64) << 32 | self.found_coords.len() as u64;
+                        self.found_keys.push(key);
+                        self.found_coords.push(g.map(|x| x as u32));
                     }
                 }
             }
-            layer_faces.sort_unstable();
-            for &idx in &layer_faces {
-                let f = layout.face_coords(c, idx as usize);
+            self.found_keys.sort_unstable();
+            layer_faces.clear();
+            layer_coords.clear();
+            for &key in &self.found_keys {
+                layer_faces.push((key >> 32) as u32);
+                layer_coords.push(self.found_coords[(key & 0xffff_ffff) as usize]);
+            }
+            for (&idx, f) in layer_faces.iter().zip(&layer_coords) {
+                let f = f.map(|x| x as usize);
                 if self.ext_start.is_empty() {
                     self.ext_start.push(0);
                 }
-                for slot in 0..6 {
-                    let dir = if slot % 2 == 0 { -1 } else { 1 };
-                    let idx = idx as usize;
-                    if let Some(gi) = neighbour_index(layout, c, f, idx, slot / 2, dir) {
-                        let cl = self.class[gi];
-                        if cl == from || (from == ACTIVE && cl == FIXED) {
-                            self.ext_src.push(gi as u32);
-                        }
+                for gi in neighbours(layout, c, f, idx as usize, fstride)
+                    .into_iter()
+                    .flatten()
+                {
+                    let cl = self.class[gi];
+                    if cl == from || (from == ACTIVE && cl == FIXED) {
+                        self.ext_src.push(gi as u32);
                     }
                 }
                 self.ext_start.push(self.ext_src.len() as u32);
             }
             if layer == EXT1 {
                 std::mem::swap(&mut self.ext1, &mut layer_faces);
+                std::mem::swap(&mut self.ext1_coords, &mut layer_coords);
             } else {
                 std::mem::swap(&mut self.ext2, &mut layer_faces);
             }
         }
         self.layer_scratch = layer_faces;
+        self.layer_coords = layer_coords;
         for g in self.ext_groups.iter_mut().flatten() {
             g.0.clear();
             g.1.clear();
@@ -591,9 +688,15 @@ mod tests {
             CellLabel::Velocity,
             CellLabel::Outflow,
         ];
-        for periodic in [[false; 3], [true, false, true], [false, true, false]] {
+        // Small boxes (most faces on an end of the array) and a larger one (interior faces).
+        for (periodic, dims) in [
+            ([false; 3], [9, 7, 6]),
+            ([true, false, true], [9, 7, 6]),
+            ([false, true, false], [9, 7, 6]),
+            ([false; 3], [16, 13, 12]),
+            ([true, true, false], [14, 12, 11]),
+        ] {
             let mut rng = fastrand::Rng::with_seed(11);
-            let dims = [9, 7, 6];
             let mut grid = FluidGrid::new(dims, 1e-3, [0.0; 3], periodic).unwrap();
             // Start mostly solid: a sparse fluid region, as in the uterine scene.
             for k in 0..dims[2] {
@@ -629,6 +732,7 @@ mod tests {
                     assert_eq!(set.class, want.class, "class, component {c}, {periodic:?}");
                     assert_eq!(set.compact, want.compact);
                     assert_eq!(set.active, want.active);
+                    assert_eq!(set.active_cells, want.active_cells);
                     assert_eq!(set.fixed, want.fixed);
                     assert_eq!(set.fixed_moving, want.fixed_moving);
                     assert_eq!(set.stencil, want.stencil);
@@ -725,7 +829,112 @@ mod tests {
                     let want_fixed = (ll.is_wall() || ul.is_wall()) && (open(ll) || open(ul));
                     assert_eq!(set.class[idx] == ACTIVE, want_active, "face {idx} c {c}");
                     assert_eq!(set.class[idx] == FIXED, want_fixed, "face {idx} c {c}");
+                    if let Ok(n) = set.active.binary_search(&(idx as u32)) {
+                        let (_, li) = label_of(&grid, lo);
+                        let (_, ui) = label_of(&grid, up);
+                        assert_eq!(set.active_cells()[n], [li, ui], "face {idx} c {c}");
+                    }
                 }
+            }
+        }
+    }
+
+    /// The stencils and extrapolation layers by the definitions, face by face over the whole
+    /// array (cells by [`face_cells`], neighbours by [`neighbour_index`] and
+    /// [`neighbour_coords`]): the reference for the rebuild's shortcuts (kept cells shifted to a
+    /// tangential neighbour, plain offsets off the array's ends, layers found from the inside).
+    #[test]
+    fn stencils_and_layers_match_their_definitions() {
+        for (periodic, dims) in [
+            ([false; 3], [12, 10, 9]),
+            ([true, false, true], [10, 9, 8]),
+            ([false, true, true], [9, 11, 10]),
+        ] {
+            let mut rng = fastrand::Rng::with_seed(17);
+            let mut grid = FluidGrid::new(dims, 1e-3, [0.0; 3], periodic).unwrap();
+            for n in 0..grid.cell_count() {
+                let l = if rng.f32() < 0.3 {
+                    CellLabel::Fluid
+                } else {
+                    [CellLabel::Solid, CellLabel::Velocity, CellLabel::Outflow][rng.usize(..3)]
+                };
+                grid.set_label(grid.coords(n), l).unwrap();
+            }
+            let layout = Layout::new(dims, periodic);
+            for c in 0..3 {
+                let set = fresh(&grid, &layout, c);
+                let labels_of = |f: [usize; 3]| {
+                    let (lo, up) = face_cells(&grid, c, f);
+                    (label_of(&grid, lo), label_of(&grid, up))
+                };
+                let nf = layout.face_count(c);
+                for (n, &idx) in set.active.iter().enumerate() {
+                    let idx = idx as usize;
+                    let f = layout.face_coords(c, idx);
+                    let (mut st, mut diag) = ([NONE; 6], 6.0f32);
+                    for (slot, entry_of_slot) in st.iter_mut().enumerate() {
+                        let (d, dir) = (slot / 2, if slot % 2 == 0 { -1 } else { 1 });
+                        let Some(gi) = neighbour_index(&layout, c, f, idx, d, dir) else {
+                            diag += 1.0;
+                            continue;
+                        };
+                        let cl = set.class[gi];
+                        let entry = |cl| match cl {
+                            ACTIVE => set.compact[gi],
+                            _ => CONST_BIT | gi as u32,
+                        };
+                        if d == c {
+                            match cl {
+                                ACTIVE | FIXED => *entry_of_slot = entry(cl),
+                                _ => diag -= 1.0,
+                            }
+                            continue;
+                        }
+                        let ((ll, _), (ul, _)) = labels_of(neighbour_coords(&layout, c, f, d, dir));
+                        if ll.is_wall() && ul.is_wall() {
+                            diag += 1.0;
+                        } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
+                            *entry_of_slot = entry(cl);
+                        } else {
+                            diag -= 1.0;
+                        }
+                    }
+                    assert_eq!(set.stencil[n], st, "stencil of face {idx}, c {c}");
+                    assert_eq!(set.diag[n], diag, "diagonal of face {idx}, c {c}");
+                }
+                // Layers: faces neither active nor fixed beside the layer inside, in index order,
+                // with their sources in slot order.
+                let nbrs = |idx: usize| {
+                    let f = layout.face_coords(c, idx);
+                    (0..6).filter_map(move |slot| {
+                        let dir = if slot % 2 == 0 { -1 } else { 1 };
+                        neighbour_index(&layout, c, f, idx, slot / 2, dir)
+                    })
+                };
+                let tracked = |i: usize| matches!(set.class[i], ACTIVE | FIXED);
+                let ext1: Vec<u32> = (0..nf)
+                    .filter(|&i| !tracked(i) && nbrs(i).any(|g| set.class[g] == ACTIVE))
+                    .map(|i| i as u32)
+                    .collect();
+                let in1 = |i: usize| ext1.binary_search(&(i as u32)).is_ok();
+                let ext2: Vec<u32> = (0..nf)
+                    .filter(|&i| !tracked(i) && !in1(i) && nbrs(i).any(in1))
+                    .map(|i| i as u32)
+                    .collect();
+                assert_eq!(set.ext1, ext1, "ext1, c {c}, {periodic:?}");
+                assert_eq!(set.ext2, ext2, "ext2, c {c}, {periodic:?}");
+                let mut src = Vec::new();
+                let mut start = vec![0u32];
+                for &i in &ext1 {
+                    src.extend(nbrs(i as usize).filter(|&g| tracked(g)).map(|g| g as u32));
+                    start.push(src.len() as u32);
+                }
+                for &i in &ext2 {
+                    src.extend(nbrs(i as usize).filter(|&g| in1(g)).map(|g| g as u32));
+                    start.push(src.len() as u32);
+                }
+                assert_eq!(set.ext_src, src, "sources, c {c}, {periodic:?}");
+                assert_eq!(set.ext_start, start, "source starts, c {c}, {periodic:?}");
             }
         }
     }
