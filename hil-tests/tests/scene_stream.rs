@@ -182,6 +182,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // The jet at the scope tip: along the status view direction, at the status port velocity
     // (over the open fraction of the port where tissue covers part of the tip).
     let (mut jets, mut clear_jets, mut changing) = (0, 0, 0);
+    let mut worst_error = 0.0f64;
     for fl in of(&lines, "flow") {
         let (Some(st), Some(window)) = (fl["status"].as_object(), fl["window"].as_object()) else {
             continue;
@@ -211,12 +212,19 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
             "jet {speed:.3} m/s vs status inflow port velocity {port:.3} m/s / open fraction \
              {open:.3} = {expected:.3} m/s (over the frame: {window:?})"
         );
+        worst_error = worst_error.max((speed - expected).abs() / expected);
         jets += 1;
         if open == 1.0 {
             clear_jets += 1;
         }
     }
     let flows = of(&lines, "flow").len();
+    eprintln!(
+        "{jets} jets checked ({clear_jets} with the port clear), {changing} left out (the flow or \
+         the open fraction changed over their frame), of {flows} flow fields; largest deviation \
+         {:.2} %",
+        worst_error * 100.0
+    );
     assert!(
         jets >= 10,
         "only {jets} of {flows} flow fields with an inflow jet ({changing} left out: the open \
