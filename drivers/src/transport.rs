@@ -272,6 +272,9 @@ struct Inner {
     last_error: Option<String>,
     down_reason: Option<LinkDownReason>,
     stopping: bool,
+    /// Threads in [`RigLink::wait_for_sample`]: a sample wakes the condition variable only when
+    /// somebody waits (a wake is a system call, 250 a second for nobody otherwise).
+    sample_waiters: u32,
 }
 
 struct Shared {
@@ -333,6 +336,7 @@ impl RigLink {
                 last_error: None,
                 down_reason: None,
                 stopping: false,
+                sample_waiters: 0,
             }),
             sample_cv: Condvar::new(),
             stop_cv: Condvar::new(),
@@ -414,12 +418,14 @@ impl RigLink {
             if now >= deadline || inner.stopping {
                 return None;
             }
+            inner.sample_waiters += 1;
             inner = self
                 .shared
                 .sample_cv
                 .wait_timeout(inner, deadline - now)
                 .map(|(g, _)| g)
                 .unwrap_or_else(|e| e.into_inner().0);
+            inner.sample_waiters -= 1;
         }
     }
 
@@ -455,6 +461,10 @@ impl Drop for RigLink {
         self.stop_thread();
     }
 }
+
+/// How often a session refreshes the I/O thread's CPU-time probe: reading a thread's CPU clock
+/// is a system call (no vDSO), too dear for every sample of a 250 Hz rig.
+const CPU_PROBE_INTERVAL: Duration = Duration::from_millis(100);
 
 /// CPU time of the calling thread.
 fn thread_cpu_time_ns() -> u64 {
@@ -671,8 +681,9 @@ impl IoThread {
         let mut expected_seq: Option<u32> = None;
         let mut buf = [0u8; RX_CHUNK_MAX_BYTES];
         let mut frames = Vec::with_capacity(16);
+        self.update_cpu();
+        let mut cpu_probed_at = Instant::now();
         loop {
-            self.update_cpu();
             if self.stopping() {
                 return SessionEnd::Shutdown;
             }
@@ -719,6 +730,10 @@ impl IoThread {
                 }
             }
             let now = Instant::now();
+            if now - cpu_probed_at >= CPU_PROBE_INTERVAL {
+                self.update_cpu();
+                cpu_probed_at = now;
+            }
             if !*established {
                 if now - hello_sent_at > cfg.handshake_timeout {
                     if attempts >= cfg.handshake_attempts {
@@ -844,8 +859,11 @@ impl IoThread {
                 inner.latest = Some(outcome.state);
                 inner.latest_raw = Some(sample);
                 inner.link_state = LinkState::Connected;
+                let waiting = inner.sample_waiters > 0;
                 drop(inner);
-                self.shared.sample_cv.notify_all();
+                if waiting {
+                    self.shared.sample_cv.notify_all();
+                }
                 None
             }
             Message::Heartbeat(_) => {

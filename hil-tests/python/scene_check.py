@@ -5,14 +5,19 @@ cavity/positions and flow for --seconds and prints one JSON object per received 
 
   {"kind": "topology", "revision", "triangles", "vertices", "t"}
   {"kind": "positions", "t", "revision", "pressure_pa", "volume_m3", "status": {...} | null}
-  {"kind": "flow", "t", "inflow_cells", "jet", "status": {...} | null, "frame_status": {...} | null}
+  {"kind": "flow", "t", "inflow_cells", "jet", "status": {...} | null, "frame_status": {...} | null,
+   "window": {"statuses", "port_min", "port_max", "open_min", "open_max", "safe_max"} | null}
   {"kind": "end", "statuses", "last_status": {...}}
 
 "status" is the status with the sample's status_sequence (null when this subscriber did not get
 it). "frame_status" is the first later status whose scene_frames is at least two past the paired
 status's: it shows the scene figures (such as inflow_port_open_fraction) of the frame that
 published the field or of the next one, which the paired status (taken before that frame) may not
-have yet; a figure equal in both held throughout the field's frame.
+have yet. "window" spans every status from the frame before the paired status's (the field's jet
+is the mean flow since the scene's previous frame, whose inputs were taken then) through
+"frame_status", with the extremes of the inflow port velocity, the open fraction and the safe
+state over them (null when this subscriber missed one of them): a figure whose extremes agree
+held throughout the field's frame.
 hil-tests/tests/scene_stream.rs asserts on the lines.
 """
 
@@ -45,6 +50,7 @@ def brief(s):
         "scope_tip_position_m": list(s.scope_tip_position_m),
         "valve_in_opening": s.valve_in_opening,
         "valve_out_opening": s.valve_out_opening,
+        "safe_state": s.safe_state,
         "scene_state": s.scene_state,
         "scene_stage_runs": list(s.scene_stage_runs),
         "scene_stage_skips": list(s.scene_stage_skips),
@@ -64,6 +70,31 @@ def frame_status(statuses, seq, newest):
         if s is not None and s["scene_frames"] >= base["scene_frames"] + 2:
             return s
     return None
+
+
+def window(statuses, seq, frame):
+    """Extremes of the figures a field's jet depends on over its whole frame: the statuses from the
+    last one before any showing the frame ahead of status `seq`'s (the field's hydraulic interval
+    begins at the scene's previous frame) through `frame`; None if one of them is missing."""
+    base = statuses.get(seq)
+    if base is None or frame is None:
+        return None
+    first = seq
+    while True:
+        s = statuses.get(first - 1)
+        if s is None:
+            return None
+        first -= 1
+        if s["scene_frames"] < base["scene_frames"] - 1:
+            break
+    span = [statuses.get(k) for k in range(first, frame["sequence"] + 1)]
+    if any(s is None or s["inflow_port_open_fraction"] != s["inflow_port_open_fraction"] for s in span):
+        return None  # a missed status, or no open fraction yet (NaN before the scene runs)
+    port = [s["inflow_port_velocity_m_per_s"] for s in span]
+    open_ = [s["inflow_port_open_fraction"] for s in span]
+    return {"statuses": len(span), "port_min": min(port), "port_max": max(port),
+            "open_min": min(open_), "open_max": max(open_),
+            "safe_max": max(s["safe_state"] for s in span)}
 
 
 def main() -> int:
@@ -123,6 +154,7 @@ def main() -> int:
             done = seq in statuses or now - at > 0.05
             if done and line["kind"] == "flow":
                 line["frame_status"] = frame_status(statuses, seq, newest)
+                line["window"] = window(statuses, seq, line["frame_status"])
                 done = line["frame_status"] is not None or now - at > 0.3
             if done:
                 line["status"] = statuses.get(seq)

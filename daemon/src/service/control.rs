@@ -5,9 +5,10 @@
 //!
 //! - [`ControlThread`] (`hm-control`, normal priority) owns the iceoryx2 node, the server port
 //!   and every request in flight (an `ActiveRequest` is tied to its port's thread). It polls the
-//!   server every [`POLL_PERIOD`], checks each request's form, hands it to the runtime as a
-//!   [`Job`] (`try_send`: a full queue answers `busy`) and sends the response when the job's
-//!   oneshot answers. It never blocks on a handler.
+//!   server every [`IDLE_POLL_PERIOD`] ([`POLL_PERIOD`] while requests are in flight), checks
+//!   each request's form, hands it to the runtime as a [`Job`] (`try_send`: a full queue
+//!   answers `busy`) and sends the response when the job's oneshot answers. It never blocks on
+//!   a handler.
 //! - [`serve`] runs on the daemon's tokio runtime and runs one task per job: the handlers wait
 //!   (asynchronously) for the real-time side to confirm, e.g. for the 1 kHz loop to show the new
 //!   procedure id, with a deadline of [`HANDLER_TIMEOUT`].
@@ -33,8 +34,12 @@ use super::hydraulics::ProcedureControl;
 use super::scene::SceneFeed;
 use crate::record::recorder::{RecorderHandle, RecorderStatus};
 
-/// How often the control thread looks for requests and finished jobs: a request waits at most
-/// this long before its handler starts.
+/// How often the control thread looks for requests while none is in flight: a request waits at
+/// most this long before its handler starts. Control is a human's command, so 50 ms is
+/// immediate enough; each poll wakes the thread (20 wakes a second at rest, not 100).
+pub const IDLE_POLL_PERIOD: Duration = Duration::from_millis(50);
+/// How often it looks for requests and finished jobs while requests are in flight, so an answer
+/// leaves within this of its handler's.
 pub const POLL_PERIOD: Duration = Duration::from_millis(10);
 /// A handler that has not finished within this is answered `failed` (below the clients'
 /// [`control::RESPONSE_TIMEOUT`]).
@@ -507,7 +512,11 @@ fn serve_requests(
                 false
             }
         });
-        std::thread::sleep(POLL_PERIOD);
+        std::thread::sleep(if in_flight.is_empty() {
+            IDLE_POLL_PERIOD
+        } else {
+            POLL_PERIOD
+        });
     }
     let started = Instant::now();
     for (active, _, command) in in_flight.drain(..) {

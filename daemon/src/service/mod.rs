@@ -36,8 +36,9 @@ use publisher::StatusPublisher;
 use rig_source::RigSource;
 use sim::{LoopSettings, SimLoop, Telemetry};
 
-/// How often the supervisor checks the threads, the duration and the watchdog.
-const SUPERVISOR_PERIOD: Duration = Duration::from_millis(20);
+/// How often the supervisor checks the threads, the duration and the watchdog. Signals wake it
+/// at once; nothing it checks needs a finer grain, and each check wakes the runtime's thread.
+const SUPERVISOR_PERIOD: Duration = Duration::from_millis(100);
 /// How often the supervisor removes resources of dead iceoryx2 nodes (crashed renderers). Done
 /// here, not on the loop (which publishes), because it walks the file system and would delay a tick.
 const DEAD_NODE_CLEANUP_INTERVAL: Duration = Duration::from_secs(5);

@@ -100,6 +100,8 @@ impl SceneFigures {
 pub struct SceneFeed {
     snapshot: Mutex<Option<FeedSnapshot>>,
     compliance: Mutex<Option<Box<dyn CavityCompliance>>>,
+    /// Set when `compliance` holds one for the loop to take.
+    compliance_ready: AtomicBool,
     /// A scene the control plane asked for, taken by the scene thread between frames.
     scene_request: Mutex<Option<SceneDesc>>,
     /// Figures for status.
@@ -122,6 +124,7 @@ impl Default for SceneFeed {
         Self {
             snapshot: Mutex::new(None),
             compliance: Mutex::new(None),
+            compliance_ready: AtomicBool::new(false),
             scene_request: Mutex::new(None),
             figures,
             offers: AtomicU64::new(0),
@@ -150,7 +153,14 @@ impl SceneFeed {
 
     /// Called by the loop: the atlas's compliance once the scene has it (never waits).
     pub fn take_compliance(&self) -> Option<Box<dyn CavityCompliance>> {
-        self.compliance.try_lock().ok().and_then(|mut c| c.take())
+        // One load per tick while there is nothing to take (every tick but one).
+        if !self.compliance_ready.load(Ordering::Acquire) {
+            return None;
+        }
+        let mut slot = self.compliance.try_lock().ok()?;
+        // Cleared under the lock `give_compliance` sets it under: a newer one is never missed.
+        self.compliance_ready.store(false, Ordering::Release);
+        slot.take()
     }
 
     /// Called by the control plane: the scene thread switches to `desc` after its current frame
@@ -173,6 +183,7 @@ impl SceneFeed {
     fn give_compliance(&self, c: Box<dyn CavityCompliance>) {
         if let Ok(mut slot) = self.compliance.lock() {
             *slot = Some(c);
+            self.compliance_ready.store(true, Ordering::Release);
         }
     }
 }
@@ -770,6 +781,32 @@ mod tests {
             assert!(vel >= cells && vel < cells + 4);
             assert_eq!(total, vel + 12 * cells);
         }
+    }
+
+    #[test]
+    fn the_loop_takes_each_compliance_once_and_never_misses_a_newer_one() {
+        use hydrometra_sim::hydraulics::LinearCompliance;
+        let feed = SceneFeed::default();
+        let curve = |volume_at_zero_m3: f64| {
+            Box::new(LinearCompliance {
+                volume_at_zero_m3,
+                compliance_m3_per_pa: 1e-10,
+            })
+        };
+        assert!(feed.take_compliance().is_none());
+        feed.give_compliance(curve(1e-6));
+        // A busy slot leaves it for the next tick.
+        let guard = feed.compliance.lock().unwrap();
+        assert!(feed.take_compliance().is_none());
+        drop(guard);
+        let first = feed.take_compliance().expect("the atlas's compliance");
+        assert_eq!(first.volume_m3(0.0), 1e-6);
+        assert!(feed.take_compliance().is_none(), "taken once");
+        // A newer scene's curve is taken too.
+        feed.give_compliance(curve(2e-6));
+        let second = feed.take_compliance().expect("the newer compliance");
+        assert_eq!(second.volume_m3(0.0), 2e-6);
+        assert!(feed.take_compliance().is_none());
     }
 
     #[test]
