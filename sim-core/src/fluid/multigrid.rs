@@ -1723,24 +1723,15 @@ mod tests {
                         break;
                     }
                     let at = format!("level {l}, round {round}, {periodic:?}");
-                    assert_eq!(a.dims, b.dims, "{at}");
-                    assert_eq!(a.periodic, b.periodic, "{at}");
-                    assert_eq!(a.label, b.label, "{at}");
-                    assert_eq!(a.row_of_cell, b.row_of_cell, "{at}");
-                    assert_eq!(a.cell_of_row, b.cell_of_row, "{at}");
-                    assert_eq!(a.nbr, b.nbr, "{at}");
-                    assert_eq!(a.diag, b.diag, "{at}");
-                    assert_eq!(a.inv_diag, b.inv_diag, "{at}");
-                    assert_eq!(a.pad_of_row, b.pad_of_row, "{at}");
-                    assert_eq!((a.sy, a.sz, a.fluid), (b.sy, b.sz, b.fluid), "{at}");
-                    assert_eq!(a.spans, b.spans, "{at}");
-                    assert_eq!(a.split_span, b.split_span, "{at}");
-                    assert_eq!(a.row_spans, b.row_spans, "{at}");
-                    assert_eq!(a.ddiag, b.ddiag, "{at}");
-                    assert_eq!(a.mask, b.mask, "{at}");
-                    assert_eq!(a.inv, b.inv, "{at}");
-                    assert_eq!(a.wt, b.wt, "{at}");
-                    assert_eq!((&a.x, &a.b, &a.r), (&b.x, &b.b, &b.r), "{at}");
+                    // Every field of the level, named in the failure.
+                    macro_rules! same {
+                        ($($f:ident),*) => {$(
+                            assert_eq!(a.$f, b.$f, "{} at {at}", stringify!($f));
+                        )*};
+                    }
+                    same!(dims, periodic, label, row_of_cell, cell_of_row, nbr);
+                    same!(diag, inv_diag, pad_of_row, sy, sz, fluid, spans);
+                    same!(split_span, row_spans, ddiag, mask, inv, wt, x, b, r);
                 }
             }
         }
