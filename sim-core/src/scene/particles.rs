@@ -882,7 +882,14 @@ impl ParticleSystem {
                 .enumerate()
                 .map(|(t, ((((p, w), c), f), s))| {
                     s[..classes].fill(0.0);
-                    k.run(t * chunk, p, w, c, f, s)
+                    k.run(Task {
+                        offset: t * chunk,
+                        pos: p,
+                        slip: w,
+                        class: c,
+                        fate: f,
+                        sums: s,
+                    })
                 })
                 .sum();
             for t in &self.task_sums[..n.div_ceil(chunk)] {
@@ -892,14 +899,14 @@ impl ParticleSystem {
             }
             left
         } else {
-            k.run(
-                0,
-                &mut self.pos,
-                &mut self.slip,
-                &self.class,
-                &mut self.fate,
-                &mut sums,
-            )
+            k.run(Task {
+                offset: 0,
+                pos: &mut self.pos,
+                slip: &mut self.slip,
+                class: &self.class,
+                fate: &mut self.fate,
+                sums: &mut sums,
+            })
         };
         if left > 0 {
             self.remove_left();
@@ -1339,6 +1346,17 @@ mod lane {
     }
 }
 
+/// One task's particles for [`Kernel::run`]: the first is particle `offset` of the system, and
+/// the clarity's sums of the particles that stay go to `sums`.
+struct Task<'a> {
+    offset: usize,
+    pos: &'a mut [[f32; 3]],
+    slip: &'a mut [[f32; 3]],
+    class: &'a [u8],
+    fate: &'a mut [u8],
+    sums: &'a mut ClassSums,
+}
+
 /// The per-particle step, shared by the threads.
 struct Kernel<'a> {
     field: Sampler<'a>,
@@ -1387,51 +1405,34 @@ impl<'a> Kernel<'a> {
             .unwrap_or(VoxelKind::Solid)
     }
 
-    /// Moves the particles of one task (the first is particle `offset`); returns how many left
-    /// (their fate is not KEEP).
-    fn run(
-        &self,
-        offset: usize,
-        pos: &mut [[f32; 3]],
-        slip: &mut [[f32; 3]],
-        class: &[u8],
-        fate: &mut [u8],
-        sums: &mut ClassSums,
-    ) -> usize {
+    /// Moves the particles of one task; returns how many left (their fate is not KEEP).
+    fn run(&self, task: Task<'_>) -> usize {
         #[cfg(target_arch = "x86_64")]
         if crate::fluid::avx2::available() {
             // SAFETY: the CPU has AVX2 and FMA (checked above).
-            return unsafe { self.run_avx2(offset, pos, slip, class, fate, sums) };
+            return unsafe { self.run_avx2(task) };
         }
-        self.run_portable(offset, pos, slip, class, fate, sums)
+        self.run_portable(task)
     }
 
     /// [`Kernel::run_portable`] compiled for AVX2 and FMA (the fluid stages' SIMD style: the
     /// same portable code, a second time with the wider instruction set).
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn run_avx2(
-        &self,
-        offset: usize,
-        pos: &mut [[f32; 3]],
-        slip: &mut [[f32; 3]],
-        class: &[u8],
-        fate: &mut [u8],
-        sums: &mut ClassSums,
-    ) -> usize {
-        self.run_portable(offset, pos, slip, class, fate, sums)
+    fn run_avx2(&self, task: Task<'_>) -> usize {
+        self.run_portable(task)
     }
 
     #[inline(always)]
-    fn run_portable(
-        &self,
-        offset: usize,
-        pos: &mut [[f32; 3]],
-        slip: &mut [[f32; 3]],
-        class: &[u8],
-        fate: &mut [u8],
-        sums: &mut ClassSums,
-    ) -> usize {
+    fn run_portable(&self, task: Task<'_>) -> usize {
+        let Task {
+            offset,
+            pos,
+            slip,
+            class,
+            fate,
+            sums,
+        } = task;
         let mut left = 0;
         let n = pos.len().min(slip.len()).min(class.len()).min(fate.len());
         let mut done = |f: u8, class: u8, p: [f32; 3]| {
@@ -2301,7 +2302,14 @@ mod tests {
             let (mut pos, mut slip) = (sys.pos.clone(), sys.slip.clone());
             let mut fate = vec![KEEP; pos.len()];
             let mut sums = [0.0; 256];
-            let left = k.run(0, &mut pos, &mut slip, &sys.class, &mut fate, &mut sums);
+            let left = k.run(Task {
+                offset: 0,
+                pos: &mut pos,
+                slip: &mut slip,
+                class: &sys.class,
+                fate: &mut fate,
+                sums: &mut sums,
+            });
             (pos, slip, fate, left)
         };
         // From 0: every start checked, one at a time; from the end: all grouped.
