@@ -376,8 +376,15 @@ impl PressureSolver {
             rz
         };
         let mut rz = precondition(mg, regions, false);
+        // `dp` is zero off the spans (cleared at each relabelling, written only on them).
         let l0 = &mg.levels[0];
-        dp.copy_from_slice(&l0.x);
+        for_spans(l0, dp, |spans, out, off| {
+            for &[s, e] in spans {
+                out[s as usize - off..e as usize - off]
+                    .copy_from_slice(&l0.x[s as usize..e as usize]);
+            }
+            0.0
+        });
         for it in 1..=max_iterations {
             outcome.iterations = it;
             let l0 = &mut mg.levels[0];
