@@ -1717,7 +1717,10 @@ mod tests {
             }
             for &[s, e] in &spans {
                 let len = (e - s) as usize;
-                assert!(len % LANES == 0 || e as usize == limit, "{spans:?} limit {limit}");
+                assert!(
+                    len.is_multiple_of(LANES) || e as usize == limit,
+                    "{spans:?} limit {limit}"
+                );
             }
             for &[s, e] in &before {
                 assert!(

@@ -311,6 +311,13 @@ impl FluidSolver {
         Ok(s)
     }
 
+    /// Per cell row `j + ny k`, the x range `[first, end)` of its fluid and outflow cells, when
+    /// the topology is current with the grid's labels (`None` after a relabelling until the
+    /// next step rebuilds it).
+    pub(crate) fn open_rows(&self) -> Option<&[[u32; 2]]> {
+        (self.revision == self.grid.revision()).then_some(&self.open_rows[..])
+    }
+
     /// The grid.
     pub fn grid(&self) -> &FluidGrid {
         &self.grid

@@ -283,6 +283,10 @@ pub struct VortexField {
     /// Per node: 1 when all eight cells around it are fluid.
     node_mask: Vec<u8>,
     fluid_cells: Vec<u32>,
+    /// `(i, j, k)` of each of `fluid_cells`.
+    fluid_coords: Vec<[u32; 3]>,
+    /// Scratch: per cell row `j + ny k`, the x range of its open cells.
+    row_ranges: Vec<[u32; 2]>,
     /// Per component: every face of a fluid cell once, as `(face, its lowest node)`.
     fluid_faces: [Vec<[u32; 2]>; 3],
     /// The same faces as runs along x: `(first face, its lowest node, length)` (a run's faces and
@@ -342,6 +346,8 @@ impl VortexField {
             revision: 0,
             node_mask: vec![0; nodes],
             fluid_cells: Vec::new(),
+            fluid_coords: Vec::new(),
+            row_ranges: Vec::new(),
             fluid_faces: std::array::from_fn(|_| Vec::new()),
             face_runs: std::array::from_fn(|_| Vec::new()),
             face_lower: Vec::new(),
@@ -418,12 +424,29 @@ impl VortexField {
         let [nx, ny, nz] = self.dims;
         let labels = g.labels();
         let fluid = |n: usize| labels[n] == CellLabel::Fluid;
+        // The fluid cells in index order, row by row within each row's open range (the solver's
+        // when its topology is current, else a scan of the labels).
+        let mut rows = std::mem::take(&mut self.row_ranges);
+        match solver.open_rows() {
+            Some(open) => {
+                rows.clear();
+                rows.extend_from_slice(open);
+            }
+            None => crate::fluid::open_row_ranges(g, &mut rows),
+        }
         self.fluid_cells.clear();
-        for (n, l) in labels.iter().enumerate() {
-            if *l == CellLabel::Fluid {
-                self.fluid_cells.push(n as u32);
+        self.fluid_coords.clear();
+        for (row, &[a, b]) in rows.iter().enumerate() {
+            let (j, k) = ((row % ny) as u32, (row / ny) as u32);
+            let base = nx * row;
+            for i in a..b {
+                if labels[base + i as usize] == CellLabel::Fluid {
+                    self.fluid_cells.push((base + i as usize) as u32);
+                    self.fluid_coords.push([i, j, k]);
+                }
             }
         }
+        self.row_ranges = rows;
         // A node is in `node_mask` when its eight cells are fluid. Each such node is the upper
         // corner of exactly one of them (its lowest), so walking the fluid cells in index order
         // lists the nodes in index order too (no sort).
@@ -431,9 +454,8 @@ impl VortexField {
         let (cy, cz) = (nx, nx * ny);
         self.fluid_nodes.clear();
         self.row_nodes.fill((1, 0));
-        for &n in &self.fluid_cells {
-            let n = n as usize;
-            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+        for (&n, &[i, j, k]) in self.fluid_cells.iter().zip(&self.fluid_coords) {
+            let (n, i, j, k) = (n as usize, i as usize, j as usize, k as usize);
             if i + 1 >= nx || j + 1 >= ny || k + 1 >= nz {
                 continue;
             }
@@ -469,9 +491,8 @@ impl VortexField {
             let (lower, upper) = (&mut self.face_lower, &mut self.face_upper);
             lower.clear();
             upper.clear();
-            for &n in &self.fluid_cells {
-                let n = n as usize;
-                let cell = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            for (&n, cell) in self.fluid_cells.iter().zip(&self.fluid_coords) {
+                let (n, cell) = (n as usize, cell.map(|x| x as usize));
                 let next_fluid = cell[c] + 1 < [nx, ny, nz][c] && fluid(n + cell_stride[c]);
                 for up in 0..2 {
                     if up == 1 && next_fluid {
