@@ -616,6 +616,7 @@ mod tests {
             ("[atlas]\nelement = \"hex8\"", "atlas.element"),
             ("[atlas]\nlevels = 1", "atlas.levels"),
             ("[fluid]\nroi_min_mm = [0, 0, 0]", "roi_min_mm"),
+            ("[fluid]\nmax_cfl = 0", "fluid.max_cfl"),
             ("[stages]\nfluid = false\nparticles = true", "stages"),
             (
                 "[skip]\nvoxel_move_fraction = 0.9",
