@@ -95,7 +95,17 @@ pub struct FluidSpec {
     pub divergence_tolerance: f64,
     /// Below this many fluid cells (the resting slit) the fluid stage idles.
     pub min_fluid_cells: usize,
+    /// Largest CFL number of one fluid substep: a frame whose fastest face (the inflow jet) would
+    /// travel farther is split into substeps (at most the solver's `max_substeps`).
+    pub max_cfl: f64,
 }
+
+/// The scene's default CFL bound of a fluid substep: a semi-Lagrangian trace of at most five
+/// cells (Foster and Fedkiw 2001, as recommended by Bridson, *Fluid Simulation for Computer
+/// Graphics*, section 3.2). Longer traces leave the 1-2 cell wide inflow jet through the scope's
+/// walls and lose its momentum within a few millimetres of the port (`docs/particles.md`, "View
+/// clarity").
+pub const DEFAULT_MAX_CFL: f64 = 5.0;
 
 impl Default for FluidSpec {
     fn default() -> Self {
@@ -106,6 +116,7 @@ impl Default for FluidSpec {
             advection: AdvectionScheme::default(),
             divergence_tolerance: 1e-5,
             min_fluid_cells: 64,
+            max_cfl: DEFAULT_MAX_CFL,
         }
     }
 }
@@ -474,6 +485,7 @@ impl SceneDesc {
             }
         }
         positive("fluid.divergence_tolerance", f.divergence_tolerance)?;
+        positive("fluid.max_cfl", f.max_cfl)?;
         if f.divergence_tolerance > 0.1 {
             return Err(invalid(
                 o,
@@ -604,6 +616,7 @@ mod tests {
             ("[atlas]\nelement = \"hex8\"", "atlas.element"),
             ("[atlas]\nlevels = 1", "atlas.levels"),
             ("[fluid]\nroi_min_mm = [0, 0, 0]", "roi_min_mm"),
+            ("[fluid]\nmax_cfl = 0", "fluid.max_cfl"),
             ("[stages]\nfluid = false\nparticles = true", "stages"),
             (
                 "[skip]\nvoxel_move_fraction = 0.9",

@@ -25,6 +25,9 @@ use crate::fluid::{v4, CellLabel, FluidGrid, FluidSolver, V4};
 pub const GRAVITY_M_S2: f64 = 9.81;
 /// Bubble size classes (diameters spread evenly over the configured range).
 const BUBBLE_CLASSES: usize = 8;
+/// The eddy dispersion's default seed; a scene's walk uses `particles.seed ^ WALK_STREAM` (a
+/// stream apart from the emission's).
+const WALK_STREAM: u64 = 0x5eed_d15c;
 
 /// What a particle is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -240,7 +243,7 @@ impl Default for FragmentSpec {
 pub struct ParticleSpec {
     /// Most particles alive at once (storage allocated once).
     pub budget: usize,
-    /// Seed of the emission.
+    /// Seed of the emission and of the eddy dispersion's random walk.
     pub seed: u64,
     /// Most RK2 substeps per particle and step (each under one cell).
     pub max_substeps: usize,
@@ -579,8 +582,13 @@ impl ParticleSystem {
             counts: ParticleCounts::default(),
             time_s: 0.0,
             eddy_diffusivity_m2_s: 0.0,
-            walk_rng: fastrand::Rng::with_seed(0x5eed_d15c),
+            walk_rng: fastrand::Rng::with_seed(WALK_STREAM),
         }
+    }
+
+    /// Reseeds the eddy dispersion's random walk (a scene seeds it from `particles.seed`).
+    pub fn seed_walk(&mut self, seed: u64) {
+        self.walk_rng = fastrand::Rng::with_seed(seed);
     }
 
     /// Sets the eddy diffusivity of the random walk every later step adds to the advection,
@@ -1919,6 +1927,7 @@ impl Particles {
             });
         }
         self.rng = Some(SeededRng::new(spec.seed));
+        sys.seed_walk(spec.seed ^ WALK_STREAM);
         self.emit_points = Vec::with_capacity(64);
         self.system = Some(sys);
         Some(())
