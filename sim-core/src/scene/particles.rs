@@ -933,11 +933,14 @@ impl ParticleSystem {
         }
         cs.start.fill(0);
         cs.key.clear();
-        let [nx, ny, nz] = self.dims;
+        let [nx, ny, nz] = self.dims.map(|n| n as f32);
+        let (dims, stride) = (
+            lane::new4(nx, ny, nz, 1.0),
+            [1, self.dims[0], self.dims[0] * self.dims[1]],
+        );
         for p in &self.pos {
             // Every particle here ended its step in a fluid cell (inside the grid).
-            let c = p.map(|x| x.max(0.0) as usize);
-            let k = c[0].min(nx - 1) + nx * (c[1].min(ny - 1) + ny * c[2].min(nz - 1));
+            let k = lane::cell(v4::new(p[0], p[1], p[2]), dims, stride).unwrap_or(0);
             cs.key.push(k as u32);
             cs.start[k + 1] += 1;
         }
