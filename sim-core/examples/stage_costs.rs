@@ -14,10 +14,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let count: usize = args.get(3).map_or(Ok(10_000), |s| s.parse())?;
         let mut blood = stage_bench::Blood::new(&s, count).ok_or("class")?;
         let mut clarity = 0.0;
+        let mut times = Vec::with_capacity(steps);
         for _ in 0..steps {
+            let t = std::time::Instant::now();
             clarity += blood.step(&s).unwrap_or(0.0);
+            times.push(t.elapsed().as_secs_f64() * 1e6);
         }
-        println!("{:?} clarity sum {clarity}", blood.system.counts());
+        times.sort_by(f64::total_cmp);
+        let q = |f: f64| {
+            times
+                .get((f * steps as f64) as usize)
+                .copied()
+                .unwrap_or(0.0)
+        };
+        println!(
+            "{:?} clarity sum {clarity}; wall us per step: p10 {:.1} median {:.1}",
+            blood.system.counts(),
+            q(0.1),
+            q(0.5)
+        );
         return Ok(());
     }
     let mode = if what == "injected" {
