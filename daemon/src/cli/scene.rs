@@ -108,6 +108,10 @@ pub struct BenchArgs {
     /// Longest time a tracer is followed for the time to traverse, s.
     #[arg(long, default_value_t = 10.0)]
     traverse_max_s: f64,
+    /// Overrides the scene's `fluid.max_cfl` (`inf`: one fluid step per frame, the paper's
+    /// Table 1 and the session-7 figures).
+    #[arg(long)]
+    max_cfl: Option<f64>,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -670,6 +674,9 @@ fn bench(a: &BenchArgs) -> Result<()> {
     for &v in &a.voxels_mm {
         let mut desc = base.clone();
         desc.fluid.voxel_mm = v;
+        if let Some(c) = a.max_cfl {
+            desc.fluid.max_cfl = c;
+        }
         desc.stages.vortices = false;
         desc.validate()?;
         // Overlay vortices leave the solver's state alone: the run with them times the fluid

@@ -96,7 +96,8 @@ pub struct FluidSpec {
     /// Below this many fluid cells (the resting slit) the fluid stage idles.
     pub min_fluid_cells: usize,
     /// Largest CFL number of one fluid substep: a frame whose fastest face (the inflow jet) would
-    /// travel farther is split into substeps (at most the solver's `max_substeps`).
+    /// travel farther is split into substeps (at most the solver's `max_substeps`); `inf`: one
+    /// fluid step per frame whatever the CFL number.
     pub max_cfl: f64,
 }
 
@@ -485,7 +486,16 @@ impl SceneDesc {
             }
         }
         positive("fluid.divergence_tolerance", f.divergence_tolerance)?;
-        positive("fluid.max_cfl", f.max_cfl)?;
+        if !(f.max_cfl > 0.0) {
+            return Err(invalid(
+                o,
+                "fluid.max_cfl",
+                format!(
+                    "{}: expected a CFL number > 0 (inf: one fluid step per frame)",
+                    f.max_cfl
+                ),
+            ));
+        }
         if f.divergence_tolerance > 0.1 {
             return Err(invalid(
                 o,
@@ -617,6 +627,7 @@ mod tests {
             ("[atlas]\nlevels = 1", "atlas.levels"),
             ("[fluid]\nroi_min_mm = [0, 0, 0]", "roi_min_mm"),
             ("[fluid]\nmax_cfl = 0", "fluid.max_cfl"),
+            ("[fluid]\nmax_cfl = nan", "fluid.max_cfl"),
             ("[stages]\nfluid = false\nparticles = true", "stages"),
             (
                 "[skip]\nvoxel_move_fraction = 0.9",

@@ -451,7 +451,7 @@ impl Scene {
             let params = FluidParams {
                 advection: desc.fluid.advection,
                 tolerance: desc.fluid.divergence_tolerance,
-                max_cfl: Some(desc.fluid.max_cfl),
+                max_cfl: desc.fluid.max_cfl.is_finite().then_some(desc.fluid.max_cfl),
                 ..FluidParams::default()
             };
             Some(FluidSolver::new(grid, params)?)
