@@ -6,7 +6,7 @@
 //! closed); no valid frame for 1 s drops the port and reconnects; a device hello must answer a host
 //! hello within 250 ms (4 attempts); reconnect backoff starts at 50 ms and doubles up to 2 s.
 
-use std::io::{ErrorKind, Read, Write};
+use std::io::{ErrorKind, Write};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -17,6 +17,7 @@ use tracing::{debug, info, warn};
 
 use crate::calibration::Calibration;
 use crate::framing::FrameDecoder;
+use crate::port_reader::PortReader;
 use crate::state::{LinkCounters, LinkDownReason, LinkState, RigState};
 use crate::tap::Tap;
 use crate::wire::{
@@ -91,7 +92,8 @@ pub struct LinkConfig {
     pub backoff_initial: Duration,
     /// Longest reconnect delay (the delay doubles after each failure). Default 2 s.
     pub backoff_max: Duration,
-    /// Longest single blocking read; bounds shutdown and timer latency. Default 10 ms.
+    /// Longest single wait for input (rounded up to whole ms); bounds shutdown and timer
+    /// latency. Default 10 ms.
     pub read_timeout: Duration,
     /// Where the I/O thread copies every chunk of bytes it reads, as read, for a recorder.
     /// Default none.
@@ -679,6 +681,15 @@ impl IoThread {
         let mut last_frame_at = Instant::now();
         let mut last_heartbeat_at = Instant::now();
         let mut expected_seq: Option<u32> = None;
+        let mut reader = match PortReader::new(port, cfg.read_timeout) {
+            Ok(r) => r,
+            Err(e) => {
+                return SessionEnd::Lost(
+                    LinkDownReason::Lost,
+                    format!("cannot wait for the port's input: {e}"),
+                )
+            }
+        };
         let mut buf = [0u8; RX_CHUNK_MAX_BYTES];
         let mut frames = Vec::with_capacity(16);
         self.update_cpu();
@@ -687,13 +698,8 @@ impl IoThread {
             if self.stopping() {
                 return SessionEnd::Shutdown;
             }
-            match port.read(&mut buf) {
-                Ok(0) => {
-                    return SessionEnd::Lost(
-                        LinkDownReason::Lost,
-                        "zero-byte read (device hung up)".into(),
-                    )
-                }
+            match reader.read(&mut buf) {
+                Ok(0) => {}
                 Ok(n) => {
                     if let Some(tap) = &cfg.rx_tap {
                         tap.offer_bytes(monotonic_ns(), &buf[..n]);
@@ -723,8 +729,7 @@ impl IoThread {
                     }
                     self.publish_decoder_stats();
                 }
-                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
-                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(e) => {
                     return SessionEnd::Lost(LinkDownReason::Lost, format!("read failed: {e}"))
                 }
