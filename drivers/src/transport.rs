@@ -360,7 +360,7 @@ impl RigLink {
     /// A consistent copy of state, counters and the latest sample; cheap (one mutex lock).
     pub fn snapshot(&self) -> LinkSnapshot {
         let inner = self.shared.lock();
-        let status = self.status_of(&inner);
+        let status = self.status_of(&inner, Instant::now());
         LinkSnapshot {
             link_state: status.link_state,
             counters: status.counters,
@@ -376,15 +376,21 @@ impl RigLink {
     /// The part of [`snapshot`](Self::snapshot) a real-time consumer needs, without allocating:
     /// safe to call every tick of a 1 kHz loop.
     pub fn status(&self) -> LinkStatus {
-        let inner = self.shared.lock();
-        self.status_of(&inner)
+        self.status_at(Instant::now())
     }
 
-    fn status_of(&self, inner: &Inner) -> LinkStatus {
+    /// [`status`](Self::status) with the sample's age and staleness taken at `now`, for a loop
+    /// that has just read the clock.
+    pub fn status_at(&self, now: Instant) -> LinkStatus {
+        let inner = self.shared.lock();
+        self.status_of(&inner, now)
+    }
+
+    fn status_of(&self, inner: &Inner, now: Instant) -> LinkStatus {
         let age = inner
             .latest
             .as_ref()
-            .map(|s| Instant::now().saturating_duration_since(s.received_at));
+            .map(|s| now.saturating_duration_since(s.received_at));
         let link_state = match (inner.link_state, age) {
             (LinkState::Connected, Some(a)) if a > self.shared.stale_after => LinkState::Stale,
             (s, _) => s,
