@@ -18,6 +18,8 @@ pub mod calibration;
 #[cfg(feature = "std")]
 pub mod emulator;
 #[cfg(feature = "std")]
+mod port_reader;
+#[cfg(feature = "std")]
 pub mod state;
 #[cfg(feature = "std")]
 pub mod tap;

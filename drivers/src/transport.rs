@@ -6,7 +6,7 @@
 //! closed); no valid frame for 1 s drops the port and reconnects; a device hello must answer a host
 //! hello within 250 ms (4 attempts); reconnect backoff starts at 50 ms and doubles up to 2 s.
 
-use std::io::{ErrorKind, Read, Write};
+use std::io::{ErrorKind, Write};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
@@ -17,6 +17,7 @@ use tracing::{debug, info, warn};
 
 use crate::calibration::Calibration;
 use crate::framing::FrameDecoder;
+use crate::port_reader::PortReader;
 use crate::state::{LinkCounters, LinkDownReason, LinkState, RigState};
 use crate::tap::Tap;
 use crate::wire::{
@@ -91,7 +92,8 @@ pub struct LinkConfig {
     pub backoff_initial: Duration,
     /// Longest reconnect delay (the delay doubles after each failure). Default 2 s.
     pub backoff_max: Duration,
-    /// Longest single blocking read; bounds shutdown and timer latency. Default 10 ms.
+    /// Longest single wait for input (rounded up to whole ms); bounds shutdown and timer
+    /// latency. Default 10 ms.
     pub read_timeout: Duration,
     /// Where the I/O thread copies every chunk of bytes it reads, as read, for a recorder.
     /// Default none.
@@ -358,7 +360,7 @@ impl RigLink {
     /// A consistent copy of state, counters and the latest sample; cheap (one mutex lock).
     pub fn snapshot(&self) -> LinkSnapshot {
         let inner = self.shared.lock();
-        let status = self.status_of(&inner);
+        let status = self.status_of(&inner, Instant::now());
         LinkSnapshot {
             link_state: status.link_state,
             counters: status.counters,
@@ -374,15 +376,21 @@ impl RigLink {
     /// The part of [`snapshot`](Self::snapshot) a real-time consumer needs, without allocating:
     /// safe to call every tick of a 1 kHz loop.
     pub fn status(&self) -> LinkStatus {
-        let inner = self.shared.lock();
-        self.status_of(&inner)
+        self.status_at(Instant::now())
     }
 
-    fn status_of(&self, inner: &Inner) -> LinkStatus {
+    /// [`status`](Self::status) with the sample's age and staleness taken at `now`, for a loop
+    /// that has just read the clock.
+    pub fn status_at(&self, now: Instant) -> LinkStatus {
+        let inner = self.shared.lock();
+        self.status_of(&inner, now)
+    }
+
+    fn status_of(&self, inner: &Inner, now: Instant) -> LinkStatus {
         let age = inner
             .latest
             .as_ref()
-            .map(|s| Instant::now().saturating_duration_since(s.received_at));
+            .map(|s| now.saturating_duration_since(s.received_at));
         let link_state = match (inner.link_state, age) {
             (LinkState::Connected, Some(a)) if a > self.shared.stale_after => LinkState::Stale,
             (s, _) => s,
@@ -679,6 +687,15 @@ impl IoThread {
         let mut last_frame_at = Instant::now();
         let mut last_heartbeat_at = Instant::now();
         let mut expected_seq: Option<u32> = None;
+        let mut reader = match PortReader::new(port, cfg.read_timeout) {
+            Ok(r) => r,
+            Err(e) => {
+                return SessionEnd::Lost(
+                    LinkDownReason::Lost,
+                    format!("cannot wait for the port's input: {e}"),
+                )
+            }
+        };
         let mut buf = [0u8; RX_CHUNK_MAX_BYTES];
         let mut frames = Vec::with_capacity(16);
         self.update_cpu();
@@ -687,13 +704,8 @@ impl IoThread {
             if self.stopping() {
                 return SessionEnd::Shutdown;
             }
-            match port.read(&mut buf) {
-                Ok(0) => {
-                    return SessionEnd::Lost(
-                        LinkDownReason::Lost,
-                        "zero-byte read (device hung up)".into(),
-                    )
-                }
+            match reader.read(&mut buf) {
+                Ok(0) => {}
                 Ok(n) => {
                     if let Some(tap) = &cfg.rx_tap {
                         tap.offer_bytes(monotonic_ns(), &buf[..n]);
@@ -723,8 +735,7 @@ impl IoThread {
                     }
                     self.publish_decoder_stats();
                 }
-                Err(e) if e.kind() == ErrorKind::TimedOut || e.kind() == ErrorKind::Interrupted => {
-                }
+                Err(e) if e.kind() == ErrorKind::Interrupted => {}
                 Err(e) => {
                     return SessionEnd::Lost(LinkDownReason::Lost, format!("read failed: {e}"))
                 }

@@ -50,3 +50,25 @@ pub fn set_current_thread_normal() -> Result<(), String> {
         ))
     }
 }
+
+/// Sleeps until `CLOCK_MONOTONIC` reads `deadline_ns` (returns at once if it has passed). An
+/// absolute deadline needs no clock read before the sleep, and the wake-up does not drift by
+/// the time between such a read and the system call.
+pub fn sleep_until_monotonic_ns(deadline_ns: u64) {
+    const NS_PER_S: u64 = 1_000_000_000;
+    let deadline = libc::timespec {
+        tv_sec: (deadline_ns / NS_PER_S) as libc::time_t,
+        tv_nsec: (deadline_ns % NS_PER_S) as libc::c_long,
+    };
+    // clock_nanosleep returns the error number; with TIMER_ABSTIME a signal just means "again".
+    // SAFETY: `deadline` is a valid timespec; no remainder is asked for with an absolute time.
+    while unsafe {
+        libc::clock_nanosleep(
+            libc::CLOCK_MONOTONIC,
+            libc::TIMER_ABSTIME,
+            &deadline,
+            std::ptr::null_mut(),
+        )
+    } == libc::EINTR
+    {}
+}

@@ -743,9 +743,12 @@ fn write_figures(f: &SceneFigures, report: &hydrometra_sim::scene::StepReport, p
     let c = &report.counters;
     for (k, stage) in Stage::ALL.iter().enumerate().take(STAGES) {
         let s = c.get(*stage);
-        f.runs[k].store(s.runs, Ordering::Relaxed);
+        // The p99 (a selection over the recent runs) changes only when the stage ran: at rest
+        // most stages skip every frame.
+        if f.runs[k].swap(s.runs, Ordering::Relaxed) != s.runs {
+            f.p99_s_bits[k].store((s.p99_ms() * 1e-3).to_bits(), Ordering::Relaxed);
+        }
         f.skips[k].store(s.skips, Ordering::Relaxed);
-        f.p99_s_bits[k].store((s.p99_ms() * 1e-3).to_bits(), Ordering::Relaxed);
     }
     f.step_p99_s_bits
         .store((c.step.p99_ms() * 1e-3).to_bits(), Ordering::Relaxed);

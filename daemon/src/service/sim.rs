@@ -8,10 +8,12 @@ use std::sync::Mutex;
 use std::time::{Duration, Instant};
 
 use hydrometra_drivers::state::{LinkDownReason, LinkState, ScopePose};
+use hydrometra_drivers::transport::monotonic_ns;
 use hydrometra_ipc::status::link_down_reason as reason;
 use hydrometra_ipc::{alarms, Status};
 
 use super::latency::{LatencyHistogram, LatencySummary};
+use super::realtime::sleep_until_monotonic_ns;
 use super::rig_source::{RigSource, RigView};
 
 /// The inputs a simulation stage sees on one tick: the rig's calibrated values, or the safe
@@ -232,7 +234,11 @@ impl SimLoop {
     ) {
         let period = self.settings.tick;
         let period_ns = period.as_nanos().max(1) as u64;
+        // The loop keeps time in CLOCK_MONOTONIC ns (what it sleeps on, one clock read per
+        // wake-up); `start` maps those readings to the `Instant`s of rig samples (the same clock,
+        // read once more here: the mapping is off by the ~100 ns between the two reads).
         let start = Instant::now();
+        let start_ns = monotonic_ns();
         let mut tick_index: u64 = 0; // index of the next scheduled tick
         let mut ticks_since_status: u64 = 0;
         // A sample that arrived before the loop started is not a latency sample: it waited for
@@ -242,16 +248,13 @@ impl SimLoop {
         let mut sim_time_s = 0.0;
         let mut ticks_run: u64 = 0;
         while !stop.load(Ordering::Relaxed) {
-            let scheduled = start + Duration::from_nanos(period_ns.saturating_mul(tick_index));
-            let now = Instant::now();
-            if now < scheduled {
-                std::thread::sleep(scheduled - now);
-            }
-            let woke = Instant::now();
+            let scheduled_ns = start_ns.saturating_add(period_ns.saturating_mul(tick_index));
+            sleep_until_monotonic_ns(scheduled_ns);
+            let woke_ns = monotonic_ns();
+            let woke = start + Duration::from_nanos(woke_ns.saturating_sub(start_ns));
             // Whole periods that passed without a tick are skipped (not replayed in a burst) and
             // count as misses; the step covers them with a longer dt so sim time tracks real time.
-            let late_periods = (woke.saturating_duration_since(scheduled).as_nanos()
-                / u128::from(period_ns)) as u64;
+            let late_periods = woke_ns.saturating_sub(scheduled_ns) / period_ns;
             if late_periods > 0 {
                 telemetry
                     .deadline_misses
@@ -263,7 +266,7 @@ impl SimLoop {
             sim_time_s += dt_s;
             ticks_run += 1;
 
-            let view = rig.view();
+            let view = rig.view_at(woke);
             let inputs = inputs_from(&view, self.settings.safe_state_timeout);
             for stage in &mut self.stages {
                 stage.step(&inputs, dt_s);
@@ -459,7 +462,7 @@ mod tests {
     /// A scripted rig: a view that the test changes while the loop runs.
     struct Scripted(Mutex<RigView>);
     impl RigSource for Scripted {
-        fn view(&self) -> RigView {
+        fn view_at(&self, _now: Instant) -> RigView {
             *self.0.lock().unwrap()
         }
     }

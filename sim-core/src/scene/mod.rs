@@ -645,7 +645,13 @@ impl Scene {
         // 3. Voxelization.
         let t = Instant::now();
         let threshold = self.desc.skip.voxel_move_fraction * self.cells.spacing_m;
-        let stats = self.voxelizer.update(self.surface.positions_m(), threshold);
+        // The surface moves only when it is deformed: otherwise no vertex can have moved since
+        // the last update, and the scan over every vertex is skipped (the scene at rest).
+        let stats = if moved {
+            self.voxelizer.update(self.surface.positions_m(), threshold)
+        } else {
+            voxelize::VoxelizeStats::default()
+        };
         if stats.moved_vertices > 0 {
             self.report.counters.get_mut(Stage::Voxelize).ran(ms(t));
             if stats.changed_cells > 0 {
