@@ -1,6 +1,7 @@
 //! Face classification derived from the cell labels: which faces the solver updates (active), which
 //! carry a prescribed normal velocity (fixed), which are extrapolated for sampling, and the viscous
-//! stencil of every active face. Rebuilt only when a label changes, into reused buffers.
+//! stencil of every active face. Updated only when a label changes, near the changed cells, into
+//! reused buffers.
 
 use super::grid::FluidGrid;
 use super::sample::Layout;
