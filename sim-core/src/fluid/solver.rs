@@ -216,6 +216,9 @@ pub struct FluidSolver {
     run_cells: [Vec<u32>; 3],
     /// Open-cell x range of every cell row (scratch of the topology rebuild).
     open_rows: Vec<[u32; 2]>,
+    /// The labels the topology was built from: the rows that changed since, which the face sets
+    /// update.
+    label_diff: topology::LabelDiff,
     time_s: f64,
 }
 
@@ -297,6 +300,7 @@ impl FluidSolver {
             pressure_from_step: false,
             run_cells: Default::default(),
             open_rows: Vec::new(),
+            label_diff: topology::LabelDiff::default(),
             time_s: 0.0,
         };
         // Measured with the Galerkin coarse levels: 2 sweeps and a coarse scale of 0.5 (twice
@@ -397,24 +401,30 @@ impl FluidSolver {
     }
 
     fn rebuild_topology(&mut self) {
-        // The rows' open ranges bound every cell that is fluid or open on level 0 and every face
-        // that can be active or fixed: the builds below visit only them.
-        topology::open_row_ranges(&self.grid, &mut self.open_rows);
+        // The rows' open ranges bound every cell that is fluid or open on level 0: the pressure
+        // levels visit only them. The face sets visit only the faces near the cells whose labels
+        // changed (and the ranges only the rows that hold them are found again).
+        let diffed = self
+            .label_diff
+            .update(self.grid.labels(), self.grid.dims()[0]);
+        let rows_changed = diffed.then(|| self.label_diff.rows());
+        topology::update_open_row_ranges(&self.grid, rows_changed, &mut self.open_rows);
+        let changed = diffed.then(|| self.label_diff.cells());
         self.outflow_faces.clear();
-        // The three face sets and the pressure levels are independent: the x and y faces here,
-        // the z faces and the pressure levels on the fork-join helper (the result does not depend
-        // on which thread builds which).
+        // The three face sets and the pressure levels are independent: the faces here, the
+        // pressure levels (the larger part since the face sets update incrementally) on the
+        // fork-join helper (the result does not depend on which thread builds which).
         let (grid, layout, rows) = (&self.grid, &self.layout, &self.open_rows);
         let [f0, f1, f2] = &mut self.faces;
         let (pressure, pressure_pa, p_lag) =
             (&mut self.pressure, &mut self.pressure_pa, &mut self.p_lag);
         crate::fork_join::join(
             || {
-                f0.rebuild(grid, layout, 0, rows);
-                f1.rebuild(grid, layout, 1, rows);
+                f0.update(grid, layout, 0, changed);
+                f1.update(grid, layout, 1, changed);
+                f2.update(grid, layout, 2, changed);
             },
             || {
-                f2.rebuild(grid, layout, 2, rows);
                 build_pressure_levels(grid, rows, pressure, pressure_pa, p_lag);
             },
         );
