@@ -486,7 +486,7 @@ impl SceneDesc {
             }
         }
         positive("fluid.divergence_tolerance", f.divergence_tolerance)?;
-        if !(f.max_cfl > 0.0) {
+        if f.max_cfl.is_nan() || f.max_cfl <= 0.0 {
             return Err(invalid(
                 o,
                 "fluid.max_cfl",
