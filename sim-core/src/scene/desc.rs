@@ -596,6 +596,13 @@ mod tests {
         }
         let d = SceneDesc::default();
         assert_eq!(d.anatomy, AnatomyParams::default());
+        // The printed default file states the code's fluid defaults (two copies, kept equal
+        // here), except the advection scheme, which the built-in scene chooses itself.
+        let fluid = FluidSpec {
+            advection: d.fluid.advection,
+            ..FluidSpec::default()
+        };
+        assert_eq!(d.fluid, fluid);
         assert_eq!(d.hydraulics.inflow.port_area_mm2, 2.8);
         let m = SceneDesc::builtin("myoma-figo1").unwrap();
         assert_eq!(m.anatomy.myomas.len(), 1);

@@ -285,7 +285,8 @@ pub struct VortexField {
     fluid_cells: Vec<u32>,
     /// `(i, j, k)` of each of `fluid_cells`.
     fluid_coords: Vec<[u32; 3]>,
-    /// Scratch: per cell row `j + ny k`, the x range of its open cells.
+    /// Per cell row `j + ny k`, the x range of its open cells, when the solver's topology is not
+    /// current (labels changed since its last step) and they are scanned here.
     row_ranges: Vec<[u32; 2]>,
     /// Per component: every face of a fluid cell once, as `(face, its lowest node)`.
     fluid_faces: [Vec<[u32; 2]>; 3],
@@ -426,17 +427,19 @@ impl VortexField {
         let fluid = |n: usize| labels[n] == CellLabel::Fluid;
         // The fluid cells in index order, row by row within each row's open range (the solver's
         // when its topology is current, else a scan of the labels).
-        let mut rows = std::mem::take(&mut self.row_ranges);
-        match solver.open_rows() {
-            Some(open) => {
-                rows.clear();
-                rows.extend_from_slice(open);
+        let rows: &[[u32; 2]] = match solver.open_rows() {
+            Some(open) => open,
+            None => {
+                crate::fluid::open_row_ranges(g, &mut self.row_ranges);
+                &self.row_ranges
             }
-            None => crate::fluid::open_row_ranges(g, &mut rows),
-        }
+        };
         self.fluid_cells.clear();
         self.fluid_coords.clear();
         for (row, &[a, b]) in rows.iter().enumerate() {
+            if a >= b {
+                continue;
+            }
             let (j, k) = ((row % ny) as u32, (row / ny) as u32);
             let base = nx * row;
             for i in a..b {
@@ -446,7 +449,6 @@ impl VortexField {
                 }
             }
         }
-        self.row_ranges = rows;
         // A node is in `node_mask` when its eight cells are fluid. Each such node is the upper
         // corner of exactly one of them (its lowest), so walking the fluid cells in index order
         // lists the nodes in index order too (no sort).
