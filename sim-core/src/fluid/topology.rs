@@ -41,8 +41,9 @@ pub(crate) struct FaceSet {
     pub active: Vec<u32>,
     /// Compact index of each face (NONE unless active).
     pub compact: Vec<u32>,
-    /// Viscous stencil: compact index of an active neighbour, `CONST_BIT | full` for a fixed one,
-    /// NONE when the neighbour is a ghost or a zero-gradient (outflow) one.
+    /// Viscous stencil: full index of an active neighbour, `CONST_BIT | full` for a fixed one, NONE
+    /// when the neighbour is a ghost or a zero-gradient (outflow) one. Full indices, not compact
+    /// ones, so an update carries a face's stencil over unchanged (`compact` maps them).
     pub stencil: Vec<[u32; 6]>,
     /// Diagonal of the negative Laplacian (6, plus one per wall ghost, minus one per outflow side).
     pub diag: Vec<f32>,
@@ -87,15 +88,11 @@ pub(crate) struct FaceSet {
     /// Scratch: the faces the dirty faces were tracked before this update.
     previous: Vec<u32>,
     fixed_scratch: Vec<[u32; 3]>,
-    /// Coordinates of each active face (no index division per face).
-    active_coords: Vec<[u32; 3]>,
     /// The cells beside each active face (lower, upper; NONE = outside), from the classification.
     active_cells: Vec<[u32; 2]>,
     /// Position of each face in its extrapolation layer (full array; NONE unless extrapolated):
     /// carries a face's sources over an update, as `compact` carries its stencil.
     ext_pos: Vec<u32>,
-    /// Coordinates of the faces of `ext1` and `ext2`.
-    ext_coords: [Vec<[u32; 3]>; 2],
     /// The faces (coordinates) this update computes again, and for each face whether it is listed
     /// there (full array): 0 not (all 0 between updates), [`NEAR`] within one face of a changed
     /// cell's faces, [`FAR`] two faces from them (only its second-layer class and sources can
@@ -505,7 +502,6 @@ impl FaceSet {
         std::mem::swap(&mut old.ext_src, &mut self.ext_src);
         old.ext1_len = self.ext1.len();
         self.active.clear();
-        self.active_coords.clear();
         self.active_cells.clear();
         self.reuse.clear();
         self.fixed.clear();
@@ -519,9 +515,6 @@ impl FaceSet {
         self.ghosts.clear();
         self.ext1.clear();
         self.ext2.clear();
-        for v in &mut self.ext_coords {
-            v.clear();
-        }
         for v in &mut self.ext_reuse {
             v.clear();
         }
@@ -577,13 +570,11 @@ impl FaceSet {
                     for (b, &cl) in chunk.iter().enumerate() {
                         let i = 8 * w + b;
                         let idx = base + i;
-                        let f = [i as u32, fj as u32, fk as u32];
                         match cl {
                             ACTIVE => {
                                 let m = self.compact[idx];
                                 self.compact[idx] = self.active.len() as u32;
                                 self.active.push(idx as u32);
-                                self.active_coords.push(f);
                                 self.reuse.push(m);
                                 self.active_cells.push(if m == NONE {
                                     let (li, ui) =
@@ -608,7 +599,6 @@ impl FaceSet {
                                 let q = self.ext_pos[idx];
                                 self.ext_pos[idx] = list.len() as u32;
                                 list.push(idx as u32);
-                                self.ext_coords[l].push(f);
                                 let at = if l == 0 { 0 } else { old.ext1_len as u32 };
                                 self.ext_reuse[l].push(if q == NONE { NONE } else { at + q });
                             }
@@ -646,16 +636,9 @@ impl FaceSet {
         for n in 0..self.active.len() {
             let m = self.reuse[n];
             if m != NONE {
-                // Carried over: the same stencil with the neighbours' new compact indices, the
-                // same ghosts.
+                // Carried over: the same stencil (full indices), the same ghosts.
                 let m = m as usize;
-                let mut st = old.stencil[m];
-                for e in &mut st {
-                    if *e != NONE && *e & CONST_BIT == 0 {
-                        *e = self.compact[old.active[*e as usize] as usize];
-                    }
-                }
-                self.stencil.push(st);
+                self.stencil.push(old.stencil[m]);
                 self.diag.push(old.diag[m]);
                 self.self_diag.push(old.self_diag[m]);
                 self.nbr.push(old.nbr[m]);
@@ -673,7 +656,7 @@ impl FaceSet {
                 continue;
             }
             let idx = self.active[n] as usize;
-            let f = self.active_coords[n].map(|x| x as usize);
+            let f = layout.face_coords(c, idx);
             let [li0, ui0] = self.active_cells[n];
             let interior = (0..3).all(|a| f[a] > 0 && f[a] + 1 < d[a]);
             let nbs = neighbours(layout, c, f, idx, fstride);
@@ -695,7 +678,7 @@ impl FaceSet {
                     };
                     if d == c {
                         match self.class[gi] {
-                            ACTIVE => st[slot] = self.compact[gi],
+                            ACTIVE => st[slot] = gi as u32,
                             FIXED => st[slot] = CONST_BIT | gi as u32,
                             _ => diag -= 1.0, // outflow-outflow: zero gradient
                         }
@@ -727,7 +710,7 @@ impl FaceSet {
                             .push([n as u32, moving(li), moving(ui), opposite()]);
                     } else if ll == CellLabel::Fluid || ul == CellLabel::Fluid {
                         st[slot] = match self.class[gi] {
-                            ACTIVE => self.compact[gi],
+                            ACTIVE => gi as u32,
                             _ => CONST_BIT | gi as u32,
                         };
                     } else {
@@ -740,10 +723,8 @@ impl FaceSet {
             for (slot, &e) in nbr.iter_mut().zip(&st) {
                 if e == NONE {
                     selfs += 1.0;
-                } else if e & CONST_BIT != 0 {
-                    *slot = e & !CONST_BIT;
                 } else {
-                    *slot = self.active[e as usize];
+                    *slot = e & !CONST_BIT;
                 }
             }
             self.stencil.push(st);
@@ -821,17 +802,13 @@ impl FaceSet {
         }
         for (l, from) in [ACTIVE, EXT1].into_iter().enumerate() {
             let faces = if l == 0 { &self.ext1 } else { &self.ext2 };
-            for ((&idx, f), &q) in faces
-                .iter()
-                .zip(&self.ext_coords[l])
-                .zip(&self.ext_reuse[l])
-            {
+            for (&idx, &q) in faces.iter().zip(&self.ext_reuse[l]) {
                 if q != NONE {
                     let (s0, s1) = (old.ext_start[q as usize], old.ext_start[q as usize + 1]);
                     self.ext_src
                         .extend_from_slice(&old.ext_src[s0 as usize..s1 as usize]);
                 } else {
-                    let f = f.map(|x| x as usize);
+                    let f = layout.face_coords(c, idx as usize);
                     for gi in neighbours(layout, c, f, idx as usize, fstride)
                         .into_iter()
                         .flatten()
@@ -1079,7 +1056,6 @@ mod tests {
                     assert_eq!(set.compact, want.compact, "compact, {at}");
                     assert_eq!(set.active, want.active, "active, {at}");
                     assert_eq!(set.active_cells, want.active_cells, "{at}");
-                    assert_eq!(set.active_coords, want.active_coords, "{at}");
                     assert_eq!(set.fixed, want.fixed, "fixed, {at}");
                     assert_eq!(set.fixed_moving, want.fixed_moving, "{at}");
                     assert_eq!(set.stencil, want.stencil, "stencil, {at}");
@@ -1233,7 +1209,7 @@ mod tests {
                         };
                         let cl = set.class[gi];
                         let entry = |cl| match cl {
-                            ACTIVE => set.compact[gi],
+                            ACTIVE => gi as u32,
                             _ => CONST_BIT | gi as u32,
                         };
                         if d == c {

@@ -45,12 +45,14 @@ fn constant_part(set: &FaceSet, full: &[f32], ghost: &[f32], n: usize) -> f32 {
     s
 }
 
+/// Sum of the active neighbours of compact face `n` in `x` (compact; the stencil holds full
+/// indices, which `FaceSet::compact` maps).
 #[inline]
 fn variable_part(set: &FaceSet, x: &[f32], n: usize) -> f32 {
     let mut s = 0.0;
     for &e in &set.stencil[n] {
         if e != NONE && e & CONST_BIT == 0 {
-            s += x[e as usize];
+            s += x[set.compact[e as usize] as usize];
         }
     }
     s
