@@ -87,7 +87,6 @@ pub(crate) struct FaceSet {
     pub dropped: Vec<u32>,
     /// Scratch: the faces the dirty faces were tracked before this update.
     previous: Vec<u32>,
-    fixed_scratch: Vec<[u32; 3]>,
     /// The cells beside each active face (lower, upper; NONE = outside), from the classification.
     active_cells: Vec<[u32; 2]>,
     /// Position of each face in its extrapolation layer (full array; NONE unless extrapolated):
@@ -100,6 +99,14 @@ pub(crate) struct FaceSet {
     dirty: Vec<[u32; 3]>,
     marked: Vec<u8>,
     full: bool,
+    /// Per face row (`fj + d1 fk`): whether it holds a dirty face. A clean row's entries of every
+    /// list are carried over as whole slices.
+    row_dirty: Vec<bool>,
+    /// Per face row, where its entries start in each list ([`ROW_LISTS`] order); one more entry
+    /// holds the lengths. Every list is in index order, so a row's entries are contiguous.
+    row_at: Vec<[u32; ROW_LISTS]>,
+    /// The fixed faces in index order with their `Velocity` cells (before the partition).
+    fixed_in_order: Vec<[u32; 3]>,
     /// Per active face (and per face of each layer) the position it had before this update
     /// (NONE: computed again).
     reuse: Vec<u32>,
@@ -111,6 +118,13 @@ pub(crate) struct FaceSet {
 /// The per-face results of a build, kept while the next update carries them over.
 #[derive(Default, Debug)]
 struct Carried {
+    row_at: Vec<[u32; ROW_LISTS]>,
+    fixed_in_order: Vec<[u32; 3]>,
+    ext1: Vec<u32>,
+    ext2: Vec<u32>,
+    runs: Vec<[u32; 3]>,
+    regular: Vec<[u32; 3]>,
+    irregular: Vec<Irregular>,
     active: Vec<u32>,
     active_cells: Vec<[u32; 2]>,
     stencil: Vec<[u32; 6]>,
@@ -129,6 +143,9 @@ struct Carried {
 /// first-layer face, which is one face from an active face (a change of class two faces away
 /// changes it).
 const DIRTY_REACH: usize = 2;
+/// The lists `FaceSet::row_at` indexes: active, ext1, ext2, fixed (in index order), runs,
+/// regular, irregular.
+const ROW_LISTS: usize = 7;
 /// Levels of `FaceSet::marked`.
 const NEAR: u8 = 1;
 const FAR: u8 = 2;
@@ -500,7 +517,16 @@ impl FaceSet {
         std::mem::swap(&mut old.ghosts, &mut self.ghosts);
         std::mem::swap(&mut old.ext_start, &mut self.ext_start);
         std::mem::swap(&mut old.ext_src, &mut self.ext_src);
-        old.ext1_len = self.ext1.len();
+        std::mem::swap(&mut old.row_at, &mut self.row_at);
+        std::mem::swap(&mut old.fixed_in_order, &mut self.fixed_in_order);
+        std::mem::swap(&mut old.ext1, &mut self.ext1);
+        std::mem::swap(&mut old.ext2, &mut self.ext2);
+        std::mem::swap(&mut old.runs, &mut self.runs);
+        std::mem::swap(&mut old.regular, &mut self.regular);
+        std::mem::swap(&mut old.irregular, &mut self.irregular);
+        old.ext1_len = old.ext1.len();
+        self.row_at.clear();
+        self.fixed_in_order.clear();
         self.active.clear();
         self.active_cells.clear();
         self.reuse.clear();
@@ -553,12 +579,54 @@ impl FaceSet {
             }
         }
 
-        // The lists in index order, from the classes of every row (eight classes at a time: most
-        // rows hold no tracked face). A face carried over still holds its previous compact index
-        // (or layer position) here: the dirty faces were reset to NONE.
+        // The lists in index order. A clean row's entries are the last build's, as whole slices
+        // (its faces get their new compact indices and layer positions); a dirty row's come from
+        // its classes (eight at a time: most rows hold no tracked face), where a face carried over
+        // still holds its previous compact index (or layer position): the dirty faces were reset
+        // to NONE.
+        let rows = d[1] * d[2];
         for fk in 0..d[2] {
             for fj in 0..d[1] {
-                let base = d[0] * (fj + d[1] * fk);
+                let row = fj + d[1] * fk;
+                self.row_at.push([
+                    self.active.len() as u32,
+                    self.ext1.len() as u32,
+                    self.ext2.len() as u32,
+                    self.fixed_in_order.len() as u32,
+                    0,
+                    0,
+                    0,
+                ]);
+                if !self.row_dirty[row] {
+                    let (from, to) = (old.row_at[row], old.row_at[row + 1]);
+                    let span = |l: usize| from[l] as usize..to[l] as usize;
+                    let (a, n0) = (span(0), self.active.len() as u32);
+                    for (k, &idx) in old.active[a.clone()].iter().enumerate() {
+                        self.compact[idx as usize] = n0 + k as u32;
+                    }
+                    self.active.extend_from_slice(&old.active[a.clone()]);
+                    self.active_cells
+                        .extend_from_slice(&old.active_cells[a.clone()]);
+                    self.reuse.extend(a.start as u32..a.end as u32);
+                    for l in 0..2 {
+                        let (q, list, was) = if l == 0 {
+                            (span(1), &mut self.ext1, &old.ext1)
+                        } else {
+                            (span(2), &mut self.ext2, &old.ext2)
+                        };
+                        let p0 = list.len() as u32;
+                        for (k, &idx) in was[q.clone()].iter().enumerate() {
+                            self.ext_pos[idx as usize] = p0 + k as u32;
+                        }
+                        list.extend_from_slice(&was[q.clone()]);
+                        let at = if l == 0 { 0 } else { old.ext1_len as u32 };
+                        self.ext_reuse[l].extend((q.start as u32..q.end as u32).map(|q| at + q));
+                    }
+                    self.fixed_in_order
+                        .extend_from_slice(&old.fixed_in_order[span(3)]);
+                    continue;
+                }
+                let base = d[0] * row;
                 for (w, chunk) in self.class[base..base + d[0]].chunks(8).enumerate() {
                     let empty = match <[u8; 8]>::try_from(chunk) {
                         Ok(word) => u64::from_ne_bytes(word) == 0,
@@ -587,7 +655,7 @@ impl FaceSet {
                             FIXED => {
                                 let (li, ui) =
                                     face_cell_indices(cdims, cell_periodic, c, [i, fj, fk]);
-                                self.fixed.push([idx as u32, li, ui]);
+                                self.fixed_in_order.push([idx as u32, li, ui]);
                             }
                             EXT1 | EXT2 => {
                                 let l = usize::from(cl == EXT2);
@@ -608,6 +676,16 @@ impl FaceSet {
                 }
             }
         }
+
+        self.row_at.push([
+            self.active.len() as u32,
+            self.ext1.len() as u32,
+            self.ext2.len() as u32,
+            self.fixed_in_order.len() as u32,
+            0,
+            0,
+            0,
+        ]);
 
         // Viscous stencils. A tangential neighbour's cells are the face's own shifted by one cell
         // along that axis (wrapped on a periodic one).
@@ -633,15 +711,23 @@ impl FaceSet {
             to as u32
         };
         let mut old_ghost = 0;
-        for n in 0..self.active.len() {
+        let total = self.active.len();
+        let mut next = 0;
+        while next < total {
+            let n = next;
             let m = self.reuse[n];
             if m != NONE {
-                // Carried over: the same stencil (full indices), the same ghosts.
+                // Carried over, a stretch of consecutive faces at a time: the same stencils (full
+                // indices), the same ghosts.
                 let m = m as usize;
-                self.stencil.push(old.stencil[m]);
-                self.diag.push(old.diag[m]);
-                self.self_diag.push(old.self_diag[m]);
-                self.nbr.push(old.nbr[m]);
+                let mut len = 1;
+                while n + len < total && self.reuse[n + len] as usize == m + len {
+                    len += 1;
+                }
+                self.stencil.extend_from_slice(&old.stencil[m..m + len]);
+                self.diag.extend_from_slice(&old.diag[m..m + len]);
+                self.self_diag.extend_from_slice(&old.self_diag[m..m + len]);
+                self.nbr.extend_from_slice(&old.nbr[m..m + len]);
                 while old
                     .ghosts
                     .get(old_ghost)
@@ -649,12 +735,20 @@ impl FaceSet {
                 {
                     old_ghost += 1;
                 }
-                while let Some(g) = old.ghosts.get(old_ghost).filter(|g| g[0] as usize == m) {
-                    self.ghosts.push([n as u32, g[1], g[2], g[3]]);
+                let shift = (n as u32).wrapping_sub(m as u32);
+                while let Some(g) = old
+                    .ghosts
+                    .get(old_ghost)
+                    .filter(|g| (g[0] as usize) < m + len)
+                {
+                    self.ghosts
+                        .push([g[0].wrapping_add(shift), g[1], g[2], g[3]]);
                     old_ghost += 1;
                 }
+                next += len;
                 continue;
             }
+            next += 1;
             let idx = self.active[n] as usize;
             let f = layout.face_coords(c, idx);
             let [li0, ui0] = self.active_cells[n];
@@ -733,47 +827,78 @@ impl FaceSet {
             self.nbr.push(nbr);
         }
 
-        // Runs of active faces, and of regular ones (see `regular`).
+        // Runs of active faces, and of regular ones (see `regular`), row by row (a run never
+        // crosses a row): a clean row's are the last build's, shifted to its new compact indices.
         let offs = fstride;
-        for (n, &idx) in self.active.iter().enumerate() {
-            let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
-                Some(r)
-                    if r[0] + r[2] == idx
-                        && r[1] + r[2] == n as u32
-                        && !(idx as usize).is_multiple_of(d[0]) =>
-                {
-                    r[2] += 1
+        for row in 0..=rows {
+            self.row_at[row][4..].copy_from_slice(&[
+                self.runs.len() as u32,
+                self.regular.len() as u32,
+                self.irregular.len() as u32,
+            ]);
+            if row == rows {
+                break;
+            }
+            if !self.row_dirty[row] {
+                let (from, to) = (old.row_at[row], old.row_at[row + 1]);
+                let shift = self.row_at[row][0].wrapping_sub(from[0]);
+                let moved = |r: &[u32; 3]| [r[0], r[1].wrapping_add(shift), r[2]];
+                let span = |l: usize| from[l] as usize..to[l] as usize;
+                self.runs.extend(old.runs[span(4)].iter().map(moved));
+                self.regular.extend(old.regular[span(5)].iter().map(moved));
+                self.irregular
+                    .extend(old.irregular[span(6)].iter().map(|f| Irregular {
+                        n: f.n.wrapping_add(shift),
+                        ..*f
+                    }));
+                continue;
+            }
+            let (a0, a1) = (
+                self.row_at[row][0] as usize,
+                self.row_at[row + 1][0] as usize,
+            );
+            for n in a0..a1 {
+                let idx = self.active[n];
+                let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
+                    Some(r)
+                        if r[0] + r[2] == idx
+                            && r[1] + r[2] == n as u32
+                            && !(idx as usize).is_multiple_of(d[0]) =>
+                    {
+                        r[2] += 1
+                    }
+                    _ => runs.push([idx, n as u32, 1]),
+                };
+                push(&mut self.runs);
+                let i = idx as usize;
+                let plain = self.self_diag[n] == 6.0
+                    && (0..6).all(|slot| {
+                        let o = offs[slot / 2];
+                        let want = if slot % 2 == 0 {
+                            i.checked_sub(o)
+                        } else {
+                            Some(i + o)
+                        };
+                        want == Some(self.nbr[n][slot] as usize)
+                    });
+                if plain {
+                    push(&mut self.regular);
+                } else {
+                    self.irregular.push(Irregular {
+                        n: n as u32,
+                        idx,
+                        nbr: self.nbr[n],
+                        self_diag: self.self_diag[n],
+                    });
                 }
-                _ => runs.push([idx, n as u32, 1]),
-            };
-            push(&mut self.runs);
-            let i = idx as usize;
-            let plain = self.self_diag[n] == 6.0
-                && (0..6).all(|slot| {
-                    let o = offs[slot / 2];
-                    let want = if slot % 2 == 0 {
-                        i.checked_sub(o)
-                    } else {
-                        Some(i + o)
-                    };
-                    want == Some(self.nbr[n][slot] as usize)
-                });
-            if plain {
-                push(&mut self.regular);
-            } else {
-                self.irregular.push(Irregular {
-                    n: n as u32,
-                    idx,
-                    nbr: self.nbr[n],
-                    self_diag: self.self_diag[n],
-                });
             }
         }
 
-        // Keep only `Velocity` cells in the wall-velocity pairs, moving fixed faces first, so the
-        // per-step wall updates skip label lookups and still walls.
+        // Keep only `Velocity` cells in the wall-velocity pairs (again for carried faces: their
+        // cells did not change), moving fixed faces first, so the per-step wall updates skip
+        // label lookups and still walls.
         let moving = |i: u32| i != NONE && grid.label_at(i as usize) == CellLabel::Velocity;
-        for f in &mut self.fixed {
+        for f in &mut self.fixed_in_order {
             for cell in &mut f[1..] {
                 if !moving(*cell) {
                     *cell = NONE;
@@ -782,12 +907,11 @@ impl FaceSet {
         }
         // A stable partition (one pass each way), not a sort: only the two groups matter.
         let still = |f: &[u32; 3]| f[1] == NONE && f[2] == NONE;
-        let mut parted = std::mem::take(&mut self.fixed_scratch);
-        parted.clear();
-        parted.extend(self.fixed.iter().filter(|f| !still(f)));
-        parted.extend(self.fixed.iter().filter(|f| still(f)));
-        std::mem::swap(&mut self.fixed, &mut parted);
-        self.fixed_scratch = parted;
+        self.fixed.clear();
+        self.fixed
+            .extend(self.fixed_in_order.iter().filter(|f| !still(f)));
+        self.fixed
+            .extend(self.fixed_in_order.iter().filter(|f| still(f)));
         self.fixed_moving = self
             .fixed
             .iter()
@@ -802,12 +926,31 @@ impl FaceSet {
         }
         for (l, from) in [ACTIVE, EXT1].into_iter().enumerate() {
             let faces = if l == 0 { &self.ext1 } else { &self.ext2 };
-            for (&idx, &q) in faces.iter().zip(&self.ext_reuse[l]) {
+            let reuse = &self.ext_reuse[l];
+            let mut next = 0;
+            while next < faces.len() {
+                let (idx, q) = (faces[next], reuse[next]);
                 if q != NONE {
-                    let (s0, s1) = (old.ext_start[q as usize], old.ext_start[q as usize + 1]);
+                    // A stretch of consecutive carried faces: their sources in one slice.
+                    let q = q as usize;
+                    let mut len = 1;
+                    while next + len < faces.len() && reuse[next + len] as usize == q + len {
+                        len += 1;
+                    }
+                    let (s0, s1) = (old.ext_start[q], old.ext_start[q + len]);
+                    let shift = (self.ext_src.len() as u32).wrapping_sub(s0);
                     self.ext_src
                         .extend_from_slice(&old.ext_src[s0 as usize..s1 as usize]);
-                } else {
+                    self.ext_start.extend(
+                        old.ext_start[q + 1..=q + len]
+                            .iter()
+                            .map(|&e| e.wrapping_add(shift)),
+                    );
+                    next += len;
+                    continue;
+                }
+                next += 1;
+                {
                     let f = layout.face_coords(c, idx as usize);
                     for gi in neighbours(layout, c, f, idx as usize, fstride)
                         .into_iter()
@@ -858,6 +1001,8 @@ impl FaceSet {
         let d = self.fdims;
         self.dirty.clear();
         self.full = changed.is_none();
+        self.row_dirty.clear();
+        self.row_dirty.resize(d[1] * d[2], self.full);
         let Some(changed) = changed else {
             for fk in 0..d[2] {
                 for fj in 0..d[1] {
@@ -874,6 +1019,7 @@ impl FaceSet {
             let at = [cell % nx, (cell / nx) % ny, cell / (nx * ny)];
             for (fk, near_k) in dirty_span(at[2], usize::from(c == 2), d[2], p[2]) {
                 for (fj, near_j) in dirty_span(at[1], usize::from(c == 1), d[1], p[1]) {
+                    self.row_dirty[fj + d[1] * fk] = true;
                     let base = d[0] * (fj + d[1] * fk);
                     for (i, near_i) in dirty_span(at[0], usize::from(c == 0), d[0], p[0]) {
                         let level = if near_i && near_j && near_k {
