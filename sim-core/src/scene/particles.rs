@@ -1241,8 +1241,8 @@ struct Sampler<'a> {
     corner_bytes: [usize; 8],
     /// The upper sample along x is the next element (more than one cell along x).
     x_pairs: bool,
-    /// `field` holds every cell of the grid, and a cell index fits an `i32` (the eight-particle
-    /// kernel's precondition: its samples need no bounds check).
+    /// `field` holds every cell of the grid, and a cell's byte offset in it fits a `u32` (the
+    /// eight-particle kernel's precondition: its samples need no bounds check).
     whole: bool,
 }
 
@@ -1265,7 +1265,7 @@ impl<'a> Sampler<'a> {
             whole: dims
                 .iter()
                 .try_fold(1usize, |n, &d| n.checked_mul(d))
-                .is_some_and(|n| n <= field.len() && n <= i32::MAX as usize),
+                .is_some_and(|n| n <= field.len() && n <= (u32::MAX as usize) / size),
         }
     }
 

@@ -106,11 +106,7 @@ pub(super) fn run(
         });
         let fluid = c.in_fluid(k, q);
         let done = one & fluid;
-        let bits = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
-        let done_v = _mm256_castsi256_ps(_mm256_cmpeq_epi32(
-            _mm256_and_si256(_mm256_set1_epi32(done as i32), bits),
-            bits,
-        ));
+        let done_v = lane_mask(done);
         store3(
             pb,
             std::array::from_fn(|a| _mm256_blendv_ps(p[a], q[a], done_v)),
@@ -202,13 +198,17 @@ fn substeps(
     let half_inv = _mm256_mul_ps(c.half, inv);
     let half_sd = sd.map(|x| _mm256_add_ps(_mm256_mul_ps(x, half_inv), c.zero));
     let sd = sd.map(|x| _mm256_add_ps(_mm256_mul_ps(x, inv), c.zero));
-    let subs = lanes_i32(_mm256_cvttps_epi32(subs));
+    let most = lanes_i32(_mm256_cvttps_epi32(subs))[..n]
+        .iter()
+        .copied()
+        .max()
+        .unwrap_or(0);
     let mut fates = [KEEP; BLOCK];
-    let most = subs[..n].iter().copied().max().unwrap_or(0);
+    // The lanes still in the cavity (fate KEEP).
+    let mut live = filled;
     for sub in 0..most {
-        let on = (0..BLOCK).fold(0u32, |m, l| {
-            m | u32::from(sub < subs[l] && fates[l] == KEEP) << l
-        }) & filled;
+        let more = _mm256_cmp_ps::<_CMP_LT_OQ>(_mm256_set1_ps(sub as f32), subs);
+        let on = _mm256_movemask_ps(more) as u32 & live;
         if on == 0 {
             break;
         }
@@ -226,14 +226,15 @@ fn substeps(
         let q: [__m256; 3] = std::array::from_fn(|a| {
             _mm256_add_ps(_mm256_mul_ps(hs, k2[a]), _mm256_add_ps(p[a], sd[a]))
         });
-        let (q, fluid) = (lanes3(q), c.in_fluid(k, q));
-        for l in (0..BLOCK).filter(|l| on >> l & 1 != 0) {
-            if fluid >> l & 1 != 0 {
-                for a in 0..3 {
-                    w.p[a][l] = q[a][l];
-                }
-                continue;
-            }
+        let fluid = c.in_fluid(k, q);
+        let moved = lane_mask(on & fluid);
+        w.p = lanes3(std::array::from_fn(|a| _mm256_blendv_ps(p[a], q[a], moved)));
+        let walls = on & !fluid;
+        if walls == 0 {
+            continue;
+        }
+        let q = lanes3(q);
+        for l in (0..BLOCK).filter(|l| walls >> l & 1 != 0) {
             // `Kernel::land` past its fluid case: an outlet, or a slide along the wall.
             let (pl, ql) = (w.lane(l, &w.p), w.lane(l, &q));
             let (end, f) = k.land(pl, ql);
@@ -242,6 +243,9 @@ fn substeps(
                 w.p[a][l] = e[a];
             }
             fates[l] = f;
+            if f != KEEP {
+                live &= !(1 << l);
+            }
         }
     }
     let mut left = 0;
@@ -325,7 +329,7 @@ impl Consts {
                 _mm256_cvttps_epi32(q[1]),
                 _mm256_cvttps_epi32(q[2]),
             ];
-            (_mm256_movemask_ps(inside) as u32, index(self, i))
+            (_mm256_movemask_ps(inside) as u32, index::<0>(self, i))
         };
         let mut fluid = 0u32;
         for (l, &n) in cells.iter().enumerate() {
@@ -389,7 +393,8 @@ fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3
             t[a] = _mm256_sub_ps(s, fl);
             i[a] = _mm256_cvttps_epi32(fl);
         }
-        let base = index(c, i);
+        // Byte offsets of the lower samples.
+        let base = index::<4>(c, i);
         let [tx, ty, tz] = lanes3(t);
         let f = &k.field;
         let [_, sy, sz] = f.step;
@@ -402,7 +407,7 @@ fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3
             // SAFETY: `Kernel::blocks`: the field holds the whole grid, and the lower index is
             // at most n - 2 along x and at most max(n - 2, 0) along y and z, so the pairs at
             // `base + {0, sy} + {0, sz}` end at most at the grid's last cell.
-            let at = first.add(base[l] as usize).cast::<f32>();
+            let at = first.byte_add(base[l] as usize).cast::<f32>();
             let pairs = [
                 _mm256_loadu_ps(at),
                 _mm256_loadu_ps(at.add(4 * sy)),
@@ -431,18 +436,18 @@ fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3
     }
 }
 
-/// Cell indices `i + nx j + nx ny k` of eight whole-number triples (`lane::index`; every index
-/// fits an `i32`, [`Kernel::blocks`]).
+/// Cell indices `i + nx j + nx ny k` of eight whole-number triples (`lane::index`), times
+/// `2^SHIFT` (every cell's byte offset in the field fits a `u32`, [`Kernel::blocks`]).
 #[inline(always)]
-fn index(c: &Consts, i: [__m256i; 3]) -> [i32; BLOCK] {
-    let mut out = [0i32; BLOCK];
-    // SAFETY: the caller has AVX2; the store writes the whole `[i32; 8]`.
+fn index<const SHIFT: i32>(c: &Consts, i: [__m256i; 3]) -> [u32; BLOCK] {
+    let mut out = [0u32; BLOCK];
+    // SAFETY: the caller has AVX2; the store writes the whole `[u32; 8]`.
     unsafe {
         let n = _mm256_add_epi32(
             _mm256_add_epi32(i[0], _mm256_mullo_epi32(i[1], c.nx)),
             _mm256_mullo_epi32(i[2], c.nxny),
         );
-        _mm256_storeu_si256(out.as_mut_ptr().cast(), n);
+        _mm256_storeu_si256(out.as_mut_ptr().cast(), _mm256_slli_epi32::<SHIFT>(n));
     }
     out
 }
@@ -476,6 +481,19 @@ fn cone_weights(cone: &super::Cone, p: [__m256; 3]) -> [f32; BLOCK] {
         _mm256_max_ps(r2, _mm256_set1_ps(cone.near2)),
     );
     lanes(_mm256_and_ps(w, inside))
+}
+
+/// The lanes of `bits` as a mask (all ones where set).
+#[inline(always)]
+fn lane_mask(bits: u32) -> __m256 {
+    // SAFETY: the caller has AVX2.
+    unsafe {
+        let each = _mm256_setr_epi32(1, 2, 4, 8, 16, 32, 64, 128);
+        _mm256_castsi256_ps(_mm256_cmpeq_epi32(
+            _mm256_and_si256(_mm256_set1_epi32(bits as i32), each),
+            each,
+        ))
+    }
 }
 
 /// The eight lanes.
