@@ -395,7 +395,10 @@ fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3
         }
         // Byte offsets of the lower samples.
         let base = index::<4>(c, i);
-        let [tx, ty, tz] = lanes3(t);
+        // The weights from memory: one broadcast load per weight and lane (from registers, two
+        // shuffles each).
+        let t = std::hint::black_box(lanes3(t));
+        let [tx, ty, tz] = &t;
         let f = &k.field;
         let [_, sy, sz] = f.step;
         let first = f.field.as_ptr();
@@ -416,9 +419,9 @@ fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3
             ];
             *out = lane::blend_x_pairs(
                 pairs,
-                _mm256_set1_ps(ty[l]),
-                _mm256_set1_ps(tz[l]),
-                _mm_set1_ps(tx[l]),
+                _mm256_broadcast_ss(&ty[l]),
+                _mm256_broadcast_ss(&tz[l]),
+                _mm_broadcast_ss(&tx[l]),
             );
         }
         // Transposed: [u, v, w, 0] per particle to u, v, w per lane.
