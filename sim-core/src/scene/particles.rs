@@ -1629,14 +1629,19 @@ impl<'a> Kernel<'a> {
         // are GROUP of them, whose substeps then run side by side (their samples overlap too).
         let mut waiting = [Resume::default(); GROUP];
         let mut count = 0;
-        let mut from = 0;
+        // Eight at a time, each particle in a lane of its own (`block8`), where it can; the rest
+        // (fewer than eight) in groups of four.
         #[cfg(target_arch = "x86_64")]
-        if FMA && self.blocks() {
-            // Eight at a time, each particle in a lane of its own (`block8`).
+        let from = if FMA && self.blocks() {
             // SAFETY: `FMA` only in `run_avx2` (the CPU has AVX2 and FMA).
             let (l, moved) = unsafe { block8::run(self, grouped, pos, slip, class, fate, sums) };
-            (left, from) = (left + l, moved);
-        }
+            left += l;
+            moved
+        } else {
+            0
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let from = 0;
         for g in (from..grouped).step_by(GROUP) {
             let p: Result<&mut [[f32; 3]; GROUP], _> = (&mut pos[g..g + GROUP]).try_into();
             let w: Result<&mut [[f32; 3]; GROUP], _> = (&mut slip[g..g + GROUP]).try_into();

@@ -319,9 +319,12 @@ impl Consts {
     fn in_fluid(&self, k: &Kernel<'_>, q: [__m256; 3]) -> u32 {
         // SAFETY (the intrinsics): the caller has AVX2 (inlined into `run`).
         let (inside, cells) = unsafe {
-            let mut inside = _mm256_cmp_ps::<_CMP_LT_OQ>(q[0], self.dims[0]);
+            // In [0, dims) along every axis (a NaN fails).
+            let mut inside = _mm256_cmp_ps::<_CMP_GE_OQ>(q[0], self.zero);
             for a in 0..3 {
-                inside = _mm256_and_ps(inside, _mm256_cmp_ps::<_CMP_GE_OQ>(q[a], self.zero));
+                if a > 0 {
+                    inside = _mm256_and_ps(inside, _mm256_cmp_ps::<_CMP_GE_OQ>(q[a], self.zero));
+                }
                 inside = _mm256_and_ps(inside, _mm256_cmp_ps::<_CMP_LT_OQ>(q[a], self.dims[a]));
             }
             let i = [
