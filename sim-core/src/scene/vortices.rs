@@ -684,12 +684,13 @@ impl VortexField {
         for c in 0..3 {
             let u = solver.face_velocities_mut(c);
             let (faces, injected) = (&self.faces[c], &mut self.injected[c]);
-            for &[f, _] in &self.fluid_faces[c] {
-                let idx = f as usize;
-                let d = faces[idx] - injected[idx];
-                if d != 0.0 {
-                    u[idx] += d;
-                    injected[idx] = faces[idx];
+            // Over the runs of consecutive faces (vectorised); an unchanged face adds zero.
+            for &[f, _, len] in &self.face_runs[c] {
+                let r = f as usize..(f + len) as usize;
+                let (u, new, old) = (&mut u[r.clone()], &faces[r.clone()], &mut injected[r]);
+                for ((u, &new), old) in u.iter_mut().zip(new).zip(old.iter_mut()) {
+                    *u += new - *old;
+                    *old = new;
                 }
             }
         }
