@@ -151,7 +151,7 @@ impl Support {
         if self.a > 1e-3 {
             let beta = s0 * nx;
             let disc = beta * beta - self.a * (e0 - s0 * s0 - self.cut2);
-            if !(disc >= 0.0) {
+            if disc.is_nan() || disc < 0.0 {
                 return None;
             }
             let sq = disc.sqrt();
@@ -174,7 +174,7 @@ impl Support {
         let first = if a > b { a } else { b };
         let (a, b) = (hi - self.offset[0] + MARGIN_CELLS, ib as i32 as f32);
         let last = if a < b { a } else { b };
-        if !(first <= last) {
+        if first > last {
             return None;
         }
         // Both >= 0: truncation floors, the first rounds up.
