@@ -38,6 +38,7 @@ mod ports;
 pub mod prepare;
 mod random;
 pub mod surface;
+mod vortex_potential;
 pub mod vortices;
 pub mod voxelize;
 

@@ -19,6 +19,9 @@
 use serde::{Deserialize, Serialize};
 
 use super::random::SeededRng;
+use super::vortex_potential::{
+    self, curl_run, radial_potential, rankine_psi, taper, Slab, Support, Table,
+};
 use super::Scene;
 use crate::fluid::{CellLabel, FluidSolver};
 
@@ -30,8 +33,6 @@ pub const CUTOFF_CORES: f64 = 2.5;
 pub const AXIAL_FLAT_CORES: f64 = 1.0;
 /// The axial window is zero from this many core radii.
 pub const AXIAL_END_CORES: f64 = 2.0;
-/// Entries of the potential's table over `q = r^2 / R^2` in `[0, CUTOFF_CORES^2]`.
-const TABLE_SIZE: usize = 512;
 
 /// Where the vortices act.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -144,32 +145,6 @@ impl VortexSpec {
     }
 }
 
-/// Smoothstep taper: 1 for `x <= a`, 0 for `x >= b`, C1 in between; and its derivative.
-#[inline]
-fn taper(x: f64, a: f64, b: f64) -> (f64, f64) {
-    if x <= a {
-        (1.0, 0.0)
-    } else if x >= b {
-        (0.0, 0.0)
-    } else {
-        let t = (x - a) / (b - a);
-        (
-            1.0 - t * t * (3.0 - 2.0 * t),
-            -6.0 * t * (1.0 - t) / (b - a),
-        )
-    }
-}
-
-/// Rankine's stream function over `Gamma / (2 pi)`, zero at the cutoff: `r` in core radii.
-#[inline]
-fn rankine_psi(r: f64) -> f64 {
-    if r <= 1.0 {
-        0.5 * (1.0 - r * r) + CUTOFF_CORES.ln()
-    } else {
-        (CUTOFF_CORES / r).ln()
-    }
-}
-
 /// One Rankine vortex.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Vortex {
@@ -225,7 +200,7 @@ impl Vortex {
         let (s, _, r) = self.frame(p);
         let rr = r / self.core_radius_m;
         let k = self.circulation_m2_s / (2.0 * std::f64::consts::PI);
-        self.axial_window(s) * k * rankine_psi(rr) * taper(rr, RANKINE_EXACT_CORES, CUTOFF_CORES).0
+        self.axial_window(s) * k * radial_potential(rr)
     }
 
     /// Half extent (m) of the vortex's support along each axis.
@@ -310,8 +285,10 @@ pub struct VortexField {
     /// The node layer splitting the nodes of `node_mask` in halves (the two tasks of
     /// `rebuild`).
     split_k: usize,
-    /// `Psi(q) w(q)` over `Gamma / (2 pi)` at `q = r^2/R^2`.
-    table: Box<[f32; TABLE_SIZE + 1]>,
+    /// The radial factor of the potential, tabulated.
+    table: Box<Table>,
+    /// Each vortex's support on the grid (the step's scratch, kept for its capacity).
+    supports: Vec<Support>,
     stats: VortexStats,
 }
 
@@ -328,14 +305,10 @@ impl VortexField {
         let nodes = (dims[0] + 1) * (dims[1] + 1) * (dims[2] + 1);
         let faces: [Vec<f32>; 3] =
             std::array::from_fn(|c| vec![0.0; solver.face_velocities(c).len()]);
-        let qmax = CUTOFF_CORES * CUTOFF_CORES;
-        let table = Box::new(std::array::from_fn(|i| {
-            let r = (qmax * i as f64 / TABLE_SIZE as f64).sqrt();
-            (rankine_psi(r) * taper(r, RANKINE_EXACT_CORES, CUTOFF_CORES).0) as f32
-        }));
         Ok(Self {
             rng: SeededRng::new(spec.seed),
             vortices: Vec::with_capacity(spec.max_count),
+            supports: Vec::with_capacity(spec.max_count),
             fluid_nodes: Vec::new(),
             split_k: 0,
             row_nodes: vec![(1, 0); (dims[1] + 1) * (dims[2] + 1)],
@@ -356,7 +329,7 @@ impl VortexField {
             pot: std::array::from_fn(|_| vec![0.0; nodes]),
             injected: faces.clone(),
             faces,
-            table,
+            table: vortex_potential::table(),
             stats: VortexStats::default(),
         })
     }
@@ -650,14 +623,17 @@ impl VortexField {
         let (p0a, p0b) = p0.split_at_mut(at);
         let (p1a, p1b) = p1.split_at_mut(at);
         let (p2a, p2b) = p2.split_at_mut(at);
+        let inv_h = 1.0 / self.h;
+        self.supports.clear();
+        self.supports.extend(
+            (self.vortices.iter()).filter_map(|v| Support::of(v, self.origin, inv_h, self.dims)),
+        );
         let slab = Slab {
-            vortices: &self.vortices,
+            supports: &self.supports,
             node_mask: &self.node_mask,
             row_nodes: &self.row_nodes,
             table: &self.table,
             dims: self.dims,
-            origin: self.origin,
-            h: self.h,
         };
         let (lower, upper) = crate::fork_join::join(
             || slab.potential(0..self.split_k, 0, [p0a, p1a, p2a]),
@@ -691,17 +667,7 @@ impl VortexField {
                 let (na, nb) = (&pot[a][..], &pot[b][..]);
                 for &[f, base, len] in runs {
                     let (f, base, len) = (f as usize - offset, base as usize, len as usize);
-                    fn window(p: &[f32], at: usize, len: usize) -> &[f32] {
-                        &p[at..at + len]
-                    }
-                    let at = |p, o| window(p, base + o, len);
-                    let (b00, b10, b01, b11) = (at(nb, 0), at(nb, sa), at(nb, sb), at(nb, sa + sb));
-                    let (a00, a10, a01, a11) = (at(na, 0), at(na, sa), at(na, sb), at(na, sa + sb));
-                    for (i, o) in out[f..f + len].iter_mut().enumerate() {
-                        let u = (b10[i] + b11[i] - b00[i] - b01[i])
-                            - (a01[i] + a11[i] - a00[i] - a10[i]);
-                        *o = u * inv;
-                    }
+                    curl_run(&mut out[f..f + len], [na, nb], base, [sa, sb], inv);
                 }
             }
         };
@@ -718,12 +684,13 @@ impl VortexField {
         for c in 0..3 {
             let u = solver.face_velocities_mut(c);
             let (faces, injected) = (&self.faces[c], &mut self.injected[c]);
-            for &[f, _] in &self.fluid_faces[c] {
-                let idx = f as usize;
-                let d = faces[idx] - injected[idx];
-                if d != 0.0 {
-                    u[idx] += d;
-                    injected[idx] = faces[idx];
+            // Over the runs of consecutive faces (vectorised); an unchanged face adds zero.
+            for &[f, _, len] in &self.face_runs[c] {
+                let r = f as usize..(f + len) as usize;
+                let (u, new, old) = (&mut u[r.clone()], &faces[r.clone()], &mut injected[r]);
+                for ((u, &new), old) in u.iter_mut().zip(new).zip(old.iter_mut()) {
+                    *u += new - *old;
+                    *old = new;
                 }
             }
         }
@@ -747,179 +714,6 @@ impl VortexField {
             }
         }
     }
-}
-
-/// What the potential's evaluation over a range of node layers reads.
-struct Slab<'a> {
-    vortices: &'a [Vortex],
-    node_mask: &'a [u8],
-    row_nodes: &'a [(u32, u32)],
-    table: &'a [f32; TABLE_SIZE + 1],
-    dims: [usize; 3],
-    origin: [f64; 3],
-    h: f64,
-}
-
-impl Slab<'_> {
-    /// Adds every vortex's potential at the nodes of `node_mask` in the node layers `layers`
-    /// to `pot` (those layers' nodes, the first at node `offset`); returns the nodes evaluated.
-    fn potential(
-        &self,
-        layers: std::ops::Range<usize>,
-        offset: usize,
-        mut pot: [&mut [f32]; 3],
-    ) -> usize {
-        if layers.is_empty() {
-            return 0;
-        }
-        let [nx, ny, _] = self.dims;
-        let (sx, sy) = (nx + 1, (nx + 1) * (ny + 1));
-        let mut evaluated = 0;
-        let qmax = (CUTOFF_CORES * CUTOFF_CORES) as f32;
-        let tscale = TABLE_SIZE as f32 / qmax;
-        let h = self.h;
-        for v in self.vortices {
-            let ext = v.half_extent_m();
-            let mut lo = [0usize; 3];
-            let mut hi = [0usize; 3];
-            let mut empty = false;
-            for a in 0..3 {
-                let l = ((v.centre_m[a] - ext[a] - self.origin[a]) / h)
-                    .ceil()
-                    .max(0.0);
-                let u = ((v.centre_m[a] + ext[a] - self.origin[a]) / h)
-                    .floor()
-                    .min(self.dims[a] as f64);
-                if l.is_nan() || u.is_nan() || l > u {
-                    empty = true;
-                }
-                lo[a] = l as usize;
-                hi[a] = u.max(0.0) as usize;
-            }
-            if empty || v.circulation_m2_s == 0.0 {
-                continue;
-            }
-            let n = v.axis.map(|x| x as f32);
-            let amp = (v.circulation_m2_s / (2.0 * std::f64::consts::PI)) as f32;
-            let inv_r2 = (1.0 / (v.core_radius_m * v.core_radius_m)) as f32;
-            let (flat, end) = (
-                (AXIAL_FLAT_CORES * v.core_radius_m) as f32,
-                (AXIAL_END_CORES * v.core_radius_m) as f32,
-            );
-            let inv_len = 1.0 / (end - flat);
-            let hf = h as f32;
-            let inv_hf = 1.0 / hf;
-            let r2max = qmax / inv_r2;
-            let table = self.table;
-            let [p0, p1, p2] = &mut pot;
-            for k in lo[2].max(layers.start)..=hi[2].min(layers.end - 1) {
-                let dz = self.origin[2] + k as f64 * h - v.centre_m[2];
-                for j in lo[1]..=hi[1] {
-                    // Only the row's nodes in `node_mask` (their extent, precomputed).
-                    let (ra, rb) = self.row_nodes[j + (ny + 1) * k];
-                    let (ia, ib) = (lo[0].max(ra as usize), hi[0].min(rb as usize));
-                    if ia > ib {
-                        continue;
-                    }
-                    let dy = self.origin[1] + j as f64 * h - v.centre_m[1];
-                    let s0 = (dy * v.axis[1] + dz * v.axis[2]) as f32;
-                    let e0 = (dy * dy + dz * dz) as f32;
-                    let x_ia = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
-                    // The row's stretch within the support (the cutoff cylinder and the axial
-                    // window).
-                    let Some((ia, ib)) =
-                        row_span(ia, ib, x_ia, [s0, e0, n[0]], [r2max, end], inv_hf)
-                    else {
-                        continue;
-                    };
-                    let row = sx * j + sy * k - offset;
-                    let nodes = row + ia..=row + ib;
-                    let mut dx = (self.origin[0] + ia as f64 * h - v.centre_m[0]) as f32;
-                    for (((&mask, a0), a1), a2) in self.node_mask
-                        [nodes.start() + offset..=nodes.end() + offset]
-                        .iter()
-                        .zip(&mut p0[nodes.clone()])
-                        .zip(&mut p1[nodes.clone()])
-                        .zip(&mut p2[nodes])
-                    {
-                        let x = dx;
-                        dx += hf;
-                        let s = s0 + x * n[0];
-                        let sa = s.abs();
-                        let q = (x * x + e0 - s * s).max(0.0) * inv_r2;
-                        if mask == 0 || sa >= end || q >= qmax {
-                            continue;
-                        }
-                        evaluated += 1;
-                        let g = if sa <= flat {
-                            1.0
-                        } else {
-                            let t = (sa - flat) * inv_len;
-                            1.0 - t * t * (3.0 - 2.0 * t)
-                        };
-                        let x = q * tscale;
-                        let m = (x as i32 as usize).min(TABLE_SIZE - 1);
-                        let f = x - m as f32;
-                        let psi = table[m] + f * (table[m + 1] - table[m]);
-                        let phi = amp * g * psi;
-                        *a0 += phi * n[0];
-                        *a1 += phi * n[1];
-                        *a2 += phi * n[2];
-                    }
-                }
-            }
-        }
-        evaluated
-    }
-}
-
-/// The nodes `ia..=ib` of a row (along x; the first at `x_ia` from the vortex's centre, `s0`
-/// and `e0` the row's axial offset and squared distance in y and z, `n0` the axis's x component)
-/// that can lie in the vortex's support: within `r^2 < r2max` of the axis and `|s| < end` of the
-/// centre plane. The margin is a thousandth of a cell (the f32 roots' error is far smaller, and the
-/// potential vanishes with zero slope at both edges); the per-node test decides. `None` when no
-/// node can.
-#[inline]
-fn row_span(
-    ia: usize,
-    ib: usize,
-    x_ia: f32,
-    [s0, e0, n0]: [f32; 3],
-    [r2max, end]: [f32; 2],
-    inv_h: f32,
-) -> Option<(usize, usize)> {
-    // Along the row, x from the centre: r^2(x) = (1 - n0^2) x^2 - 2 s0 n0 x + e0 - s0^2 and
-    // s(x) = s0 + n0 x. Rows nearly along the axis are narrowed by the axial window alone.
-    let (mut lo, mut hi) = (f32::NEG_INFINITY, f32::INFINITY);
-    let a = 1.0 - n0 * n0;
-    if a > 1e-3 {
-        let b = -2.0 * s0 * n0;
-        let c = e0 - s0 * s0 - r2max;
-        let disc = b * b - 4.0 * a * c;
-        if disc.is_nan() || disc < 0.0 {
-            return None;
-        }
-        let (sq, inv_2a) = (disc.sqrt(), 0.5 / a);
-        (lo, hi) = ((-b - sq) * inv_2a, (-b + sq) * inv_2a);
-    }
-    if n0.abs() > 1e-6 {
-        let (x1, x2) = ((-end - s0) / n0, (end - s0) / n0);
-        lo = lo.max(x1.min(x2));
-        hi = hi.min(x1.max(x2));
-    } else if s0.abs() >= end {
-        return None;
-    }
-    const MARGIN_CELLS: f32 = 1e-3;
-    let first = ((lo - x_ia) * inv_h - MARGIN_CELLS).max(0.0);
-    let last = ((hi - x_ia) * inv_h + MARGIN_CELLS).min((ib - ia) as f32);
-    if !(last >= 0.0 && first <= last) {
-        return None;
-    }
-    // Both in `[0, ib - ia]` here: the conversions truncate (floor), the first rounds up (no
-    // libm call for ceil on the baseline target).
-    let (f, l) = (first as usize, last as usize);
-    let f = f + usize::from((f as f32) < first);
-    (f <= l).then_some((ia + f, ia + l))
 }
 
 /// The vortex stage of a scene.
