@@ -128,20 +128,9 @@ fn max_abs(a: &[f64]) -> f64 {
 }
 
 impl PressureSolver {
-    /// Resizes the vectors after the level-0 rows changed, keeping nothing of the old warm start.
+    /// Resizes the vectors after the level-0 rows changed, keeping nothing of the old warm start
+    /// (the compressed-row vectors of the reference solvers are sized when one runs).
     pub fn resize(&mut self) {
-        let n = self.mg.levels[0].rows();
-        for v in [
-            &mut self.q,
-            &mut self.b,
-            &mut self.r,
-            &mut self.z,
-            &mut self.p,
-            &mut self.ap,
-        ] {
-            v.clear();
-            v.resize(n, 0.0);
-        }
         self.regions.build(&self.mg.levels[0]);
         let l0 = &self.mg.levels[0];
         let len = l0.x.len();
@@ -197,7 +186,8 @@ impl PressureSolver {
         tol_abs: f64,
         max_iterations: usize,
     ) -> SolveOutcome {
-        if self.q.is_empty() {
+        let n = self.mg.levels[0].rows();
+        if n == 0 {
             return SolveOutcome {
                 iterations: 0,
                 converged: true,
@@ -209,6 +199,16 @@ impl PressureSolver {
                 return self.red_black_gauss_seidel(sweeps, tol_abs)
             }
             _ => {}
+        }
+        for v in [
+            &mut self.q,
+            &mut self.b,
+            &mut self.r,
+            &mut self.z,
+            &mut self.p,
+            &mut self.ap,
+        ] {
+            v.resize(n, 0.0);
         }
         let pad_of_row = &self.mg.levels[0].pad_of_row;
         for ((q, b), &p) in self.q.iter_mut().zip(&mut self.b).zip(pad_of_row) {
