@@ -824,10 +824,11 @@ impl Level {
     /// says.
     fn build_dense(&mut self, diag: DenseDiag) {
         let [nx, ny, nz] = self.dims;
+        let (old_sy, old_sz) = (self.sy, self.sz);
         self.sy = nx + 2;
         self.sz = (nx + 2) * (ny + 2);
         let len = self.sz * (nz + 2);
-        // Periodic halos are written outside the spans: those levels clear the whole box.
+        // Periodic halos are written outside the fluid cells: those levels clear the whole box.
         let sparse = self.mask.len() == len && !self.periodic.iter().any(|&p| p);
         let [inv0, inv1] = &mut self.inv;
         let vectors = [
@@ -840,9 +841,12 @@ impl Level {
             &mut self.r,
         ];
         if sparse {
+            // Every vector of the level is zero off its fluid cells: clearing the last fluid
+            // rows (not the spans, twice as long with their gaps) zeroes the box.
             for v in vectors {
-                for &[s, e] in &self.spans {
-                    v[s as usize..e as usize].fill(0.0);
+                for &[j, k, i0, i1] in &self.row_spans {
+                    let p = pad_index(old_sy, old_sz, i0 as usize, j as usize, k as usize);
+                    v[p..p + (i1 - i0) as usize].fill(0.0);
                 }
             }
             let mut old = self.old_spans.take().unwrap_or_default();

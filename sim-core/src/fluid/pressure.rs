@@ -134,16 +134,16 @@ impl PressureSolver {
         self.regions.build(&self.mg.levels[0]);
         let l0 = &self.mg.levels[0];
         let len = l0.x.len();
-        // Zero outside level 0's spans: only the previous spans need clearing.
+        // Zero outside level 0's spans: only the previous spans need clearing. `dd` and `dap` are
+        // written over the spans before they are read, and read only there: they keep whatever
+        // the old spans left.
         match &l0.old_spans {
             Some(old) if self.dq.len() == len => {
                 for &[s, e] in old {
                     let r = s as usize..e as usize;
                     self.dq[r.clone()].fill(0.0);
                     self.bd[r.clone()].fill(0.0);
-                    self.dd[r.clone()].fill(0.0);
-                    self.dp[r.clone()].fill(0.0);
-                    self.dap[r].fill(0.0);
+                    self.dp[r].fill(0.0);
                 }
             }
             _ => {
