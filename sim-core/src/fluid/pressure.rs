@@ -316,7 +316,9 @@ impl PressureSolver {
                     for i in 0..n {
                         let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
                         out[i] = mk[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
-                        m = m.max(out[i].abs());
+                        // Not f32::max: a plain comparison vectorizes (NaN is skipped by both).
+                        let a = out[i].abs();
+                        m = if a > m { a } else { m };
                     }
                 }
                 m as f64
