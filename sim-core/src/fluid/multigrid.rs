@@ -392,7 +392,9 @@ impl pulp::WithSimd for SpanRun<'_> {
                         for k in 0..LANES {
                             d[k] += alpha * p[k];
                             r[k] -= alpha * ap[k];
-                            m[k] = m[k].max(r[k].abs());
+                            // A plain comparison: one vector max (f32::max adds a NaN blend).
+                            let a = r[k].abs();
+                            m[k] = if a > m[k] { a } else { m[k] };
                         }
                     }
                     let tail = pc
@@ -403,7 +405,8 @@ impl pulp::WithSimd for SpanRun<'_> {
                     for ((&p, &ap), (d, r)) in tail {
                         *d += alpha * p;
                         *r -= alpha * ap;
-                        m[0] = m[0].max(r.abs());
+                        let a = r.abs();
+                        m[0] = if a > m[0] { a } else { m[0] };
                     }
                     if let Some((x, inv)) = init.as_mut() {
                         for ((x, &r), &i) in x[rs].iter_mut().zip(r.iter()).zip(&inv[s..e]) {
@@ -624,11 +627,12 @@ impl Level {
                     let odd = c[a] % 2 == 1;
                     // +axis face (fluid or open neighbour), and -axis face to an open neighbour
                     // (a fluid one is counted from its own +axis face).
-                    if odd && c[a] + 1 < n {
-                        if matches!(self.label[ci + cell_stride[a]], L_FLUID | L_OPEN) {
-                            let w = fine_w.map_or(1.0, |w| w[a][pf]);
-                            coarse.wt[a][pc] += w * share[a];
-                        }
+                    if odd
+                        && c[a] + 1 < n
+                        && matches!(self.label[ci + cell_stride[a]], L_FLUID | L_OPEN)
+                    {
+                        let w = fine_w.map_or(1.0, |w| w[a][pf]);
+                        coarse.wt[a][pc] += w * share[a];
                     }
                     if !odd && c[a] > 0 && self.label[ci - cell_stride[a]] == L_OPEN {
                         let w = fine_w.map_or(1.0, |w| w[a][pf - fine_stride[a]]);
