@@ -392,7 +392,9 @@ impl pulp::WithSimd for SpanRun<'_> {
                         for k in 0..LANES {
                             d[k] += alpha * p[k];
                             r[k] -= alpha * ap[k];
-                            m[k] = m[k].max(r[k].abs());
+                            // A plain comparison: one vector max (f32::max adds a NaN blend).
+                            let a = r[k].abs();
+                            m[k] = if a > m[k] { a } else { m[k] };
                         }
                     }
                     let tail = pc
@@ -403,7 +405,8 @@ impl pulp::WithSimd for SpanRun<'_> {
                     for ((&p, &ap), (d, r)) in tail {
                         *d += alpha * p;
                         *r -= alpha * ap;
-                        m[0] = m[0].max(r.abs());
+                        let a = r.abs();
+                        m[0] = if a > m[0] { a } else { m[0] };
                     }
                     if let Some((x, inv)) = init.as_mut() {
                         for ((x, &r), &i) in x[rs].iter_mut().zip(r.iter()).zip(&inv[s..e]) {
@@ -503,6 +506,17 @@ fn pad_index(sy: usize, sz: usize, i: usize, j: usize, k: usize) -> usize {
     (i + 1) + sy * (j + 1) + sz * (k + 1)
 }
 
+/// Where [`Level::build_dense`] takes the diagonal from.
+#[derive(Clone, Copy)]
+enum DenseDiag {
+    /// The compressed rows' (level 0, built just before).
+    Rows,
+    /// Counted from the labels (a coarse level with unit couplings).
+    Count,
+    /// Left to [`Level::galerkin`], which sets it on every fluid cell.
+    Later,
+}
+
 /// One multigrid level.
 #[derive(Default, Debug)]
 pub(crate) struct Level {
@@ -562,15 +576,6 @@ impl Level {
         (!a.is_empty()).then_some([&a[..], &b[..], &c[..]])
     }
 
-    /// Coupling between the fluid-or-open cells at padded index `p` and `p + e_axis`: the
-    /// level's weight, or 1 with unit couplings.
-    fn coupling(&self, axis: usize, p: usize) -> f32 {
-        match self.couplings() {
-            Some(w) => w[axis][p],
-            None => 1.0,
-        }
-    }
-
     /// The Galerkin operator of piecewise-constant prolongation on the coarse level `coarse`
     /// (labels and dense form built): every fine face between a fluid child and a fluid or open
     /// cell of another coarse cell adds its coupling, over the number of fine faces a full coarse
@@ -587,50 +592,51 @@ impl Level {
             return;
         }
         let len = coarse.mask.len();
-        for w in &mut coarse.wt {
-            w.clear();
-            w.resize(len, 0.0);
+        // Zero outside the coarse non-solid ranges: `coarsen` cleared the last ones.
+        if coarse.wt[0].len() != len {
+            for w in &mut coarse.wt {
+                w.clear();
+                w.resize(len, 0.0);
+            }
         }
         let [nx, ny, nz] = self.dims;
         let ratio: [f32; 3] = std::array::from_fn(|a| if self.dims[a] > 1 { 2.0 } else { 1.0 });
         let faces_per_face: [f32; 3] =
             std::array::from_fn(|a| (0..3).filter(|&b| b != a).map(|b| ratio[b]).product());
-        let lab = |i: usize, j: usize, k: usize| self.label[i + nx * (j + ny * k)];
-        let (csy, csz) = (coarse.sy, coarse.sz);
-        let parent = |c: [usize; 3]| pad_index(csy, csz, c[0] / 2, c[1] / 2, c[2] / 2);
+        let share: [f32; 3] = std::array::from_fn(|a| 1.0 / faces_per_face[a]);
+        let fine_w = self.couplings();
+        let cell_stride = [1, nx, nx * ny];
+        let (fine_stride, coarse_stride) = ([1, self.sy, self.sz], [1, coarse.sy, coarse.sz]);
         for &[j, k, i0, i1] in &self.row_spans {
             let (j, k) = (j as usize, k as usize);
+            let base = nx * (j + ny * k);
             for i in i0 as usize..i1 as usize {
-                if lab(i, j, k) != L_FLUID {
+                let ci = base + i;
+                if self.label[ci] != L_FLUID {
                     continue;
                 }
                 let c = [i, j, k];
-                let pc = parent(c);
+                let (pf, pc) = (
+                    self.pad(i, j, k),
+                    pad_index(coarse.sy, coarse.sz, i / 2, j / 2, k / 2),
+                );
                 for a in 0..3 {
                     let n = [nx, ny, nz][a];
+                    // The fine face to the +axis neighbour crosses into another coarse cell when
+                    // the cell is odd along the axis, the -axis face when it is even.
+                    let odd = c[a] % 2 == 1;
                     // +axis face (fluid or open neighbour), and -axis face to an open neighbour
                     // (a fluid one is counted from its own +axis face).
-                    if c[a] + 1 < n {
-                        let mut q = c;
-                        q[a] += 1;
-                        if matches!(lab(q[0], q[1], q[2]), L_FLUID | L_OPEN) {
-                            let pq = parent(q);
-                            if pq != pc {
-                                let w = self.coupling(a, self.pad(i, j, k));
-                                coarse.wt[a][pc] += w / faces_per_face[a];
-                            }
-                        }
+                    if odd
+                        && c[a] + 1 < n
+                        && matches!(self.label[ci + cell_stride[a]], L_FLUID | L_OPEN)
+                    {
+                        let w = fine_w.map_or(1.0, |w| w[a][pf]);
+                        coarse.wt[a][pc] += w * share[a];
                     }
-                    if c[a] > 0 {
-                        let mut q = c;
-                        q[a] -= 1;
-                        if lab(q[0], q[1], q[2]) == L_OPEN {
-                            let pq = parent(q);
-                            if pq != pc {
-                                let w = self.coupling(a, self.pad(q[0], q[1], q[2]));
-                                coarse.wt[a][pq] += w / faces_per_face[a];
-                            }
-                        }
+                    if !odd && c[a] > 0 && self.label[ci - cell_stride[a]] == L_OPEN {
+                        let w = fine_w.map_or(1.0, |w| w[a][pf - fine_stride[a]]);
+                        coarse.wt[a][pc - coarse_stride[a]] += w * share[a];
                     }
                 }
             }
@@ -656,27 +662,28 @@ impl Level {
         self.cell_of_row.len()
     }
 
-    fn neighbour_cell(&self, c: [usize; 3], axis: usize, dir: i32) -> Option<usize> {
-        let n = self.dims[axis];
-        let mut g = c;
-        if dir < 0 {
-            if c[axis] == 0 {
-                if !self.periodic[axis] {
-                    return None;
-                }
-                g[axis] = n - 1;
-            } else {
-                g[axis] -= 1;
+    /// Cell indices of the six neighbours of cell `c` (index `ci`), order -x +x -y +y -z +z, with
+    /// `usize::MAX` past a non-periodic wall (a periodic axis wraps, onto the cell itself when it
+    /// is one cell long).
+    #[inline(always)]
+    fn neighbour_cells(&self, c: [usize; 3], ci: usize) -> [usize; 6] {
+        let [nx, ny, _] = self.dims;
+        let stride = [1, nx, nx * ny];
+        let mut out = [usize::MAX; 6];
+        for a in 0..3 {
+            let (n, st) = (self.dims[a], stride[a]);
+            if c[a] > 0 {
+                out[2 * a] = ci - st;
+            } else if self.periodic[a] {
+                out[2 * a] = ci + (n - 1) * st;
             }
-        } else if c[axis] + 1 == n {
-            if !self.periodic[axis] {
-                return None;
+            if c[a] + 1 < n {
+                out[2 * a + 1] = ci + st;
+            } else if self.periodic[a] {
+                out[2 * a + 1] = ci - (n - 1) * st;
             }
-            g[axis] = 0;
-        } else {
-            g[axis] += 1;
         }
-        Some(g[0] + self.dims[0] * (g[1] + self.dims[1] * g[2]))
+        out
     }
 
     /// Padded index of interior cell (i, j, k).
@@ -687,17 +694,10 @@ impl Level {
 
     /// Number of fluid or open neighbours of a fluid cell.
     fn count_diag(&self, c: [usize; 3]) -> f32 {
-        let mut diag = 0.0f32;
-        for axis in 0..3 {
-            for dir in [-1i32, 1] {
-                if let Some(g) = self.neighbour_cell(c, axis, dir) {
-                    if matches!(self.label[g], L_FLUID | L_OPEN) {
-                        diag += 1.0;
-                    }
-                }
-            }
-        }
-        diag
+        let ci = c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2]);
+        let nb = self.neighbour_cells(c, ci).into_iter();
+        nb.filter(|&g| g != usize::MAX && matches!(self.label[g], L_FLUID | L_OPEN))
+            .count() as f32
     }
 
     /// Sets level 0's box and its labels: `label(cell)` inside the row ranges `rows` (per row
@@ -788,42 +788,51 @@ impl Level {
         self.nbr.clear();
         self.diag.clear();
         self.inv_diag.clear();
+        self.pad_of_row.clear();
         let zero_slot = self.cell_of_row.len() as u32;
-        for row in 0..self.cell_of_row.len() {
-            let ci = self.cell_of_row[row] as usize;
-            let c = [ci % nx, (ci / nx) % ny, ci / (nx * ny)];
-            let mut nb = [zero_slot; 6];
-            for axis in 0..3 {
-                for (s, dir) in [-1i32, 1].into_iter().enumerate() {
-                    if let Some(g) = self.neighbour_cell(c, axis, dir) {
-                        if self.label[g] == L_FLUID {
-                            nb[2 * axis + s] = self.row_of_cell[g];
+        let (sy, sz) = (nx + 2, (nx + 2) * (ny + 2));
+        // The same order as the scan above: row by row within the ranges.
+        for (r, &[a, b]) in self.row_ext.iter().enumerate() {
+            let (j, k) = (r % ny, r / ny);
+            for i in a as usize..b as usize {
+                let ci = r * nx + i;
+                if self.label[ci] != L_FLUID {
+                    continue;
+                }
+                let mut nb = [zero_slot; 6];
+                let mut diag = 0.0f32;
+                for (slot, g) in nb.iter_mut().zip(self.neighbour_cells([i, j, k], ci)) {
+                    if g == usize::MAX {
+                        continue;
+                    }
+                    match self.label[g] {
+                        L_FLUID => {
+                            *slot = self.row_of_cell[g];
+                            diag += 1.0;
                         }
+                        L_OPEN => diag += 1.0,
+                        _ => {}
                     }
                 }
+                self.nbr.push(nb);
+                self.diag.push(diag);
+                self.inv_diag
+                    .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
+                self.pad_of_row.push(pad_index(sy, sz, i, j, k) as u32);
             }
-            let diag = self.count_diag(c);
-            self.nbr.push(nb);
-            self.diag.push(diag);
-            self.inv_diag
-                .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });
         }
-        self.build_dense();
-        self.pad_of_row.clear();
-        for row in 0..self.cell_of_row.len() {
-            let ci = self.cell_of_row[row] as usize;
-            self.pad_of_row
-                .push(self.pad(ci % nx, (ci / nx) % ny, ci / (nx * ny)) as u32);
-        }
+        self.build_dense(DenseDiag::Rows);
     }
 
-    /// Builds the dense (padded) operator, spans and vectors from `label`.
-    pub fn build_dense(&mut self) {
+    /// Builds the dense (padded) operator, spans and vectors from `label`, the diagonal as `diag`
+    /// says.
+    fn build_dense(&mut self, diag: DenseDiag) {
         let [nx, ny, nz] = self.dims;
+        let (old_sy, old_sz) = (self.sy, self.sz);
         self.sy = nx + 2;
         self.sz = (nx + 2) * (ny + 2);
         let len = self.sz * (nz + 2);
-        // Periodic halos are written outside the spans: those levels clear the whole box.
+        // Periodic halos are written outside the fluid cells: those levels clear the whole box.
         let sparse = self.mask.len() == len && !self.periodic.iter().any(|&p| p);
         let [inv0, inv1] = &mut self.inv;
         let vectors = [
@@ -836,9 +845,12 @@ impl Level {
             &mut self.r,
         ];
         if sparse {
+            // Every vector of the level is zero off its fluid cells: clearing the last fluid
+            // rows (not the spans, twice as long with their gaps) zeroes the box.
             for v in vectors {
-                for &[s, e] in &self.spans {
-                    v[s as usize..e as usize].fill(0.0);
+                for &[j, k, i0, i1] in &self.row_spans {
+                    let p = pad_index(old_sy, old_sz, i0 as usize, j as usize, k as usize);
+                    v[p..p + (i1 - i0) as usize].fill(0.0);
                 }
             }
             let mut old = self.old_spans.take().unwrap_or_default();
@@ -869,10 +881,14 @@ impl Level {
                     self.fluid += 1;
                     first.get_or_insert(i);
                     end = i + 1;
-                    let d = self.count_diag([i, j, k]);
                     let p = self.pad(i, j, k);
-                    self.ddiag[p] = d;
                     self.mask[p] = 1.0;
+                    let d = match diag {
+                        DenseDiag::Rows => self.diag[self.row_of_cell[c] as usize],
+                        DenseDiag::Count => self.count_diag([i, j, k]),
+                        DenseDiag::Later => continue,
+                    };
+                    self.ddiag[p] = d;
                     self.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
                 }
                 if let Some(i0) = first {
@@ -922,14 +938,24 @@ impl Level {
             && coarse.label.len() == ncell
             && coarse.row_ext.len() == nrow
         {
-            // Only the last ranges can hold non-solid cells.
+            // Only the last ranges can hold non-solid cells, and non-zero couplings.
+            let clear_wt = coarse.wt[0].len() == coarse.mask.len();
             for (r, &[a, b]) in coarse.row_ext.iter().enumerate() {
                 coarse.label[r * cd[0] + a as usize..r * cd[0] + b as usize].fill(L_SOLID);
+                if clear_wt && a < b {
+                    let p = coarse.pad(a as usize, r % cd[1], r / cd[1]);
+                    for w in &mut coarse.wt {
+                        w[p..p + (b - a) as usize].fill(0.0);
+                    }
+                }
             }
             coarse.row_ext.fill([0, 0]);
         } else {
             coarse.dims = cd;
             coarse.periodic = periodic;
+            for w in &mut coarse.wt {
+                w.clear();
+            }
             coarse.label.clear();
             coarse.label.resize(ncell, L_SOLID);
             coarse.row_ext.clear();
@@ -1342,7 +1368,12 @@ impl Multigrid {
             if !fine[l - 1].coarsen(&mut coarse[0]) {
                 break;
             }
-            coarse[0].build_dense();
+            let unit = fine[l - 1].any_periodic() || coarse[0].any_periodic();
+            coarse[0].build_dense(if unit {
+                DenseDiag::Count
+            } else {
+                DenseDiag::Later
+            });
             fine[l - 1].galerkin(&mut coarse[0]);
             self.used += 1;
         }

@@ -128,33 +128,22 @@ fn max_abs(a: &[f64]) -> f64 {
 }
 
 impl PressureSolver {
-    /// Resizes the vectors after the level-0 rows changed, keeping nothing of the old warm start.
+    /// Resizes the vectors after the level-0 rows changed, keeping nothing of the old warm start
+    /// (the compressed-row vectors of the reference solvers are sized when one runs).
     pub fn resize(&mut self) {
-        let n = self.mg.levels[0].rows();
-        for v in [
-            &mut self.q,
-            &mut self.b,
-            &mut self.r,
-            &mut self.z,
-            &mut self.p,
-            &mut self.ap,
-        ] {
-            v.clear();
-            v.resize(n, 0.0);
-        }
         self.regions.build(&self.mg.levels[0]);
         let l0 = &self.mg.levels[0];
         let len = l0.x.len();
-        // Zero outside level 0's spans: only the previous spans need clearing.
+        // Zero outside level 0's spans: only the previous spans need clearing. `dd` and `dap` are
+        // written over the spans before they are read, and read only there: they keep whatever
+        // the old spans left.
         match &l0.old_spans {
             Some(old) if self.dq.len() == len => {
                 for &[s, e] in old {
                     let r = s as usize..e as usize;
                     self.dq[r.clone()].fill(0.0);
                     self.bd[r.clone()].fill(0.0);
-                    self.dd[r.clone()].fill(0.0);
-                    self.dp[r.clone()].fill(0.0);
-                    self.dap[r].fill(0.0);
+                    self.dp[r].fill(0.0);
                 }
             }
             _ => {
@@ -197,7 +186,8 @@ impl PressureSolver {
         tol_abs: f64,
         max_iterations: usize,
     ) -> SolveOutcome {
-        if self.q.is_empty() {
+        let n = self.mg.levels[0].rows();
+        if n == 0 {
             return SolveOutcome {
                 iterations: 0,
                 converged: true,
@@ -209,6 +199,16 @@ impl PressureSolver {
                 return self.red_black_gauss_seidel(sweeps, tol_abs)
             }
             _ => {}
+        }
+        for v in [
+            &mut self.q,
+            &mut self.b,
+            &mut self.r,
+            &mut self.z,
+            &mut self.p,
+            &mut self.ap,
+        ] {
+            v.resize(n, 0.0);
         }
         let pad_of_row = &self.mg.levels[0].pad_of_row;
         for ((q, b), &p) in self.q.iter_mut().zip(&mut self.b).zip(pad_of_row) {
@@ -316,7 +316,9 @@ impl PressureSolver {
                     for i in 0..n {
                         let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
                         out[i] = mk[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
-                        m = m.max(out[i].abs());
+                        // Not f32::max: a plain comparison vectorizes (NaN is skipped by both).
+                        let a = out[i].abs();
+                        m = if a > m { a } else { m };
                     }
                 }
                 m as f64
