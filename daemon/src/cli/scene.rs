@@ -610,50 +610,76 @@ fn timed_step<'a>(
     scene.step(inputs, dt_s)
 }
 
-/// Warms up and times the operating point (outflow half open) on a new scene.
-fn timed_run(desc: SceneDesc, assets: &SceneAssets, a: &BenchArgs) -> Result<Timed> {
+/// Warms up and times the operating point (outflow half open) on a new scene per description.
+/// With several, their timed steps alternate (one step of each in turn), so that the machine's
+/// drifts during the runs fall on all of them alike: a like-for-like comparison.
+fn timed_runs(descs: Vec<SceneDesc>, assets: &SceneAssets, a: &BenchArgs) -> Result<Vec<Timed>> {
     let dt = 1.0 / a.rate_hz;
-    let mut scene = Scene::new(desc, assets.clone())?;
     let inputs = |f: usize| SceneInputs {
         rig: operating_point(f, dt, a.pump_mmhg, 0.5),
         hydraulics: HydraulicsInput::Own,
     };
-    for f in 0..a.warmup {
-        scene.step(&inputs(f), dt)?;
+    let mut runs = Vec::with_capacity(descs.len());
+    for desc in descs {
+        let mut scene = Scene::new(desc, assets.clone())?;
+        for f in 0..a.warmup {
+            scene.step(&inputs(f), dt)?;
+        }
+        let start = scene.report().counters.clone();
+        runs.push((
+            Timed {
+                scene,
+                start,
+                projection_iterations: 0,
+                max_div_rel: 0.0,
+                fluid_runs: 0,
+            },
+            FluidTimes::default(),
+        ));
     }
-    let start = scene.report().counters.clone();
-    let (mut its, mut max_div, mut fluid_runs) = (0usize, 0.0f64, 0usize);
-    let (mut rebuilds, mut substeps, mut topology_ms, mut advect_ms, mut project_ms) =
-        (0usize, 0usize, 0.0, 0.0, 0.0);
     for f in a.warmup..a.warmup + a.steps {
-        let r = timed_step(&mut scene, &inputs(f), dt)?;
-        if let Some(s) = r.fluid {
-            its += s.projection_iterations;
-            max_div = max_div.max(s.max_div_rel);
-            fluid_runs += 1;
-            rebuilds += usize::from(s.topology_rebuilt);
-            substeps += s.substeps;
-            topology_ms += s.topology_ms;
-            advect_ms += s.advect_ms;
-            project_ms += s.project_ms;
+        for (run, times) in &mut runs {
+            let r = timed_step(&mut run.scene, &inputs(f), dt)?;
+            if let Some(s) = r.fluid {
+                run.projection_iterations += s.projection_iterations;
+                run.max_div_rel = run.max_div_rel.max(s.max_div_rel);
+                run.fluid_runs += 1;
+                times.rebuilds += usize::from(s.topology_rebuilt);
+                times.substeps += s.substeps;
+                times.topology_ms += s.topology_ms;
+                times.advect_ms += s.advect_ms;
+                times.project_ms += s.project_ms;
+            }
         }
     }
-    let per_run = |x: f64| x / fluid_runs.max(1) as f64;
-    eprintln!(
-        "{} mm{}: {fluid_runs} fluid steps, {substeps} substeps, {rebuilds} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
-        scene.desc().fluid.voxel_mm,
-        if scene.vortices().is_some() { " with vortices" } else { "" },
-        per_run(topology_ms),
-        per_run(advect_ms),
-        per_run(project_ms)
-    );
-    Ok(Timed {
-        scene,
-        start,
-        projection_iterations: its,
-        max_div_rel: max_div,
-        fluid_runs,
-    })
+    Ok(runs
+        .into_iter()
+        .map(|(run, times)| {
+            let per_run = |x: f64| x / run.fluid_runs.max(1) as f64;
+            eprintln!(
+                "{} mm{}: {} fluid steps, {} substeps, {} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
+                run.scene.desc().fluid.voxel_mm,
+                if run.scene.vortices().is_some() { " with vortices" } else { "" },
+                run.fluid_runs,
+                times.substeps,
+                times.rebuilds,
+                per_run(times.topology_ms),
+                per_run(times.advect_ms),
+                per_run(times.project_ms)
+            );
+            run
+        })
+        .collect())
+}
+
+/// The fluid step's parts summed over a timed run.
+#[derive(Default)]
+struct FluidTimes {
+    rebuilds: usize,
+    substeps: usize,
+    topology_ms: f64,
+    advect_ms: f64,
+    project_ms: f64,
 }
 
 /// `desc` with `n` vortices in `mode`, all of them from the first step.
@@ -692,25 +718,19 @@ fn bench(a: &BenchArgs) -> Result<()> {
         desc.validate()?;
         // Overlay vortices leave the solver's state alone: the run with them times the fluid
         // step without them too (like for like, the same steps). Injected ones change the
-        // state: a baseline run without and a second run with them.
+        // state: a baseline scene without and a second scene with them, their steps alternating.
         let overlay = a.vortices > 0 && a.vortex_mode == BenchVortexMode::Overlay;
-        let mut run = if overlay {
-            timed_run(
-                with_vortices(desc.clone(), a.vortices, a.vortex_mode)?,
-                &assets,
-                a,
-            )?
+        let mut descs = vec![if overlay {
+            with_vortices(desc.clone(), a.vortices, a.vortex_mode)?
         } else {
-            timed_run(desc.clone(), &assets, a)?
-        };
-        let injected = if a.vortices > 0 && !overlay {
-            Some(timed_run(
-                with_vortices(desc.clone(), a.vortices, a.vortex_mode)?,
-                &assets,
-                a,
-            )?)
-        } else {
-            None
+            desc.clone()
+        }];
+        if a.vortices > 0 && !overlay {
+            descs.push(with_vortices(desc.clone(), a.vortices, a.vortex_mode)?);
+        }
+        let mut timed = timed_runs(descs, &assets, a)?.into_iter();
+        let (Some(mut run), injected) = (timed.next(), timed.next()) else {
+            bail!("{v} mm: no timed run");
         };
         let with = injected.as_ref().unwrap_or(&run);
         let vortices = with
