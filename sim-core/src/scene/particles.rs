@@ -17,7 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::clarity::{ClarityTracker, View, ViewSpec};
 use super::dispersion;
 use super::random::SeededRng;
-use super::vortices::cross;
+use super::vortex_potential::cross;
 use super::{Scene, VoxelKind};
 use crate::fluid::{v4, CellLabel, FluidGrid, FluidSolver, V4};
 

@@ -1,5 +1,5 @@
-//! The vortices' vector potential on the grid nodes (`docs/particles.md`, the vortex model in
-//! [`super::vortices`]): each vortex adds `g(s) Psi(r) n` at the nodes of its support, four
+//! One Rankine vortex in closed form ([`Vortex`]) and the vortices' vector potential on the grid
+//! nodes (`docs/particles.md`; the field of many in [`super::vortices`]): each vortex adds `g(s) Psi(r) n` at the nodes of its support, four
 //! consecutive nodes of a row at a time (SSE2, the x86-64 baseline; element-wise elsewhere).
 //!
 //! A vortex touches a few dozen nodes in short rows (a core of one or two cells), so the work is
@@ -7,9 +7,98 @@
 //! nodes go through one branch-free four-lane kernel whose lanes outside the row, the support or
 //! `node_mask` add zero.
 
-use super::vortices::{
-    Vortex, AXIAL_END_CORES, AXIAL_FLAT_CORES, CUTOFF_CORES, RANKINE_EXACT_CORES,
-};
+/// Rankine's profile holds exactly out to this many core radii.
+pub const RANKINE_EXACT_CORES: f64 = 1.5;
+/// The tangential velocity is zero from this many core radii.
+pub const CUTOFF_CORES: f64 = 2.5;
+/// The axial window is 1 up to this many core radii from the centre plane.
+pub const AXIAL_FLAT_CORES: f64 = 1.0;
+/// The axial window is zero from this many core radii.
+pub const AXIAL_END_CORES: f64 = 2.0;
+
+/// One Rankine vortex.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Vortex {
+    /// Centre, m.
+    pub centre_m: [f64; 3],
+    /// Unit axis (the vorticity's direction).
+    pub axis: [f64; 3],
+    /// Circulation, m^2/s (positive: counter-clockwise about the axis).
+    pub circulation_m2_s: f64,
+    /// Core radius, m.
+    pub core_radius_m: f64,
+}
+
+impl Vortex {
+    /// Tangential speed at `r_m` from the axis in the centre plane (m/s): Rankine's out to
+    /// `RANKINE_EXACT_CORES`, tapered to zero at `CUTOFF_CORES`.
+    pub fn tangential_speed_m_s(&self, r_m: f64) -> f64 {
+        let big_r = self.core_radius_m;
+        let r = r_m.abs() / big_r;
+        let k = self.circulation_m2_s / (2.0 * std::f64::consts::PI * big_r);
+        let rankine = if r <= 1.0 { r } else { 1.0 / r };
+        let (w, dw) = taper(r, RANKINE_EXACT_CORES, CUTOFF_CORES);
+        // v = -(Psi w)' with Psi' = -rankine (in units of Gamma / (2 pi R)).
+        k * (rankine * w - rankine_psi(r) * dw)
+    }
+
+    /// The axial window at `s_m` from the centre plane.
+    pub fn axial_window(&self, s_m: f64) -> f64 {
+        let r = self.core_radius_m;
+        taper(s_m.abs(), AXIAL_FLAT_CORES * r, AXIAL_END_CORES * r).0
+    }
+
+    /// `(s, r_vec, r)`: the axial coordinate and the radial vector of `p`.
+    fn frame(&self, p: [f64; 3]) -> (f64, [f64; 3], f64) {
+        let d: [f64; 3] = std::array::from_fn(|a| p[a] - self.centre_m[a]);
+        let s = dot(d, self.axis);
+        let rv: [f64; 3] = std::array::from_fn(|a| d[a] - s * self.axis[a]);
+        (s, rv, dot(rv, rv).sqrt())
+    }
+
+    /// The vortex's velocity at `p` (m/s), closed form.
+    pub fn velocity_m_s(&self, p: [f64; 3]) -> [f64; 3] {
+        let (s, rv, r) = self.frame(p);
+        if r == 0.0 {
+            return [0.0; 3];
+        }
+        let m = self.axial_window(s) * self.tangential_speed_m_s(r) / r;
+        cross(self.axis, rv).map(|v| v * m)
+    }
+
+    /// The vector potential's magnitude at `p`, m^2/s (`A = phi n`, `curl A` = the velocity).
+    pub fn potential_m2_s(&self, p: [f64; 3]) -> f64 {
+        let (s, _, r) = self.frame(p);
+        let rr = r / self.core_radius_m;
+        let k = self.circulation_m2_s / (2.0 * std::f64::consts::PI);
+        self.axial_window(s) * k * radial_potential(rr)
+    }
+
+    /// Half extent (m) of the vortex's support along each axis.
+    pub fn half_extent_m(&self) -> [f64; 3] {
+        let (l, r) = (
+            AXIAL_END_CORES * self.core_radius_m,
+            CUTOFF_CORES * self.core_radius_m,
+        );
+        self.axis
+            .map(|n| l * n.abs() + r * (1.0 - n * n).max(0.0).sqrt())
+    }
+}
+
+#[inline]
+pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// The cross product.
+#[inline]
+pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
 
 /// Intervals of the potential's table over `q = r^2 / R^2` in `[0, CUTOFF_CORES^2]` (a power of
 /// two: the index needs no bounds check).
