@@ -588,15 +588,7 @@ impl FaceSet {
         for fk in 0..d[2] {
             for fj in 0..d[1] {
                 let row = fj + d[1] * fk;
-                self.row_at.push([
-                    self.active.len() as u32,
-                    self.ext1.len() as u32,
-                    self.ext2.len() as u32,
-                    self.fixed_in_order.len() as u32,
-                    0,
-                    0,
-                    0,
-                ]);
+                self.row_at.push(self.list_lengths());
                 if !self.row_dirty[row] {
                     let (from, to) = (old.row_at[row], old.row_at[row + 1]);
                     let span = |l: usize| from[l] as usize..to[l] as usize;
@@ -677,15 +669,7 @@ impl FaceSet {
             }
         }
 
-        self.row_at.push([
-            self.active.len() as u32,
-            self.ext1.len() as u32,
-            self.ext2.len() as u32,
-            self.fixed_in_order.len() as u32,
-            0,
-            0,
-            0,
-        ]);
+        self.row_at.push(self.list_lengths());
 
         // Viscous stencils. A tangential neighbour's cells are the face's own shifted by one cell
         // along that axis (wrapped on a periodic one).
@@ -986,6 +970,21 @@ impl FaceSet {
         for &f in &self.dirty {
             self.marked[face_index(f)] = 0;
         }
+    }
+
+    /// The lengths of the lists [`FaceSet::row_at`] indexes that are built with the classes
+    /// (active, ext1, ext2, fixed); the runs' three are filled in later.
+    fn list_lengths(&self) -> [u32; ROW_LISTS] {
+        let n = |len: usize| len as u32;
+        [
+            n(self.active.len()),
+            n(self.ext1.len()),
+            n(self.ext2.len()),
+            n(self.fixed_in_order.len()),
+            0,
+            0,
+            0,
+        ]
     }
 
     /// Lists the faces an update computes again: those within [`DIRTY_REACH`] of a face beside a
