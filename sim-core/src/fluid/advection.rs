@@ -284,8 +284,9 @@ impl Grid3 {
     }
 }
 
-/// Four-lane vectors for positions and the centred velocity (the fourth lane is unused): one SSE
-/// register on x86-64, where building them element-wise would go through memory (a stalled
+/// Four-lane vectors for positions and the centred velocity (the fourth lane is unused), and the
+/// elementary four-lane operations the particle and vortex kernels share: one SSE register on
+/// x86-64, where building them element-wise would go through memory (a stalled
 /// store-to-load forward per face) and LLVM would drop the fourth lane and emit scalar code.
 #[cfg(target_arch = "x86_64")]
 pub(crate) mod v4 {
@@ -316,6 +317,21 @@ pub(crate) mod v4 {
     #[inline(always)]
     pub fn add(a: V4, b: V4) -> V4 {
         unsafe { _mm_add_ps(a, b) }
+    }
+    /// `a - b`.
+    #[inline(always)]
+    pub fn sub(a: V4, b: V4) -> V4 {
+        unsafe { _mm_sub_ps(a, b) }
+    }
+    /// `a b`.
+    #[inline(always)]
+    pub fn mul(a: V4, b: V4) -> V4 {
+        unsafe { _mm_mul_ps(a, b) }
+    }
+    /// `[x, x, x, x]`.
+    #[inline(always)]
+    pub fn splat(x: f32) -> V4 {
+        unsafe { _mm_set1_ps(x) }
     }
     /// `a + t (b - a)`.
     #[inline(always)]
@@ -353,6 +369,21 @@ pub(crate) mod v4 {
     #[inline(always)]
     pub fn add(a: V4, b: V4) -> V4 {
         std::array::from_fn(|l| a[l] + b[l])
+    }
+    /// `a - b`.
+    #[inline(always)]
+    pub fn sub(a: V4, b: V4) -> V4 {
+        std::array::from_fn(|l| a[l] - b[l])
+    }
+    /// `a b`.
+    #[inline(always)]
+    pub fn mul(a: V4, b: V4) -> V4 {
+        std::array::from_fn(|l| a[l] * b[l])
+    }
+    /// `[x, x, x, x]`.
+    #[inline(always)]
+    pub fn splat(x: f32) -> V4 {
+        [x; 4]
     }
     /// `a + t (b - a)`.
     #[inline(always)]

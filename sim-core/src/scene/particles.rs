@@ -1309,6 +1309,7 @@ impl<'a> Sampler<'a> {
 mod lane {
     use std::arch::x86_64::*;
 
+    pub use crate::fluid::v4::{mul, splat, sub};
     use crate::fluid::V4;
 
     // SAFETY (every `unsafe` below): SSE2 is part of the x86-64 baseline, and these intrinsics
@@ -1319,25 +1320,10 @@ mod lane {
     pub fn new4(a: f32, b: f32, c: f32, d: f32) -> V4 {
         unsafe { _mm_set_ps(d, c, b, a) }
     }
-    /// `[x, x, x, x]`.
-    #[inline(always)]
-    pub fn splat(x: f32) -> V4 {
-        unsafe { _mm_set1_ps(x) }
-    }
     /// `a b + c`.
     #[inline(always)]
     pub fn mul_add(a: V4, b: V4, c: V4) -> V4 {
         unsafe { _mm_add_ps(_mm_mul_ps(a, b), c) }
-    }
-    /// `a b`.
-    #[inline(always)]
-    pub fn mul(a: V4, b: V4) -> V4 {
-        unsafe { _mm_mul_ps(a, b) }
-    }
-    /// `a - b`.
-    #[inline(always)]
-    pub fn sub(a: V4, b: V4) -> V4 {
-        unsafe { _mm_sub_ps(a, b) }
     }
     /// `a + t (b - a)`, `t` the same in every lane.
     #[inline(always)]
@@ -1451,6 +1437,7 @@ mod lane {
 /// The few four-lane operations of the particle kernel beyond [`v4`]'s (portable fallback).
 #[cfg(not(target_arch = "x86_64"))]
 mod lane {
+    pub use crate::fluid::v4::{mul, splat, sub};
     use crate::fluid::V4;
 
     /// `[a, b, c, d]`.
@@ -1458,25 +1445,10 @@ mod lane {
     pub fn new4(a: f32, b: f32, c: f32, d: f32) -> V4 {
         [a, b, c, d]
     }
-    /// `[x, x, x, x]`.
-    #[inline(always)]
-    pub fn splat(x: f32) -> V4 {
-        [x; 4]
-    }
     /// `a b + c`.
     #[inline(always)]
     pub fn mul_add(a: V4, b: V4, c: V4) -> V4 {
         std::array::from_fn(|l| a[l] * b[l] + c[l])
-    }
-    /// `a b`.
-    #[inline(always)]
-    pub fn mul(a: V4, b: V4) -> V4 {
-        std::array::from_fn(|l| a[l] * b[l])
-    }
-    /// `a - b`.
-    #[inline(always)]
-    pub fn sub(a: V4, b: V4) -> V4 {
-        std::array::from_fn(|l| a[l] - b[l])
     }
     /// `a + t (b - a)`, `t` the same in every lane.
     #[inline(always)]

@@ -688,31 +688,12 @@ mod lane {
 
     /// Four lanes; a mask has every bit of a true lane set.
     pub type V = __m128;
+    pub use crate::fluid::v4::{add, lanes, mul, splat, sub, zero};
 
-    #[inline(always)]
-    pub fn splat(x: f32) -> V {
-        unsafe { _mm_set1_ps(x) }
-    }
-    #[inline(always)]
-    pub fn zero() -> V {
-        unsafe { _mm_setzero_ps() }
-    }
     /// `[0, 1, 2, 3]`.
     #[inline(always)]
     pub fn ramp() -> V {
         unsafe { _mm_set_ps(3.0, 2.0, 1.0, 0.0) }
-    }
-    #[inline(always)]
-    pub fn add(a: V, b: V) -> V {
-        unsafe { _mm_add_ps(a, b) }
-    }
-    #[inline(always)]
-    pub fn sub(a: V, b: V) -> V {
-        unsafe { _mm_sub_ps(a, b) }
-    }
-    #[inline(always)]
-    pub fn mul(a: V, b: V) -> V {
-        unsafe { _mm_mul_ps(a, b) }
     }
     /// The second operand where either is NaN.
     #[inline(always)]
@@ -795,11 +776,6 @@ mod lane {
     pub fn load_padded(s: &[f32]) -> V {
         load(&std::array::from_fn(|l| s.get(l).copied().unwrap_or(0.0)))
     }
-    /// The lanes.
-    #[inline(always)]
-    pub fn lanes(v: V) -> [f32; 4] {
-        bytemuck::cast(v)
-    }
     /// Linear interpolation in the table at `t` (in `[0, TABLE_SIZE]`, or NaN: then entry 0).
     #[inline(always)]
     pub fn lookup(table: &Table, t: V) -> V {
@@ -832,6 +808,7 @@ mod lane {
 
     /// Four lanes; a mask has every bit of a true lane set.
     pub type V = [f32; 4];
+    pub use crate::fluid::v4::{add, lanes, mul, splat, sub, zero};
 
     fn map2(a: V, b: V, f: impl Fn(f32, f32) -> f32) -> V {
         std::array::from_fn(|l| f(a[l], b[l]))
@@ -839,24 +816,9 @@ mod lane {
     fn mask(t: bool) -> f32 {
         f32::from_bits(if t { u32::MAX } else { 0 })
     }
-    pub fn splat(x: f32) -> V {
-        [x; 4]
-    }
-    pub fn zero() -> V {
-        [0.0; 4]
-    }
     /// `[0, 1, 2, 3]`.
     pub fn ramp() -> V {
         [0.0, 1.0, 2.0, 3.0]
-    }
-    pub fn add(a: V, b: V) -> V {
-        map2(a, b, |a, b| a + b)
-    }
-    pub fn sub(a: V, b: V) -> V {
-        map2(a, b, |a, b| a - b)
-    }
-    pub fn mul(a: V, b: V) -> V {
-        map2(a, b, |a, b| a * b)
     }
     /// The second operand where either is NaN.
     pub fn max(a: V, b: V) -> V {
@@ -916,10 +878,6 @@ mod lane {
     /// The first (up to) four floats of `s`, zero beyond its end.
     pub fn load_padded(s: &[f32]) -> V {
         std::array::from_fn(|l| s.get(l).copied().unwrap_or(0.0))
-    }
-    /// The lanes.
-    pub fn lanes(v: V) -> [f32; 4] {
-        v
     }
     /// Linear interpolation in the table at `t` (in `[0, TABLE_SIZE]`, or NaN: then entry 0).
     pub fn lookup(table: &Table, t: V) -> V {
