@@ -90,7 +90,7 @@ pub(crate) struct FaceSet {
     /// The cells beside each active face (lower, upper; NONE = outside), from the classification.
     active_cells: Vec<[u32; 2]>,
     /// Position of each face in its extrapolation layer (full array; NONE unless extrapolated):
-    /// carries a face's sources over an update, as `compact` carries an active face's per-face results.
+    /// carries a face's sources over an update, as `compact` carries an active face's results.
     ext_pos: Vec<u32>,
     /// The faces (coordinates) this update computes again, and for each face whether it is listed
     /// there (full array): 0 not (all 0 between updates), [`NEAR`] within one face of a changed
