@@ -120,6 +120,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // starts collecting: a pause between two collections longer than the subscriber's buffer
     // (64 statuses, 640 ms at the 100 Hz used here, so a test process held off the CPU for a moment on a loaded machine loses none) would lose statuses.
     let victim_python = python();
+    let mut killed_after = None;
     let lines = check(&prefix, 24.0, || {
         statuses.extend(reader.collect_for(Duration::from_secs(4)));
         let mut victim = Command::new(&victim_python)
@@ -130,6 +131,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
             .spawn()
             .expect("start the second subscriber");
         statuses.extend(reader.collect_for(Duration::from_secs(3)));
+        killed_after = statuses.last().map(|s| s.sequence);
         victim.kill().expect("kill -9 the subscriber");
         let _ = victim.wait();
         statuses.extend(reader.collect_for(Duration::from_secs(18)));
@@ -248,23 +250,47 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         "positions stalled for {longest_gap:.3} s"
     );
 
-    // The SIGKILL disturbed nothing: status contiguous, and the loop never stalled. A daemon
-    // held up by a dead subscriber misses every tick it is held (a 10 ms stall is 10 misses
-    // between two statuses 4 ms apart); the isolated late ticks of a loaded machine are not
-    // that (this shared 2-core machine shows 16-70 per 30 s with or without subscribers,
-    // BENCHMARKS.md), so the bound is on the largest jump and on the total (0.5 % of ticks).
+    // The SIGKILL disturbed nothing: status contiguous, no tick's work held up, and the loop on
+    // time around the kill. A daemon held up by a dead subscriber would block inside a tick
+    // (the status publish is part of the tick's work), so the longest tick's work is the direct
+    // check; the misses around the kill (a 10 ms stall is 10 misses between two statuses 10 ms
+    // apart) the indirect one. Late wake-ups elsewhere are the machine's: with this test's
+    // subscribers on a loaded 2-core machine (load 3-6) the SCHED_FIFO loop woke up to 13 ms
+    // late a few times per run, anywhere in it (33-116 misses in 25 s), while its longest tick's
+    // work stayed at 0.07-0.25 ms; the total is bounded at 1 % of the ticks (BENCHMARKS.md).
     hydrometra_hil_tests::assert_contiguous(&statuses);
-    let misses_after = statuses.last().map_or(0, |s| s.deadline_misses);
-    let ticks = statuses.last().unwrap().ticks - statuses.first().unwrap().ticks;
-    let largest_jump = statuses
+    let last = statuses.last().unwrap();
+    assert!(
+        last.tick_work_max_s < 0.005,
+        "a tick's work took {:.3} ms:\n{}",
+        last.tick_work_max_s * 1e3,
+        daemon.log()
+    );
+    let killed_after = killed_after.expect("statuses before the kill");
+    let around_kill: Vec<_> = statuses
+        .iter()
+        .filter(|s| s.sequence + 10 >= killed_after && s.sequence <= killed_after + 100)
+        .collect();
+    assert!(
+        around_kill.len() > 100,
+        "{} statuses around the kill",
+        around_kill.len()
+    );
+    let jump = around_kill
         .windows(2)
         .map(|w| w[1].deadline_misses - w[0].deadline_misses)
         .max()
         .unwrap_or(0);
     assert!(
-        largest_jump < 10 && (misses_after - misses_before) * 200 <= ticks,
-        "deadline misses during the run: {} in {ticks} ticks, {largest_jump} between two \
-         statuses:\n{}",
+        jump < 10,
+        "{jump} deadline misses between two statuses within 1 s of the SIGKILL:\n{}",
+        daemon.log()
+    );
+    let misses_after = last.deadline_misses;
+    let ticks = last.ticks - statuses.first().unwrap().ticks;
+    assert!(
+        (misses_after - misses_before) * 100 <= ticks,
+        "deadline misses during the run: {} in {ticks} ticks:\n{}",
         misses_after - misses_before,
         daemon.log()
     );
