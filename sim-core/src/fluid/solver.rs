@@ -243,7 +243,7 @@ fn build_pressure_levels(
         CellLabel::Outflow => L_OPEN,
         _ => L_SOLID,
     });
-    l0.build_rows_in_extents();
+    l0.build_in_extents();
     // The pressure is zero outside the fluid cells, so only the previous spans can hold stale
     // values.
     let len = l0.mask.len();
@@ -428,10 +428,12 @@ impl FluidSolver {
                 build_pressure_levels(grid, rows, pressure, pressure_pa, p_lag);
             },
         );
+        // The compact vectors (viscosity and advection results, wall ghosts) are written whole
+        // before they are read (`update_ghosts` clears the ghosts), so a relabelling only sizes
+        // them: clearing them cost more than the rest of the serial part of the rebuild.
         for c in 0..3 {
             let n = self.faces[c].active.len();
             for v in [&mut self.compact[c], &mut self.ghost[c]] {
-                v.clear();
                 v.resize(n, 0.0);
             }
             let (l0, layout) = (&self.pressure.mg.levels[0], &self.layout);
@@ -462,8 +464,9 @@ impl FluidSolver {
             }
         }
         let [f0, f1, f2] = &self.faces;
+        let counts = [f0.active.len(), f1.active.len(), f2.active.len()];
         self.plan
-            .rebuild(&self.layout, [&f0.active, &f1.active, &f2.active]);
+            .rebuild(&self.layout, [&f0.runs, &f1.runs, &f2.runs], counts);
         let total = self.plan.offset[3];
         let [f0, f1, f2] = &mut self.adv_foot;
         for v in [
@@ -476,7 +479,6 @@ impl FluidSolver {
             f1,
             f2,
         ] {
-            v.clear();
             v.resize(total, 0.0);
         }
         self.revision = self.grid.revision();
