@@ -564,6 +564,8 @@ pub(crate) struct Level {
     /// +axis neighbour); empty on level 0 and on periodic levels, whose couplings are 1 between
     /// unknowns (and to open cells, in the diagonal).
     pub wt: [Vec<f32>; 3],
+    /// Scratch of [`Level::build_dense`]: one row's neighbour counts.
+    pub row_counts: Vec<u8>,
     /// Dense unknowns, right-hand side and residual.
     pub x: Vec<f32>,
     pub b: Vec<f32>,
@@ -717,28 +719,40 @@ impl Level {
         [ym, yp, zm, zp]
     }
 
-    /// Number of fluid or open neighbours of cell `i` of the row starting at cell `row` (`rows`:
-    /// [`Level::neighbour_rows`] of it).
-    #[inline(always)]
-    fn count_diag(&self, row: usize, i: usize, rows: &[Option<usize>; 4]) -> f32 {
+    /// The number of fluid or open neighbours of cells `a..b` of the row starting at cell `row`
+    /// (`rows`: [`Level::neighbour_rows`] of it) into `out`, a row's slice at a time (the
+    /// loops vectorise).
+    fn count_row(
+        &self,
+        row: usize,
+        [a, b]: [usize; 2],
+        rows: &[Option<usize>; 4],
+        out: &mut Vec<u8>,
+    ) {
         let nx = self.dims[0];
-        let open = |c: usize| u32::from(self.label[c] != L_SOLID);
-        let c = row + i;
-        let mut n = 0;
-        if i > 0 {
-            n += open(c - 1);
-        } else if self.periodic[0] {
-            n += open(c + nx - 1);
-        }
-        if i + 1 < nx {
-            n += open(c + 1);
-        } else if self.periodic[0] {
-            n += open(c + 1 - nx);
-        }
+        out.clear();
+        out.resize(b - a, 0);
+        let add = |out: &mut [u8], labels: &[u8]| {
+            for (o, &l) in out.iter_mut().zip(labels) {
+                *o += u8::from(l != L_SOLID);
+            }
+        };
         for r in rows.iter().flatten() {
-            n += open(r + i);
+            add(out, &self.label[r + a..r + b]);
         }
-        n as f32
+        let label = &self.label[row..row + nx];
+        // -x: the cell before, or across a periodic axis the row's last cell.
+        let lo = usize::from(a == 0);
+        add(&mut out[lo..], &label[a + lo - 1..b - 1]);
+        if a == 0 && self.periodic[0] {
+            out[0] += u8::from(label[nx - 1] != L_SOLID);
+        }
+        // +x: the cell after, or across a periodic axis the row's first cell.
+        let hi = b - usize::from(b == nx);
+        add(&mut out[..hi - a], &label[a + 1..hi + 1]);
+        if b == nx && self.periodic[0] {
+            out[b - a - 1] += u8::from(label[0] != L_SOLID);
+        }
     }
 
     /// Sets level 0's box and its labels: `label(cell)` inside the row ranges `rows` (per row
@@ -920,6 +934,7 @@ impl Level {
         self.spans.clear();
         self.row_spans.clear();
         self.fluid = 0;
+        let mut counts = std::mem::take(&mut self.row_counts);
         debug_assert_eq!(self.row_ext.len(), ny * nz);
         for k in 0..nz {
             for j in 0..ny {
@@ -930,7 +945,10 @@ impl Level {
                     continue;
                 }
                 let row = nx * (j + ny * k);
-                let rows = self.neighbour_rows(j, k);
+                if let DenseDiag::Count = diag {
+                    let rows = self.neighbour_rows(j, k);
+                    self.count_row(row, [a as usize, b as usize], &rows, &mut counts);
+                }
                 for i in a as usize..b as usize {
                     if self.label[row + i] != L_FLUID {
                         continue;
@@ -941,7 +959,7 @@ impl Level {
                     let p = self.pad(i, j, k);
                     self.mask[p] = 1.0;
                     let d = match diag {
-                        DenseDiag::Count => self.count_diag(row, i, &rows),
+                        DenseDiag::Count => counts[i - a as usize] as f32,
                         DenseDiag::Later => continue,
                     };
                     self.ddiag[p] = d;
@@ -961,6 +979,7 @@ impl Level {
                 }
             }
         }
+        self.row_counts = counts;
         if !self.periodic.iter().any(|&p| p) {
             round_spans(&mut self.spans, len - self.sz);
         }

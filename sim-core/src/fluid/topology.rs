@@ -449,6 +449,7 @@ pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
 impl FaceSet {
     /// The cells beside each active face (lower, upper; NONE = outside), as [`face_cells`] finds
     /// them, in the order of `active`.
+    #[cfg(test)]
     pub fn active_cells(&self) -> &[[u32; 2]] {
         &self.active_cells
     }
