@@ -119,29 +119,23 @@ pub(crate) struct Plan {
 }
 
 impl Plan {
-    /// Rebuilds the runs from the (ascending) active face lists.
-    pub fn rebuild(&mut self, layout: &Layout, active: [&[u32]; 3]) {
+    /// Rebuilds the runs from each component's runs of active faces (`[full, compact, len]`,
+    /// ascending, each a whole run of consecutive faces of one x row: [`FaceSet::runs`]) and
+    /// its number of active faces.
+    ///
+    /// [`FaceSet::runs`]: super::topology::FaceSet::runs
+    pub fn rebuild(&mut self, layout: &Layout, runs: [&[[u32; 3]]; 3], counts: [usize; 3]) {
         self.runs.clear();
         self.block_runs.clear();
         let mut pos = 0usize;
-        for (c, list) in active.iter().enumerate() {
+        for (c, list) in runs.iter().enumerate() {
             self.offset[c] = pos;
-            let nx = layout.fdims[c][0] as u32;
-            let mut n = 0;
-            while n < list.len() {
-                let first = list[n];
-                // Extend while the next active face is the next face of the same x row.
-                let mut len = 1usize;
-                while n + len < list.len()
-                    && list[n + len] == first + len as u32
-                    && (first % nx) + (len as u32) < nx
-                {
-                    len += 1;
-                }
+            for &[first, n, len] in list.iter() {
+                let (start, len) = (pos + n as usize, len as usize);
                 // Cut at block boundaries.
                 let mut done = 0usize;
                 while done < len {
-                    let at = pos + done;
+                    let at = start + done;
                     let room = BLOCK - at % BLOCK;
                     let take = room.min(len - done);
                     let f = layout.face_coords(c, (first as usize) + done);
@@ -154,9 +148,8 @@ impl Plan {
                     });
                     done += take;
                 }
-                pos += len;
-                n += len;
             }
+            pos += counts[c];
         }
         self.offset[3] = pos;
         let blocks = pos.div_ceil(BLOCK);
@@ -1899,8 +1892,23 @@ mod tests {
                             .collect()
                     })
                     .collect();
+                // Runs of consecutive active faces within an x row, as the face sets keep them.
+                let runs: Vec<Vec<[u32; 3]>> = (0..3)
+                    .map(|c| {
+                        let nx = layout.fdims[c][0] as u32;
+                        let mut runs: Vec<[u32; 3]> = Vec::new();
+                        for (n, &idx) in active[c].iter().enumerate() {
+                            match runs.last_mut() {
+                                Some(r) if r[0] + r[2] == idx && idx % nx != 0 => r[2] += 1,
+                                _ => runs.push([idx, n as u32, 1]),
+                            }
+                        }
+                        runs
+                    })
+                    .collect();
+                let counts = [active[0].len(), active[1].len(), active[2].len()];
                 let mut plan = Plan::default();
-                plan.rebuild(&layout, [&active[0], &active[1], &active[2]]);
+                plan.rebuild(&layout, [&runs[0], &runs[1], &runs[2]], counts);
                 for dt_cells in [0.3, -2.5, 7.0, 300.0, -5000.0] {
                     let pass = Pass {
                         geo: &geo,

@@ -20,8 +20,8 @@
 //! where an odd periodic axis or a one-cell periodic axis makes a cell its own colour's neighbour it
 //! is a Jacobi update within the colour, still symmetric, and the half-sweeps stay convergent).
 //!
-//! Level 0 also keeps the compressed rows (fluid cells numbered in order, with neighbour lists) that
-//! the reference solvers, the baseline and the region search use.
+//! Level 0 can also build the compressed rows (fluid cells numbered in order, with neighbour lists)
+//! that the reference solvers and the baseline use, when one of them runs.
 
 use super::topology::NONE;
 
@@ -509,9 +509,7 @@ fn pad_index(sy: usize, sz: usize, i: usize, j: usize, k: usize) -> usize {
 /// Where [`Level::build_dense`] takes the diagonal from.
 #[derive(Clone, Copy)]
 enum DenseDiag {
-    /// The compressed rows' (level 0, built just before).
-    Rows,
-    /// Counted from the labels (a coarse level with unit couplings).
+    /// Counted from the labels (level 0, and a coarse level with unit couplings).
     Count,
     /// Left to [`Level::galerkin`], which sets it on every fluid cell.
     Later,
@@ -523,6 +521,9 @@ pub(crate) struct Level {
     pub dims: [usize; 3],
     pub periodic: [bool; 3],
     pub label: Vec<u8>,
+    /// Whether the compressed rows below match the labels (level 0 only; built by
+    /// [`Level::build_compressed_rows`] when a reference solver needs them).
+    pub rows_built: bool,
     /// Compressed rows (level 0 only): row of each cell (NONE if not fluid), cell of each row.
     pub row_of_cell: Vec<u32>,
     pub cell_of_row: Vec<u32>,
@@ -563,6 +564,8 @@ pub(crate) struct Level {
     /// +axis neighbour); empty on level 0 and on periodic levels, whose couplings are 1 between
     /// unknowns (and to open cells, in the diagonal).
     pub wt: [Vec<f32>; 3],
+    /// Scratch of [`Level::build_dense`]: one row's neighbour counts.
+    pub row_counts: Vec<u8>,
     /// Dense unknowns, right-hand side and residual.
     pub x: Vec<f32>,
     pub b: Vec<f32>,
@@ -657,16 +660,16 @@ impl Level {
         }
     }
 
-    /// Compressed rows (fluid cells).
+    /// Fluid cells (the compressed rows, when built).
     pub fn rows(&self) -> usize {
-        self.cell_of_row.len()
+        self.fluid
     }
 
     /// Cell indices of the six neighbours of cell `c` (index `ci`), order -x +x -y +y -z +z, with
     /// `usize::MAX` past a non-periodic wall (a periodic axis wraps, onto the cell itself when it
     /// is one cell long).
     #[inline(always)]
-    fn neighbour_cells(&self, c: [usize; 3], ci: usize) -> [usize; 6] {
+    pub(super) fn neighbour_cells(&self, c: [usize; 3], ci: usize) -> [usize; 6] {
         let [nx, ny, _] = self.dims;
         let stride = [1, nx, nx * ny];
         let mut out = [usize::MAX; 6];
@@ -692,12 +695,64 @@ impl Level {
         pad_index(self.sy, self.sz, i, j, k)
     }
 
-    /// Number of fluid or open neighbours of a fluid cell.
-    fn count_diag(&self, c: [usize; 3]) -> f32 {
-        let ci = c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2]);
-        let nb = self.neighbour_cells(c, ci).into_iter();
-        nb.filter(|&g| g != usize::MAX && matches!(self.label[g], L_FLUID | L_OPEN))
-            .count() as f32
+    /// Linear index of the first cell of the rows beside row `(j, k)`, order -y +y -z +z (`None`
+    /// past a non-periodic wall; a periodic axis wraps, onto the row itself when it is one row
+    /// long), as [`Level::neighbour_cells`] steps.
+    pub(super) fn neighbour_rows(&self, j: usize, k: usize) -> [Option<usize>; 4] {
+        let [nx, ny, nz] = self.dims;
+        let row = nx * (j + ny * k);
+        let step = |at: usize, n: usize, stride: usize, periodic: bool| {
+            let down = if at > 0 {
+                Some(row - stride)
+            } else {
+                periodic.then(|| row + (n - 1) * stride)
+            };
+            let up = if at + 1 < n {
+                Some(row + stride)
+            } else {
+                periodic.then(|| row - (n - 1) * stride)
+            };
+            [down, up]
+        };
+        let [ym, yp] = step(j, ny, nx, self.periodic[1]);
+        let [zm, zp] = step(k, nz, nx * ny, self.periodic[2]);
+        [ym, yp, zm, zp]
+    }
+
+    /// The number of fluid or open neighbours of cells `a..b` of the row starting at cell `row`
+    /// (`rows`: [`Level::neighbour_rows`] of it) into `out`, a row's slice at a time (the
+    /// loops vectorise).
+    fn count_row(
+        &self,
+        row: usize,
+        [a, b]: [usize; 2],
+        rows: &[Option<usize>; 4],
+        out: &mut Vec<u8>,
+    ) {
+        let nx = self.dims[0];
+        out.clear();
+        out.resize(b - a, 0);
+        let add = |out: &mut [u8], labels: &[u8]| {
+            for (o, &l) in out.iter_mut().zip(labels) {
+                *o += u8::from(l != L_SOLID);
+            }
+        };
+        for r in rows.iter().flatten() {
+            add(out, &self.label[r + a..r + b]);
+        }
+        let label = &self.label[row..row + nx];
+        // -x: the cell before, or across a periodic axis the row's last cell.
+        let lo = usize::from(a == 0);
+        add(&mut out[lo..], &label[a + lo - 1..b - 1]);
+        if a == 0 && self.periodic[0] {
+            out[0] += u8::from(label[nx - 1] != L_SOLID);
+        }
+        // +x: the cell after, or across a periodic axis the row's first cell.
+        let hi = b - usize::from(b == nx);
+        add(&mut out[..hi - a], &label[a + 1..hi + 1]);
+        if b == nx && self.periodic[0] {
+            out[b - a - 1] += u8::from(label[0] != L_SOLID);
+        }
     }
 
     /// Sets level 0's box and its labels: `label(cell)` inside the row ranges `rows` (per row
@@ -752,18 +807,30 @@ impl Level {
         }
     }
 
-    /// Builds the compressed rows of level 0 (and then its dense form) from `label`, `dims`,
-    /// `periodic`, scanning the box for the rows' ranges (the reference the solver's
-    /// [`Level::set_labels`] and [`Level::build_rows_in_extents`] must match).
+    /// Builds level 0 (dense form and compressed rows) from `label`, `dims`, `periodic`, scanning
+    /// the box for the rows' ranges (the reference the solver's [`Level::set_labels`] and
+    /// [`Level::build_in_extents`] must match).
     #[cfg(test)]
     pub fn build_rows(&mut self) {
         self.scan_row_ext();
-        self.build_rows_in_extents();
+        self.build_in_extents();
+        self.build_compressed_rows();
     }
 
-    /// [`Level::build_rows`] within the row ranges `row_ext` (which [`Level::set_labels`] keeps):
-    /// the result is the same, its cost that of the ranges.
-    pub fn build_rows_in_extents(&mut self) {
+    /// Level 0's dense form from the labels within the row ranges `row_ext` (which
+    /// [`Level::set_labels`] keeps): its cost is that of the ranges. The compressed rows, which only
+    /// the reference solvers read, are built when one runs ([`Level::build_compressed_rows`]).
+    pub fn build_in_extents(&mut self) {
+        self.rows_built = false;
+        self.build_dense(DenseDiag::Count);
+    }
+
+    /// The compressed rows of level 0 (row of each fluid cell in cell order, neighbour rows,
+    /// diagonal, dense index), from the labels within `row_ext`, unless they are current.
+    pub fn build_compressed_rows(&mut self) {
+        if self.rows_built {
+            return;
+        }
         let [nx, ny, nz] = self.dims;
         debug_assert_eq!(self.row_ext.len(), ny * nz);
         let ncell = self.label.len();
@@ -821,7 +888,7 @@ impl Level {
                 self.pad_of_row.push(pad_index(sy, sz, i, j, k) as u32);
             }
         }
-        self.build_dense(DenseDiag::Rows);
+        self.rows_built = true;
     }
 
     /// Builds the dense (padded) operator, spans and vectors from `label`, the diagonal as `diag`
@@ -867,15 +934,23 @@ impl Level {
         self.spans.clear();
         self.row_spans.clear();
         self.fluid = 0;
+        let mut counts = std::mem::take(&mut self.row_counts);
         debug_assert_eq!(self.row_ext.len(), ny * nz);
         for k in 0..nz {
             for j in 0..ny {
                 let mut first = None;
                 let mut end = 0;
                 let [a, b] = self.row_ext[j + ny * k];
+                if a >= b {
+                    continue;
+                }
+                let row = nx * (j + ny * k);
+                if let DenseDiag::Count = diag {
+                    let rows = self.neighbour_rows(j, k);
+                    self.count_row(row, [a as usize, b as usize], &rows, &mut counts);
+                }
                 for i in a as usize..b as usize {
-                    let c = i + nx * (j + ny * k);
-                    if self.label[c] != L_FLUID {
+                    if self.label[row + i] != L_FLUID {
                         continue;
                     }
                     self.fluid += 1;
@@ -884,8 +959,7 @@ impl Level {
                     let p = self.pad(i, j, k);
                     self.mask[p] = 1.0;
                     let d = match diag {
-                        DenseDiag::Rows => self.diag[self.row_of_cell[c] as usize],
-                        DenseDiag::Count => self.count_diag([i, j, k]),
+                        DenseDiag::Count => counts[i - a as usize] as f32,
                         DenseDiag::Later => continue,
                     };
                     self.ddiag[p] = d;
@@ -905,6 +979,7 @@ impl Level {
                 }
             }
         }
+        self.row_counts = counts;
         if !self.periodic.iter().any(|&p| p) {
             round_spans(&mut self.spans, len - self.sz);
         }
@@ -1356,7 +1431,8 @@ pub(crate) struct Multigrid {
 }
 
 impl Multigrid {
-    /// Builds the hierarchy under a finished level 0 (`levels[0].build_rows()` done by the caller).
+    /// Builds the hierarchy under a finished level 0 (`levels[0].build_in_extents()` done by the
+    /// caller).
     pub fn build_hierarchy(&mut self) {
         self.used = 1;
         while self.used < 16 {
@@ -1813,7 +1889,13 @@ mod tests {
                     kept.levels.push(Level::default());
                 }
                 kept.levels[0].set_labels(dims, periodic, &rows, |c| labels[c]);
-                kept.levels[0].build_rows_in_extents();
+                kept.levels[0].build_in_extents();
+                // The compressed rows are built lazily: now and then, after relabellings that
+                // did not build them.
+                let rows = round % 3 == 2;
+                if rows {
+                    kept.levels[0].build_compressed_rows();
+                }
                 hierarchy(&mut kept);
                 let mut fresh = Multigrid::default();
                 fresh.levels.push(Level {
@@ -1836,8 +1918,11 @@ mod tests {
                             assert_eq!(a.$f, b.$f, "{} at {at}", stringify!($f));
                         )*};
                     }
-                    same!(dims, periodic, label, row_of_cell, cell_of_row, nbr);
-                    same!(diag, inv_diag, pad_of_row, sy, sz, fluid, spans);
+                    same!(dims, periodic, label, sy, sz, fluid, spans);
+                    if l == 0 && rows {
+                        same!(rows_built, row_of_cell, cell_of_row, nbr, diag, inv_diag);
+                        same!(pad_of_row);
+                    }
                     same!(split_span, row_spans, ddiag, mask, inv, wt, x, b, r);
                 }
             }

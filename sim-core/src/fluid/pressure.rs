@@ -119,6 +119,21 @@ fn matvec(l: &Level, x: &[f64], y: &mut [f64], parallel: bool) {
     }
 }
 
+/// Largest `|v|` over the fluid cells of `level` (`v` zero on its other cells).
+fn max_abs_f32(level: &Level, v: &[f32]) -> f32 {
+    level.spans.iter().fold(0.0f32, |m, &[s, e]| {
+        v[s as usize..e as usize].iter().fold(m, |m, &x| {
+            // Not f32::max: a plain comparison vectorizes (NaN is skipped by both).
+            let a = x.abs();
+            if a > m {
+                a
+            } else {
+                m
+            }
+        })
+    })
+}
+
 fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
@@ -129,7 +144,7 @@ fn max_abs(a: &[f64]) -> f64 {
 
 impl PressureSolver {
     /// Resizes the vectors after the level-0 rows changed, keeping nothing of the old warm start
-    /// (the compressed-row vectors of the reference solvers are sized when one runs).
+    /// (the compressed rows and their vectors, for the reference solvers, are built when one runs).
     pub fn resize(&mut self) {
         self.regions.build(&self.mg.levels[0]);
         let l0 = &self.mg.levels[0];
@@ -200,6 +215,9 @@ impl PressureSolver {
             }
             _ => {}
         }
+        // The reference solvers work on the compressed rows, built when one first runs after a
+        // relabelling.
+        self.mg.levels[0].build_compressed_rows();
         for v in [
             &mut self.q,
             &mut self.b,
@@ -326,9 +344,7 @@ impl PressureSolver {
             l0.b = r0;
             if regions.any_closed() {
                 regions.remove_closed_means_dense(&mut l0.b);
-                l0.pad_of_row
-                    .iter()
-                    .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
+                max_abs_f32(l0, &l0.b)
             } else {
                 l0max
             }
@@ -430,9 +446,7 @@ impl PressureSolver {
                 rmax = if regions.all_closed() {
                     regions.closed_max_abs as f32
                 } else {
-                    l0.pad_of_row
-                        .iter()
-                        .fold(0.0f32, |m, &p| m.max(l0.b[p as usize].abs()))
+                    max_abs_f32(l0, &l0.b)
                 };
             }
             if rmax <= tol {

@@ -5,28 +5,38 @@
 //! subtract the region mean from the right-hand side (the part of the divergence no pressure can
 //! remove, e.g. a flux mismatch of its ports) and keep iterates mean-free in that region.
 
-use super::multigrid::Level;
+use super::multigrid::{Level, L_FLUID, L_OPEN};
 use super::topology::NONE;
 
 /// Fluid regions of the finest level.
 #[derive(Default, Debug)]
 pub(crate) struct Regions {
-    /// Region id of each pressure row.
-    pub of_row: Vec<u32>,
-    /// Whether each region is closed (no open neighbour).
+    /// Whether each region is closed (no open neighbour), regions numbered in the order of their
+    /// first cell.
     pub closed: Vec<bool>,
-    /// Rows per region.
+    /// Fluid cells per region.
     pub size: Vec<u32>,
-    /// The rows of the closed regions, in row order (often a few stray cells beside an open
-    /// cavity: the mean removal then touches only them).
-    closed_rows: Vec<u32>,
-    /// The closed regions' rows as runs of consecutive padded indices (`[region, start, end)`),
-    /// for the dense vectors: a run is an x-run of fluid cells, contiguous in memory and all in
-    /// one region, so its sum and its update are plain slice loops.
+    /// The closed regions' x-runs of fluid cells as `[region, start, end)` in padded indices (for
+    /// the dense vectors: a run is contiguous in memory and all in one region, so its sum and its
+    /// update are plain slice loops); often a few stray cells beside an open cavity, and then
+    /// the mean removal touches only them.
     closed_runs: Vec<[u32; 3]>,
+    /// The same runs as ranges `[start, end)` of compressed rows (fluid cells numbered in cell
+    /// order, as [`Level::build_compressed_rows`] numbers them), for the reference solvers.
+    closed_row_runs: Vec<[u32; 2]>,
+    /// Fluid cells, and those in closed regions.
+    cells: usize,
+    closed_cells: usize,
+    /// Scratch of [`Regions::build`]: the fluid x-runs (`[cell row, first, end)`, cell order),
+    /// their union-find parents and open flags, each cell row's range of runs, the region of
+    /// each root run.
+    runs: Vec<[u32; 3]>,
+    parent: Vec<u32>,
+    open: Vec<bool>,
+    row_runs: Vec<[u32; 2]>,
+    region: Vec<u32>,
     /// Scratch accumulators, one per region.
     sum: Vec<f64>,
-    queue: Vec<u32>,
     /// Sum over the closed regions of `|sum of v|` removed by the last `remove_closed_means*`
     /// (for the divergence right-hand side `h div u`, times `h^2` it is the flux removed, m^3/s).
     pub removed_total: f64,
@@ -34,56 +44,146 @@ pub(crate) struct Regions {
     pub closed_max_abs: f64,
 }
 
+/// The root of run `x` (path halving).
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let up = parent[parent[x as usize] as usize];
+        parent[x as usize] = up;
+        x = up;
+    }
+    x
+}
+
+/// Joins the regions of runs `a` and `b` (the smaller root becomes the parent).
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        let (lo, hi) = (ra.min(rb), ra.max(rb));
+        parent[hi as usize] = lo;
+    }
+}
+
 impl Regions {
+    /// The connected regions of `level`'s fluid cells (face neighbours, across periodic axes)
+    /// and which of them touch no open cell, from its labels within its row ranges: x-runs of
+    /// fluid cells joined where they overlap in neighbouring rows, so the cost is that of the
+    /// runs, not of the cells' neighbour lists.
     pub fn build(&mut self, level: &Level) {
-        let n = level.rows();
-        self.of_row.clear();
-        self.of_row.resize(n, NONE);
-        self.closed.clear();
-        self.size.clear();
-        for seed in 0..n {
-            if self.of_row[seed] != NONE {
+        let [nx, ny, nz] = level.dims;
+        let (label, rows) = (&level.label, &level.row_ext);
+        self.runs.clear();
+        self.row_runs.clear();
+        self.row_runs.resize(ny * nz, [0, 0]);
+        for (r, &[a, b]) in rows.iter().enumerate() {
+            let first = self.runs.len() as u32;
+            let row = &label[r * nx..(r + 1) * nx];
+            let mut i = a as usize;
+            while i < b as usize {
+                if row[i] != L_FLUID {
+                    i += 1;
+                    continue;
+                }
+                let start = i;
+                while i < b as usize && row[i] == L_FLUID {
+                    i += 1;
+                }
+                self.runs.push([r as u32, start as u32, i as u32]);
+            }
+            self.row_runs[r] = [first, self.runs.len() as u32];
+        }
+        self.parent.clear();
+        self.parent.extend(0..self.runs.len() as u32);
+        let (runs, parent) = (&self.runs, &mut self.parent);
+        for r in 0..ny * nz {
+            let [s, e] = self.row_runs[r];
+            if s == e {
                 continue;
             }
-            let id = self.closed.len() as u32;
-            let mut closed = true;
-            let mut size = 0u32;
-            self.queue.clear();
-            self.queue.push(seed as u32);
-            self.of_row[seed] = id;
-            while let Some(r) = self.queue.pop() {
-                size += 1;
-                let nb = level.nbr[r as usize];
-                let fluid_nb = nb.iter().filter(|&&x| (x as usize) < n).count() as f32;
-                // Fluid neighbours through a periodic self-wrap count too; diag counts open ones.
-                if level.diag[r as usize] > fluid_nb {
-                    closed = false;
-                }
-                for &x in &nb {
-                    if (x as usize) < n && self.of_row[x as usize] == NONE {
-                        self.of_row[x as usize] = id;
-                        self.queue.push(x);
+            // A periodic x axis joins a row's last cell to its first.
+            if level.periodic[0]
+                && runs[s as usize][1] == 0
+                && runs[e as usize - 1][2] as usize == nx
+            {
+                union(parent, s, e - 1);
+            }
+            // The +y and +z neighbour rows (the relation is symmetric; wrapped on a periodic
+            // axis): runs that overlap along x touch.
+            let [_, yp, _, zp] = level.neighbour_rows(r % ny, r / ny);
+            for other in [yp, zp].into_iter().flatten() {
+                let [mut y, t] = self.row_runs[other / nx];
+                let mut x = s;
+                while x < e && y < t {
+                    let (a, b) = (runs[x as usize], runs[y as usize]);
+                    if a[1] < b[2] && b[1] < a[2] {
+                        union(parent, x, y);
+                    }
+                    if a[2] < b[2] {
+                        x += 1;
+                    } else {
+                        y += 1;
                     }
                 }
             }
-            self.closed.push(closed);
-            self.size.push(size);
         }
-        self.sum.clear();
-        self.sum.resize(self.closed.len(), 0.0);
-        self.closed_rows.clear();
-        let closed = &self.closed;
-        let rows = self.of_row.iter().enumerate();
-        let in_closed = rows.filter(|&(_, &id)| closed[id as usize]);
-        self.closed_rows.extend(in_closed.map(|(r, _)| r as u32));
-        self.closed_runs.clear();
-        for &r in &self.closed_rows {
-            let (id, p) = (self.of_row[r as usize], level.pad_of_row[r as usize]);
-            match self.closed_runs.last_mut() {
-                Some(run) if run[0] == id && run[2] == p => run[2] = p + 1,
-                _ => self.closed_runs.push([id, p, p + 1]),
+        // A region is open when one of its cells has an open neighbour.
+        self.open.clear();
+        self.open.resize(self.runs.len(), false);
+        for (r, &[a, b]) in rows.iter().enumerate() {
+            let (j, k) = (r % ny, r / ny);
+            for i in a as usize..b as usize {
+                let ci = r * nx + i;
+                if label[ci] != L_OPEN {
+                    continue;
+                }
+                for g in level.neighbour_cells([i, j, k], ci) {
+                    if g == usize::MAX || label[g] != L_FLUID {
+                        continue;
+                    }
+                    let (gr, gi) = ((g / nx) as u32, (g % nx) as u32);
+                    let [s, e] = self.row_runs[gr as usize];
+                    let run = (s..e).find(|&n| {
+                        let [_, i0, i1] = self.runs[n as usize];
+                        i0 <= gi && gi < i1
+                    });
+                    if let Some(n) = run {
+                        let root = find(&mut self.parent, n);
+                        self.open[root as usize] = true;
+                    }
+                }
             }
         }
+        // Regions numbered in the order of their first run (their first cell).
+        self.region.clear();
+        self.region.resize(self.runs.len(), NONE);
+        self.closed.clear();
+        self.size.clear();
+        self.closed_runs.clear();
+        self.closed_row_runs.clear();
+        self.closed_cells = 0;
+        let mut row = 0u32;
+        for n in 0..self.runs.len() {
+            let root = find(&mut self.parent, n as u32) as usize;
+            if self.region[root] == NONE {
+                self.region[root] = self.closed.len() as u32;
+                self.closed.push(!self.open[root]);
+                self.size.push(0);
+            }
+            let id = self.region[root];
+            let [r, i0, i1] = self.runs[n];
+            let len = i1 - i0;
+            self.size[id as usize] += len;
+            if self.closed[id as usize] {
+                let (j, k) = (r as usize % ny, r as usize / ny);
+                let p = level.pad(i0 as usize, j, k) as u32;
+                self.closed_runs.push([id, p, p + len]);
+                self.closed_row_runs.push([row, row + len]);
+                self.closed_cells += len as usize;
+            }
+            row += len;
+        }
+        self.cells = row as usize;
+        self.sum.clear();
+        self.sum.resize(self.closed.len(), 0.0);
     }
 
     /// Number of regions.
@@ -93,14 +193,14 @@ impl Regions {
 
     /// True if any region is closed.
     pub fn any_closed(&self) -> bool {
-        // A closed region has at least one row.
-        !self.closed_rows.is_empty()
+        // A closed region has at least one run.
+        !self.closed_runs.is_empty()
     }
 
     /// True if every row lies in a closed region (a cavity whose ports are all prescribed
     /// velocities): then [`Regions::closed_max_abs`] is the largest value of the whole vector.
     pub fn all_closed(&self) -> bool {
-        !self.of_row.is_empty() && self.closed_rows.len() == self.of_row.len()
+        self.cells > 0 && self.closed_cells == self.cells
     }
 
     /// Subtracts its region's mean from every row of a closed region. Returns the largest absolute
@@ -111,12 +211,16 @@ impl Regions {
             return 0.0;
         }
         self.sum.fill(0.0);
-        for &r in &self.closed_rows {
-            self.sum[self.of_row[r as usize] as usize] += v[r as usize];
+        for (&[id, ..], &[s, e]) in self.closed_runs.iter().zip(&self.closed_row_runs) {
+            for &x in &v[s as usize..e as usize] {
+                self.sum[id as usize] += x;
+            }
         }
         let worst = self.sums_to_means();
-        for &r in &self.closed_rows {
-            v[r as usize] -= self.sum[self.of_row[r as usize] as usize];
+        for (&[id, ..], &[s, e]) in self.closed_runs.iter().zip(&self.closed_row_runs) {
+            for x in &mut v[s as usize..e as usize] {
+                *x -= self.sum[id as usize];
+            }
         }
         worst
     }
@@ -189,5 +293,104 @@ impl Real for f64 {
     }
     fn from_f64(v: f64) -> Self {
         v
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fluid::multigrid::L_SOLID;
+
+    /// The regions by a search over the compressed rows' neighbour lists (the definition): per
+    /// region whether it is closed (a row has more fluid or open neighbours than fluid ones) and
+    /// its size, and the rows of the closed regions.
+    fn by_search(level: &Level) -> (Vec<bool>, Vec<u32>, Vec<u32>) {
+        let n = level.rows();
+        let mut of_row = vec![NONE; n];
+        let (mut closed, mut size) = (Vec::new(), Vec::new());
+        for seed in 0..n {
+            if of_row[seed] != NONE {
+                continue;
+            }
+            let id = closed.len() as u32;
+            let (mut is_closed, mut count) = (true, 0);
+            let mut queue = vec![seed];
+            of_row[seed] = id;
+            while let Some(r) = queue.pop() {
+                count += 1;
+                let nb = level.nbr[r];
+                let fluid_nb = nb.iter().filter(|&&x| (x as usize) < n).count() as f32;
+                if level.diag[r] > fluid_nb {
+                    is_closed = false;
+                }
+                for &x in &nb {
+                    if (x as usize) < n && of_row[x as usize] == NONE {
+                        of_row[x as usize] = id;
+                        queue.push(x as usize);
+                    }
+                }
+            }
+            closed.push(is_closed);
+            size.push(count);
+        }
+        let rows = (0..n as u32).filter(|&r| closed[of_row[r as usize] as usize]);
+        let rows = rows.collect();
+        (closed, size, rows)
+    }
+
+    #[test]
+    fn regions_from_runs_equal_a_search_over_the_rows() {
+        let mut rng = fastrand::Rng::with_seed(11);
+        let mut regions = Regions::default();
+        let mut any_closed = 0;
+        for round in 0..120 {
+            let dims = [rng.usize(1..9), rng.usize(1..9), rng.usize(1..9)];
+            let periodic = [rng.bool(), rng.bool(), rng.bool()];
+            let ncell = dims.iter().product();
+            // Mostly fluid with solid walls sprinkled in (splitting regions) and a few open cells.
+            let solid = rng.usize(10..60);
+            let open = [0, 2, 5][round % 3];
+            let label = (0..ncell)
+                .map(|_| match rng.usize(..100) {
+                    x if x < open => L_OPEN,
+                    x if x < solid => L_SOLID,
+                    _ => L_FLUID,
+                })
+                .collect();
+            let mut level = Level {
+                dims,
+                periodic,
+                label,
+                ..Default::default()
+            };
+            level.build_rows();
+            regions.build(&level);
+            let (closed, size, closed_rows) = by_search(&level);
+            let at = format!("round {round}, dims {dims:?}, periodic {periodic:?}");
+            assert_eq!(regions.closed, closed, "closed, {at}");
+            assert_eq!(regions.size, size, "size, {at}");
+            let rows: Vec<u32> = regions
+                .closed_row_runs
+                .iter()
+                .flat_map(|&[s, e]| s..e)
+                .collect();
+            assert_eq!(rows, closed_rows, "closed rows, {at}");
+            let pads: Vec<u32> = regions
+                .closed_runs
+                .iter()
+                .flat_map(|&[_, s, e]| s..e)
+                .collect();
+            let want: Vec<u32> = closed_rows
+                .iter()
+                .map(|&r| level.pad_of_row[r as usize])
+                .collect();
+            assert_eq!(pads, want, "closed runs, {at}");
+            assert_eq!(regions.any_closed(), !closed_rows.is_empty(), "{at}");
+            let all = level.rows() > 0 && closed_rows.len() == level.rows();
+            assert_eq!(regions.all_closed(), all, "{at}");
+            any_closed += usize::from(regions.any_closed() && !regions.all_closed());
+        }
+        // The random grids cover mixed open and closed regions.
+        assert!(any_closed > 10, "{any_closed} grids with both kinds");
     }
 }

@@ -245,7 +245,7 @@ fn build_pressure_levels(
         CellLabel::Outflow => L_OPEN,
         _ => L_SOLID,
     });
-    l0.build_rows_in_extents();
+    l0.build_in_extents();
     // The pressure is zero outside the fluid cells, so only the previous spans can hold stale
     // values.
     let len = l0.mask.len();
@@ -417,7 +417,6 @@ impl FluidSolver {
             rows.update(&self.open_rows, self.grid.dims(), &mut self.centred);
         }
         let changed = diffed.then(|| self.label_diff.cells());
-        self.outflow_faces.clear();
         // The three face sets and the pressure levels are independent: the faces here, the
         // pressure levels (the larger part since the face sets update incrementally) on the
         // fork-join helper (the result does not depend on which thread builds which).
@@ -435,10 +434,12 @@ impl FluidSolver {
                 build_pressure_levels(grid, rows, pressure, pressure_pa, p_lag);
             },
         );
+        // The compact vectors (viscosity and advection results, wall ghosts) are written whole
+        // before they are read (`update_ghosts` clears the ghosts), so a relabelling only sizes
+        // them: clearing them cost more than the rest of the serial part of the rebuild.
         for c in 0..3 {
             let n = self.faces[c].active.len();
             for v in [&mut self.compact[c], &mut self.ghost[c]] {
-                v.clear();
                 v.resize(n, 0.0);
             }
             let (l0, layout) = (&self.pressure.mg.levels[0], &self.layout);
@@ -448,29 +449,17 @@ impl FluidSolver {
             });
             self.run_cells[c].clear();
             self.run_cells[c].extend(cells);
-            let set = &self.faces[c];
-            for (&idx, &[lo, up]) in set.active.iter().zip(set.active_cells()) {
-                let outflow = |cell: u32| {
-                    (cell != NONE && self.grid.label_at(cell as usize) == CellLabel::Outflow)
-                        .then(|| self.grid.coords(cell as usize))
-                };
-                let (cell, sign) = match (outflow(lo), outflow(up)) {
-                    (_, Some(x)) => (x, 1.0),
-                    (Some(x), None) => (x, -1.0),
-                    (None, None) => continue,
-                };
-                self.outflow_faces
-                    .push((c as u8, idx, sign, cell.map(|v| v as u32)));
-            }
             // Faces no longer tracked are zeroed so stale values never leak into samples (the
             // untracked faces hold zero: see `set_velocity_field`).
             for &idx in &self.faces[c].dropped {
                 self.u[c][idx as usize] = 0.0;
             }
         }
+        self.find_outflow_faces();
         let [f0, f1, f2] = &self.faces;
+        let counts = [f0.active.len(), f1.active.len(), f2.active.len()];
         self.plan
-            .rebuild(&self.layout, [&f0.active, &f1.active, &f2.active]);
+            .rebuild(&self.layout, [&f0.runs, &f1.runs, &f2.runs], counts);
         let total = self.plan.offset[3];
         let [f0, f1, f2] = &mut self.adv_foot;
         for v in [
@@ -483,12 +472,50 @@ impl FluidSolver {
             f1,
             f2,
         ] {
-            v.clear();
             v.resize(total, 0.0);
         }
         self.revision = self.grid.revision();
         self.apply_fixed(true);
         self.extrapolate();
+    }
+
+    /// The active faces between a fluid and an outflow cell (`outflow_faces`, in face order),
+    /// from the outflow cells within the rows' open ranges (a few, at the ports) rather than from
+    /// every active face.
+    fn find_outflow_faces(&mut self) {
+        self.outflow_faces.clear();
+        let dims = self.grid.dims();
+        let [nx, ny, _] = dims;
+        let labels = self.grid.labels();
+        for (r, &[a, b]) in self.open_rows.iter().enumerate() {
+            let row = &labels[r * nx..(r + 1) * nx];
+            for i in a as usize..b as usize {
+                if row[i] != CellLabel::Outflow {
+                    continue;
+                }
+                let cell = [i, r % ny, r / ny];
+                for c in 0..3 {
+                    // The cell is the upper cell of its lower face and the lower cell of its
+                    // upper face (wrapped on a periodic axis).
+                    let mut up = cell;
+                    up[c] += 1;
+                    if up[c] == dims[c] && self.layout.periodic[c] {
+                        up[c] = 0;
+                    }
+                    // On a one-cell periodic axis they are one face, counted as the lower.
+                    let faces = [(cell, 1.0), (up, -1.0)];
+                    for &(f, sign) in &faces[..if up == cell { 1 } else { 2 }] {
+                        let idx = self.layout.face_index(c, f);
+                        if self.faces[c].class[idx] == topology::ACTIVE {
+                            let at = cell.map(|v| v as u32);
+                            self.outflow_faces.push((c as u8, idx as u32, sign, at));
+                        }
+                    }
+                }
+            }
+        }
+        self.outflow_faces
+            .sort_unstable_by_key(|&(c, idx, ..)| (c, idx));
     }
 
     /// Writes the prescribed normal velocity of the fixed faces: all of them (`all`, after the faces
@@ -1435,5 +1462,63 @@ mod tests {
             }
             assert!(checked > 1000, "{checked} non-zero cells compared");
         }
+    }
+
+    /// The outflow faces by their definition: every active face with an outflow cell on one
+    /// side, in face order, with +1 when the outflow cell is its upper cell.
+    fn outflow_faces_by_scan(s: &FluidSolver) -> Vec<(u8, u32, f32, [u32; 3])> {
+        let mut out = Vec::new();
+        for c in 0..3 {
+            let set = &s.faces[c];
+            for (&idx, &[lo, up]) in set.active.iter().zip(set.active_cells()) {
+                let outflow = |cell: u32| {
+                    (cell != NONE && s.grid.label_at(cell as usize) == CellLabel::Outflow)
+                        .then(|| s.grid.coords(cell as usize).map(|v| v as u32))
+                };
+                match (outflow(lo), outflow(up)) {
+                    (_, Some(x)) => out.push((c as u8, idx, 1.0, x)),
+                    (Some(x), None) => out.push((c as u8, idx, -1.0, x)),
+                    (None, None) => {}
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn outflow_faces_found_from_the_outflow_cells_equal_a_scan_of_the_active_faces() {
+        let labels = [
+            CellLabel::Fluid,
+            CellLabel::Fluid,
+            CellLabel::Solid,
+            CellLabel::Velocity,
+            CellLabel::Outflow,
+        ];
+        let mut found = 0;
+        for (seed, (dims, periodic)) in [
+            ([9, 7, 6], [false; 3]),
+            ([8, 6, 5], [true, false, true]),
+            ([7, 1, 6], [false; 3]),
+            ([7, 3, 6], [false, true, false]),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut rng = fastrand::Rng::with_seed(3 + seed as u64);
+            let grid = FluidGrid::new(dims, 1e-3, [0.0; 3], periodic).unwrap();
+            let mut s = FluidSolver::new(grid, FluidParams::default()).unwrap();
+            for round in 0..12 {
+                for _ in 0..rng.usize(1..40) {
+                    let cell = dims.map(|n| rng.usize(..n));
+                    let l = labels[rng.usize(..labels.len())];
+                    s.grid_mut().set_label(cell, l).unwrap();
+                }
+                s.rebuild_topology();
+                let want = outflow_faces_by_scan(&s);
+                assert_eq!(s.outflow_faces, want, "round {round}, {periodic:?}");
+                found += want.len();
+            }
+        }
+        assert!(found > 100, "{found} outflow faces");
     }
 }

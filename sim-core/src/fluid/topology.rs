@@ -449,6 +449,7 @@ pub(crate) fn wall_velocity(grid: &FluidGrid, c: usize, a: u32, b: u32) -> f32 {
 impl FaceSet {
     /// The cells beside each active face (lower, upper; NONE = outside), as [`face_cells`] finds
     /// them, in the order of `active`.
+    #[cfg(test)]
     pub fn active_cells(&self) -> &[[u32; 2]] {
         &self.active_cells
     }
@@ -585,90 +586,97 @@ impl FaceSet {
         // still holds its previous compact index (or layer position): the dirty faces were reset
         // to NONE.
         let rows = d[1] * d[2];
-        for fk in 0..d[2] {
-            for fj in 0..d[1] {
-                let row = fj + d[1] * fk;
-                self.row_at.push(self.list_lengths());
-                if !self.row_dirty[row] {
-                    let (from, to) = (old.row_at[row], old.row_at[row + 1]);
-                    let span = |l: usize| from[l] as usize..to[l] as usize;
-                    let (a, n0) = (span(0), self.active.len() as u32);
-                    for (k, &idx) in old.active[a.clone()].iter().enumerate() {
-                        self.compact[idx as usize] = n0 + k as u32;
+        let mut row = 0;
+        while row < rows {
+            if !self.row_dirty[row] {
+                // A stretch of clean rows: their entries are contiguous in every old list, so
+                // they move as one slice per list.
+                let end = (row + 1..rows).find(|&r| self.row_dirty[r]).unwrap_or(rows);
+                let (from, to) = (old.row_at[row], old.row_at[end]);
+                let now = self.list_lengths();
+                for at in &old.row_at[row..end] {
+                    self.row_at
+                        .push(std::array::from_fn(|l| now[l] + (at[l] - from[l])));
+                }
+                row = end;
+                let span = |l: usize| from[l] as usize..to[l] as usize;
+                let (a, n0) = (span(0), self.active.len() as u32);
+                for (k, &idx) in old.active[a.clone()].iter().enumerate() {
+                    self.compact[idx as usize] = n0 + k as u32;
+                }
+                self.active.extend_from_slice(&old.active[a.clone()]);
+                self.active_cells
+                    .extend_from_slice(&old.active_cells[a.clone()]);
+                self.reuse.extend(a.start as u32..a.end as u32);
+                for l in 0..2 {
+                    let (q, list, was) = if l == 0 {
+                        (span(1), &mut self.ext1, &old.ext1)
+                    } else {
+                        (span(2), &mut self.ext2, &old.ext2)
+                    };
+                    let p0 = list.len() as u32;
+                    for (k, &idx) in was[q.clone()].iter().enumerate() {
+                        self.ext_pos[idx as usize] = p0 + k as u32;
                     }
-                    self.active.extend_from_slice(&old.active[a.clone()]);
-                    self.active_cells
-                        .extend_from_slice(&old.active_cells[a.clone()]);
-                    self.reuse.extend(a.start as u32..a.end as u32);
-                    for l in 0..2 {
-                        let (q, list, was) = if l == 0 {
-                            (span(1), &mut self.ext1, &old.ext1)
-                        } else {
-                            (span(2), &mut self.ext2, &old.ext2)
-                        };
-                        let p0 = list.len() as u32;
-                        for (k, &idx) in was[q.clone()].iter().enumerate() {
-                            self.ext_pos[idx as usize] = p0 + k as u32;
-                        }
-                        list.extend_from_slice(&was[q.clone()]);
-                        let at = if l == 0 { 0 } else { old.ext1_len as u32 };
-                        self.ext_reuse[l].extend((q.start as u32..q.end as u32).map(|q| at + q));
-                    }
-                    self.fixed_in_order
-                        .extend_from_slice(&old.fixed_in_order[span(3)]);
+                    list.extend_from_slice(&was[q.clone()]);
+                    let at = if l == 0 { 0 } else { old.ext1_len as u32 };
+                    self.ext_reuse[l].extend((q.start as u32..q.end as u32).map(|q| at + q));
+                }
+                self.fixed_in_order
+                    .extend_from_slice(&old.fixed_in_order[span(3)]);
+                continue;
+            }
+            self.row_at.push(self.list_lengths());
+            let (fj, fk) = (row % d[1], row / d[1]);
+            let base = d[0] * row;
+            row += 1;
+            for (w, chunk) in self.class[base..base + d[0]].chunks(8).enumerate() {
+                let empty = match <[u8; 8]>::try_from(chunk) {
+                    Ok(word) => u64::from_ne_bytes(word) == 0,
+                    Err(_) => chunk.iter().all(|&cl| cl == OTHER),
+                };
+                if empty {
                     continue;
                 }
-                let base = d[0] * row;
-                for (w, chunk) in self.class[base..base + d[0]].chunks(8).enumerate() {
-                    let empty = match <[u8; 8]>::try_from(chunk) {
-                        Ok(word) => u64::from_ne_bytes(word) == 0,
-                        Err(_) => chunk.iter().all(|&cl| cl == OTHER),
-                    };
-                    if empty {
-                        continue;
-                    }
-                    for (b, &cl) in chunk.iter().enumerate() {
-                        let i = 8 * w + b;
-                        let idx = base + i;
-                        match cl {
-                            ACTIVE => {
-                                let m = self.compact[idx];
-                                self.compact[idx] = self.active.len() as u32;
-                                self.active.push(idx as u32);
-                                self.reuse.push(m);
-                                self.active_cells.push(if m == NONE {
-                                    let (li, ui) =
-                                        face_cell_indices(cdims, cell_periodic, c, [i, fj, fk]);
-                                    [li, ui]
-                                } else {
-                                    old.active_cells[m as usize]
-                                });
-                            }
-                            FIXED => {
+                for (b, &cl) in chunk.iter().enumerate() {
+                    let i = 8 * w + b;
+                    let idx = base + i;
+                    match cl {
+                        ACTIVE => {
+                            let m = self.compact[idx];
+                            self.compact[idx] = self.active.len() as u32;
+                            self.active.push(idx as u32);
+                            self.reuse.push(m);
+                            self.active_cells.push(if m == NONE {
                                 let (li, ui) =
                                     face_cell_indices(cdims, cell_periodic, c, [i, fj, fk]);
-                                self.fixed_in_order.push([idx as u32, li, ui]);
-                            }
-                            EXT1 | EXT2 => {
-                                let l = usize::from(cl == EXT2);
-                                let list = if l == 0 {
-                                    &mut self.ext1
-                                } else {
-                                    &mut self.ext2
-                                };
-                                let q = self.ext_pos[idx];
-                                self.ext_pos[idx] = list.len() as u32;
-                                list.push(idx as u32);
-                                let at = if l == 0 { 0 } else { old.ext1_len as u32 };
-                                self.ext_reuse[l].push(if q == NONE { NONE } else { at + q });
-                            }
-                            _ => {}
+                                [li, ui]
+                            } else {
+                                old.active_cells[m as usize]
+                            });
                         }
+                        FIXED => {
+                            let (li, ui) = face_cell_indices(cdims, cell_periodic, c, [i, fj, fk]);
+                            self.fixed_in_order.push([idx as u32, li, ui]);
+                        }
+                        EXT1 | EXT2 => {
+                            let l = usize::from(cl == EXT2);
+                            let list = if l == 0 {
+                                &mut self.ext1
+                            } else {
+                                &mut self.ext2
+                            };
+                            let q = self.ext_pos[idx];
+                            self.ext_pos[idx] = list.len() as u32;
+                            list.push(idx as u32);
+                            let at = if l == 0 { 0 } else { old.ext1_len as u32 };
+                            self.ext_reuse[l].push(if q == NONE { NONE } else { at + q });
+                        }
+                        _ => {}
                     }
                 }
             }
         }
-
         self.row_at.push(self.list_lengths());
 
         // Viscous stencils. A tangential neighbour's cells are the face's own shifted by one cell
@@ -814,18 +822,28 @@ impl FaceSet {
         // Runs of active faces, and of regular ones (see `regular`), row by row (a run never
         // crosses a row): a clean row's are the last build's, shifted to its new compact indices.
         let offs = fstride;
-        for row in 0..=rows {
-            self.row_at[row][4..].copy_from_slice(&[
+        let mut row = 0;
+        loop {
+            let now = [
                 self.runs.len() as u32,
                 self.regular.len() as u32,
                 self.irregular.len() as u32,
-            ]);
+            ];
             if row == rows {
+                self.row_at[row][4..].copy_from_slice(&now);
                 break;
             }
             if !self.row_dirty[row] {
-                let (from, to) = (old.row_at[row], old.row_at[row + 1]);
+                // A stretch of clean rows, as above.
+                let end = (row + 1..rows).find(|&r| self.row_dirty[r]).unwrap_or(rows);
+                let (from, to) = (old.row_at[row], old.row_at[end]);
+                for (at, was) in self.row_at[row..end].iter_mut().zip(&old.row_at[row..end]) {
+                    for l in 0..3 {
+                        at[4 + l] = now[l] + (was[4 + l] - from[4 + l]);
+                    }
+                }
                 let shift = self.row_at[row][0].wrapping_sub(from[0]);
+                row = end;
                 let moved = |r: &[u32; 3]| [r[0], r[1].wrapping_add(shift), r[2]];
                 let span = |l: usize| from[l] as usize..to[l] as usize;
                 self.runs.extend(old.runs[span(4)].iter().map(moved));
@@ -837,10 +855,12 @@ impl FaceSet {
                     }));
                 continue;
             }
+            self.row_at[row][4..].copy_from_slice(&now);
             let (a0, a1) = (
                 self.row_at[row][0] as usize,
                 self.row_at[row + 1][0] as usize,
             );
+            row += 1;
             for n in a0..a1 {
                 let idx = self.active[n];
                 let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
