@@ -328,6 +328,44 @@ fn incremental_labels_equal_a_pass_over_the_whole_box() {
     );
 }
 
+/// The scene replays its surface from the atlas restricted to the surface's vertices: the same
+/// positions and `dx/dp`, bit for bit, as the replay from the whole mesh's atlas, within the
+/// atlas, between its levels and below its first level (suction).
+#[test]
+fn the_compact_replay_equals_the_replay_from_the_whole_atlas() {
+    let (desc, assets) = coarse(1.5);
+    let scene = Scene::new(desc, assets).unwrap();
+    let atlas = scene.atlas();
+    let (mut a, mut b) = (
+        scene.cavity_surface().clone(),
+        scene.cavity_surface().clone(),
+    );
+    let compact = a.compact_atlas(atlas).unwrap();
+    assert!(compact.vertex_count() < atlas.vertex_count());
+    let top = atlas.pressure_pa[atlas.level_count() - 1];
+    for p in [
+        -2000.0,
+        -1.0,
+        0.0,
+        0.37 * top,
+        atlas.pressure_pa[1],
+        0.999 * top,
+        top,
+        2.0 * top,
+    ] {
+        a.replay(atlas, p).unwrap();
+        b.replay_compact(&compact, p).unwrap();
+        assert!(
+            a.positions_m() == b.positions_m(),
+            "positions differ at {p} Pa"
+        );
+        assert!(
+            a.dxdp_m_per_pa() == b.dxdp_m_per_pa(),
+            "dx/dp differ at {p} Pa"
+        );
+    }
+}
+
 #[test]
 fn steady_steps_do_not_allocate() {
     let (desc, assets) = coarse(1.2);

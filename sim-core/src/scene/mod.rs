@@ -405,6 +405,8 @@ fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
 pub struct Scene {
     desc: SceneDesc,
     atlas: Atlas,
+    /// The atlas of the cavity surface's vertices alone (what a step replays).
+    surface_atlas: Atlas,
     surface: CavitySurface,
     voxelizer: Voxelizer,
     cells: VoxelBox,
@@ -466,7 +468,8 @@ impl Scene {
         let SceneAssets { mesh, atlas } = assets;
         let mut surface = CavitySurface::new(&mesh)?;
         let top = atlas.pressure_pa[atlas.level_count() - 1];
-        surface.replay(&atlas, top)?;
+        let surface_atlas = surface.compact_atlas(&atlas)?;
+        surface.replay_compact(&surface_atlas, top)?;
         let h = desc.voxel_m();
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         for p in surface.positions_m() {
@@ -591,6 +594,7 @@ impl Scene {
             particles,
             desc,
             atlas,
+            surface_atlas,
         })
     }
 
@@ -706,7 +710,7 @@ impl Scene {
         let moved = (p - self.deformed_at_pa).abs() > self.desc.skip.pressure_tolerance_pa
             || self.deformed_at_pa.is_nan();
         if moved {
-            self.surface.replay(&self.atlas, p)?;
+            self.surface.replay_compact(&self.surface_atlas, p)?;
             self.deformed_at_pa = p;
             self.report.surface_volume_m3 = self.surface.enclosed_volume_m3();
             if p < self.atlas.pressure_pa[0] {
@@ -857,7 +861,7 @@ impl Scene {
             if !c.is_finite() {
                 break;
             }
-            self.surface.replay(&self.atlas, c)?;
+            self.surface.replay_compact(&self.surface_atlas, c)?;
             (b, vb) = (a, va);
             (a, va) = (c, self.surface.enclosed_volume_m3());
         }
@@ -951,15 +955,21 @@ impl Scene {
         let x0 = cells.origin_m[0];
         self.scope_cells_next.clear();
         if let Some(sc) = self.scope {
-            for row in 0..ny * nz {
-                let (j, k) = (row % ny, row / ny);
-                let c = cells.centre_m(0, j, k);
-                if let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) {
-                    let base = cells.index(0, j, k);
-                    for i in a..=b {
-                        let part = sc.part(cells.centre_m(i, j, k), h);
-                        if part != ScopePart::None {
-                            self.scope_cells_next.push(((base + i) as u32, part));
+            let y0 = cells.origin_m[1];
+            for k in 0..nz {
+                let z = cells.centre_m(0, 0, k)[2];
+                let Some((j0, j1)) = sc.slab_rows(z, y0, h, ny) else {
+                    continue;
+                };
+                for j in j0..=j1 {
+                    let c = cells.centre_m(0, j, k);
+                    if let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) {
+                        let base = cells.index(0, j, k);
+                        for i in a..=b {
+                            let part = sc.part(cells.centre_m(i, j, k), h);
+                            if part != ScopePart::None {
+                                self.scope_cells_next.push(((base + i) as u32, part));
+                            }
                         }
                     }
                 }
