@@ -350,17 +350,35 @@ fn mark(h: &HydraulicState) -> HydraulicMark {
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct BoundaryCell {
     cell: u32,
+    /// Its `(i, j, k)` (what the solver's setters take), kept to spare a division per use.
+    at: [u32; 3],
     /// Bit f set: face f (0..6) borders fluid.
     faces: u8,
 }
 
-/// A boundary cell kept between compositions, with the list it goes to: [`VoxelKind::Wall`],
-/// [`VoxelKind::Open`], [`VoxelKind::Outflow`] (the hole band) or [`VoxelKind::Inflow`] (a
-/// candidate of the tip layer).
-#[derive(Debug, Clone, Copy)]
-struct Listed {
-    cell: BoundaryCell,
-    role: VoxelKind,
+/// Replaces the entries of `list` (by cell index) in the rows `rows` (sorted) with `fresh` (the
+/// rows' new entries, by cell index), through the scratch `next`: the rows' runs are found by
+/// bisection and the rest is copied in runs.
+fn splice_rows(
+    list: &mut Vec<BoundaryCell>,
+    next: &mut Vec<BoundaryCell>,
+    fresh: &[BoundaryCell],
+    rows: &[u32],
+    nx: usize,
+) {
+    next.clear();
+    let (mut from, mut f) = (0, 0);
+    for &row in rows {
+        let (start, end) = (row as usize * nx, (row as usize + 1) * nx);
+        let a = from + list[from..].partition_point(|b| (b.cell as usize) < start);
+        let b = a + list[a..].partition_point(|b| (b.cell as usize) < end);
+        let g = f + fresh[f..].partition_point(|b| (b.cell as usize) < end);
+        next.extend_from_slice(&list[from..a]);
+        next.extend_from_slice(&fresh[f..g]);
+        (from, f) = (b, g);
+    }
+    next.extend_from_slice(&list[from..]);
+    std::mem::swap(list, next);
 }
 
 /// What [`Scene::relabel_whole_box`] changed: nothing (all zero, all false) when the row-
@@ -443,13 +461,15 @@ pub struct Scene {
     /// Fluid cells per row, and in all.
     row_fluid: Vec<u32>,
     fluid_cells: usize,
-    /// The boundary cells by cell index (what the lists are split from), and scratch for
-    /// listing rows anew: the rows, their marks, their cells, the merged list.
-    listed: Vec<Listed>,
+    /// The tip layer's cells with a face on fluid (the inflow port's candidates), by cell index
+    /// like the other boundary lists.
+    tips: Vec<BoundaryCell>,
+    /// Scratch for listing rows anew: the rows and their marks, their new walls, open cells,
+    /// hole-band cells and tip cells, a spliced list.
     relisted_rows: Vec<u32>,
     row_relisted: Vec<bool>,
-    listed_fresh: Vec<Listed>,
-    listed_next: Vec<Listed>,
+    fresh: [Vec<BoundaryCell>; 4],
+    spliced: Vec<BoundaryCell>,
     /// The hydraulic pressure the surface was last replayed for, Pa.
     deformed_at_pa: f64,
     topology_revision: u64,
@@ -579,11 +599,11 @@ impl Scene {
             scope_cells_next: Vec::with_capacity(n),
             row_fluid: vec![0; rows],
             fluid_cells: 0,
-            listed: Vec::with_capacity(n),
+            tips: Vec::with_capacity(n),
             relisted_rows: Vec::with_capacity(rows),
             row_relisted: vec![false; rows],
-            listed_fresh: Vec::with_capacity(n),
-            listed_next: Vec::with_capacity(n),
+            fresh: std::array::from_fn(|_| Vec::with_capacity(n)),
+            spliced: Vec::with_capacity(n),
             deformed_at_pa: f64::NAN,
             topology_revision: 1,
             report: StepReport {
@@ -1110,20 +1130,23 @@ impl Scene {
         // 3. The boundary cells of those rows (walls beside fluid, port candidates at the tip and
         // in the hole band), by cell index, into the kept list in place of the rows' old ones.
         self.relisted_rows.sort_unstable();
-        self.listed_fresh.clear();
+        for f in &mut self.fresh {
+            f.clear();
+        }
         for m in 0..self.relisted_rows.len() {
             let row = self.relisted_rows[m] as usize;
             let (j, k) = (row % ny, row / ny);
             let [a, b] = if whole { all } else { self.kind_extent[row] };
             for i in a as usize..b as usize {
                 let n = cells.index(i, j, k);
-                let tag = match self.kinds[n] {
-                    VoxelKind::Wall => VoxelKind::Wall,
-                    VoxelKind::Open => VoxelKind::Open,
+                // Into walls, open, hole band, tip layer.
+                let list = match self.kinds[n] {
+                    VoxelKind::Wall => 0,
+                    VoxelKind::Open => 1,
                     VoxelKind::Scope => {
                         match self.scope.map(|sc| sc.part(cells.centre_m(i, j, k), h)) {
-                            Some(ScopePart::Tip) => VoxelKind::Inflow,
-                            Some(ScopePart::Holes) => VoxelKind::Outflow,
+                            Some(ScopePart::Holes) => 2,
+                            Some(ScopePart::Tip) => 3,
                             _ => continue,
                         }
                     }
@@ -1131,55 +1154,36 @@ impl Scene {
                 };
                 let faces = self.fluid_faces(i, j, k);
                 if faces != 0 {
-                    self.listed_fresh.push(Listed {
-                        cell: BoundaryCell {
-                            cell: n as u32,
-                            faces,
-                        },
-                        role: tag,
+                    self.fresh[list].push(BoundaryCell {
+                        cell: n as u32,
+                        at: [i, j, k].map(|x| x as u32),
+                        faces,
                     });
                 }
             }
         }
-        self.listed_next.clear();
-        let mut f = 0;
-        for e in &self.listed {
-            if self.row_relisted[e.cell.cell as usize / nx] {
-                continue;
-            }
-            while f < self.listed_fresh.len() && self.listed_fresh[f].cell.cell < e.cell.cell {
-                self.listed_next.push(self.listed_fresh[f]);
-                f += 1;
-            }
-            self.listed_next.push(*e);
+        let kept = [
+            &mut self.walls,
+            &mut self.open,
+            &mut self.outflow,
+            &mut self.tips,
+        ];
+        for (list, fresh) in kept.into_iter().zip(&self.fresh) {
+            splice_rows(list, &mut self.spliced, fresh, &self.relisted_rows, nx);
         }
-        self.listed_next.extend_from_slice(&self.listed_fresh[f..]);
-        std::mem::swap(&mut self.listed, &mut self.listed_next);
         for &row in &self.relisted_rows {
             self.row_relisted[row as usize] = false;
         }
         self.relisted_rows.clear();
 
-        // 4. The lists, in cell order.
-        self.walls.clear();
-        self.open.clear();
+        // 4. The inflow port's candidates.
         self.inflow.clear();
-        self.outflow.clear();
         self.candidates.clear();
-        for e in &self.listed {
-            let b = e.cell;
-            match e.role {
-                VoxelKind::Wall => self.walls.push(b),
-                VoxelKind::Open => self.open.push(b),
-                VoxelKind::Outflow => self.outflow.push(b),
-                VoxelKind::Inflow => {
-                    if let Some(sc) = self.scope {
-                        let g = face_weight(b.faces, sc.dir);
-                        let (_, r) = sc.axial_radial(cells.centre_m_of(b.cell));
-                        self.candidates.push((r, b, g));
-                    }
-                }
-                _ => {}
+        if let Some(sc) = self.scope {
+            for &b in &self.tips {
+                let g = face_weight(b.faces, sc.dir);
+                let (_, r) = sc.axial_radial(cells.centre_m_of(b.cell));
+                self.candidates.push((r, b, g));
             }
         }
         // The inflow port: the tip cells whose fluid faces look forward, nearest the axis first,
@@ -1272,11 +1276,7 @@ impl Scene {
         let (q_in, q_out, _losses, dvdt) = targets;
         let cells = self.cells;
         let h2 = cells.spacing_m * cells.spacing_m;
-        let [nx, ny, _] = cells.dims;
-        let coords = |n: u32| {
-            let n = n as usize;
-            [n % nx, (n / nx) % ny, n / (nx * ny)]
-        };
+        let coords = |b: &BoundaryCell| b.at.map(|x| x as usize);
         let Some(solver) = self.fluid.as_mut() else {
             return;
         };
@@ -1309,7 +1309,7 @@ impl Scene {
             for (m, b) in self.inflow.iter().enumerate() {
                 let v = sc.dir.map(|d| (share(m) * u * d) as f32);
                 self.wall_velocity[b.cell as usize] = v;
-                let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+                let _ = solver.grid_mut().set_velocity(coords(b), v);
             }
             // Outflow holes: -u r_hat, u = Q_out / G_out.
             let mut g_out = 0.0;
@@ -1323,7 +1323,7 @@ impl Scene {
                 let r = radial(&sc, cells.centre_m_of(b.cell));
                 let v = r.map(|c| (-u * c) as f32);
                 self.wall_velocity[b.cell as usize] = v;
-                let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+                let _ = solver.grid_mut().set_velocity(coords(b), v);
             }
         } else {
             flux.inflow_blocked = q_in > 0.0;
@@ -1372,7 +1372,7 @@ impl Scene {
         for b in &self.walls {
             let v = self.wall_velocity[b.cell as usize].map(|x| (x as f64 * scale) as f32);
             self.wall_velocity[b.cell as usize] = v;
-            let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+            let _ = solver.grid_mut().set_velocity(coords(b), v);
         }
         flux.hydraulic_inflow_m3_per_s = q_in;
         flux.hydraulic_outflow_m3_per_s = q_out;
@@ -1387,11 +1387,9 @@ impl Scene {
         };
         let cells = self.cells;
         let h2 = cells.spacing_m * cells.spacing_m;
-        let [nx, ny, _] = cells.dims;
         // Flux out of the fluid into boundary cell b.
         let out_of_fluid = |b: &BoundaryCell| -> f64 {
-            let n = b.cell as usize;
-            let c = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            let c = b.at.map(|x| x as usize);
             let mut s = 0.0;
             for f in 0..6 {
                 if b.faces >> f & 1 == 1 {
