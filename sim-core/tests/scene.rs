@@ -302,8 +302,8 @@ fn incremental_labels_equal_a_pass_over_the_whole_box() {
             let d = s.view_direction;
             let m = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             let ds = 1.5e-3 * (0.6 + 0.6 * rng.f64()) * if rng.bool() { 1.0 } else { -1.0 };
-            for a in 0..3 {
-                s.tip_position_m[a] += ds * d[a] / m;
+            for (t, d) in s.tip_position_m.iter_mut().zip(d) {
+                *t += ds * d / m;
             }
         }
         s.valid = rng.f64() > 0.1;

@@ -93,7 +93,7 @@ impl ScopeGeometry {
         } else if (self.tip_m[2] - z).abs() > r {
             return None;
         }
-        if !(lo <= hi) {
+        if lo > hi {
             return None;
         }
         let (ya, yb) = (self.tip_m[1] + lo * d[1], self.tip_m[1] + hi * d[1]);
