@@ -451,7 +451,8 @@ pub struct Scene {
     /// Per row `j + ny k`, the x range `[first, end)` of cells that are not solid after the last
     /// [`Scene::compose_labels`].
     kind_extent: Vec<[u32; 2]>,
-    /// Rows to recompose at the next composition (the voxelizer changed them), marked per row.
+    /// Rows to recompose at the next composition (the voxelizer changed them; a composition adds
+    /// those whose scope cells changed), marked per row.
     pending_rows: Vec<u32>,
     row_pending: Vec<bool>,
     /// The built scope's cells (the sheath's rasterization) and the part each lies in, by cell
