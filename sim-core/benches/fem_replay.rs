@@ -1,5 +1,8 @@
 //! Atlas replay speed: `Atlas::positions_at` for a uterus-sized atlas (7,500 vertices, 25 levels),
-//! Hermite and linear. Run: `cargo bench -p hydrometra-sim --bench fem_replay`.
+//! Hermite and linear; and the scene's surface replay (positions and `dx/dp` of every 6th vertex
+//! of a 30,000-vertex atlas), gathered from the whole atlas (`replay_subset`) or read in order from
+//! the atlas restricted to those vertices (`subset`, `replay`).
+//! Run: `cargo bench -p hydrometra-sim --bench fem_replay`.
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use hydrometra_sim::atlas::{Atlas, AtlasLevel};
@@ -54,5 +57,29 @@ fn bench(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench);
+fn surface_replay(c: &mut Criterion) {
+    let atlas = synthetic_atlas(30_000, 25);
+    let ids: Vec<u32> = (0..30_000).step_by(6).collect();
+    let compact = atlas.subset(&ids).expect("ids in the atlas");
+    let (mut pos, mut dxdp) = (vec![[0.0f32; 3]; ids.len()], vec![[0.0f32; 3]; ids.len()]);
+    let mut p = 0.0f64;
+    c.bench_function("atlas_replay_subset_5000_of_30000v", |b| {
+        b.iter(|| {
+            p = (p + 377.0) % 20000.0;
+            atlas
+                .replay_subset(black_box(p), &ids, &mut pos, &mut dxdp)
+                .expect("sizes match");
+        })
+    });
+    c.bench_function("atlas_replay_compact_5000v", |b| {
+        b.iter(|| {
+            p = (p + 377.0) % 20000.0;
+            compact
+                .replay(black_box(p), &mut pos, &mut dxdp)
+                .expect("sizes match");
+        })
+    });
+}
+
+criterion_group!(benches, bench, surface_replay);
 criterion_main!(benches);

@@ -341,20 +341,87 @@ impl Atlas {
                 "replay_subset: vertex {bad} is not in the atlas ({n} vertices)"
             )));
         }
+        self.replay_mapped(pressure_pa, |m| ids[m] as usize, positions_out, dxdp_out);
+        Ok(())
+    }
+
+    /// [`Self::replay_subset`] of every vertex in order: the levels are read front to back (an
+    /// atlas restricted to the vertices a caller replays, [`Self::subset`], is read contiguously).
+    pub fn replay(
+        &self,
+        pressure_pa: f64,
+        positions_out: &mut [[f32; 3]],
+        dxdp_out: &mut [[f32; 3]],
+    ) -> Result<(), AtlasError> {
+        let n = self.vertex_count();
+        if positions_out.len() != n || dxdp_out.len() != n {
+            return Err(AtlasError::Argument(format!(
+                "replay: {n} vertices but {} positions and {} dx/dp outputs",
+                positions_out.len(),
+                dxdp_out.len()
+            )));
+        }
+        self.replay_mapped(pressure_pa, |m| m, positions_out, dxdp_out);
+        Ok(())
+    }
+
+    /// The atlas of the vertices `ids` alone (vertex `m` of the result is vertex `ids[m]`): the
+    /// same levels, pressures and volumes, and the same stored values, so its replay equals
+    /// [`Self::replay_subset`] of `ids` exactly.
+    pub fn subset(&self, ids: &[u32]) -> Result<Atlas, AtlasError> {
+        let n = self.vertex_count();
+        if let Some(&bad) = ids.iter().find(|&&i| i as usize >= n) {
+            return Err(AtlasError::Argument(format!(
+                "subset: vertex {bad} is not in the atlas ({n} vertices)"
+            )));
+        }
+        let levels = 0..self.level_count();
+        let gather =
+            |level: &[[f32; 3]]| ids.iter().map(|&i| level[i as usize]).collect::<Vec<_>>();
+        Ok(Atlas {
+            mesh_hash: self.mesh_hash,
+            metadata: self.metadata.clone(),
+            rest_positions_m: ids
+                .iter()
+                .map(|&i| self.rest_positions_m[i as usize])
+                .collect(),
+            pressure_pa: self.pressure_pa.clone(),
+            cavity_volume_m3: self.cavity_volume_m3.clone(),
+            positions_m: levels
+                .clone()
+                .flat_map(|k| gather(self.level_positions(k)))
+                .collect(),
+            dxdp_m_per_pa: levels.flat_map(|k| gather(self.level_dxdp(k))).collect(),
+        })
+    }
+
+    /// The replay of output `m` from vertex `vertex(m)` (checked by the callers).
+    #[inline(always)]
+    fn replay_mapped(
+        &self,
+        pressure_pa: f64,
+        vertex: impl Fn(usize) -> usize,
+        positions_out: &mut [[f32; 3]],
+        dxdp_out: &mut [[f32; 3]],
+    ) {
         let p0 = self.pressure_pa[0];
         if pressure_pa < p0 {
             let h = self.pressure_pa[1] - p0;
             let dp = (pressure_pa - p0) as f32;
             let (x0, x1) = (self.level_positions(0), self.level_positions(1));
-            for (m, &i) in ids.iter().enumerate() {
-                let i = i as usize;
+            for (m, (pos, dxdp)) in positions_out
+                .iter_mut()
+                .zip(dxdp_out.iter_mut())
+                .enumerate()
+            {
+                let i = vertex(m);
                 for c in 0..3 {
                     let slope = ((x1[i][c] - x0[i][c]) as f64 / h) as f32;
-                    positions_out[m][c] = x0[i][c] + dp * slope;
-                    dxdp_out[m][c] = slope;
+                    pos[c] = x0[i][c] + dp * slope;
+                    dxdp[c] = slope;
                 }
             }
-            return Ok(());
+            return;
         }
         let (k, t) = self.segment(pressure_pa);
         let h = self.pressure_pa[k + 1] - self.pressure_pa[k];
@@ -369,14 +436,17 @@ impl Atlas {
         let f1 = (3.0 * t2 - 2.0 * t) as f32;
         let (x0, x1) = (self.level_positions(k), self.level_positions(k + 1));
         let (g0, g1) = (self.level_dxdp(k), self.level_dxdp(k + 1));
-        for (m, &i) in ids.iter().enumerate() {
-            let i = i as usize;
+        for (m, (pos, dxdp)) in positions_out
+            .iter_mut()
+            .zip(dxdp_out.iter_mut())
+            .enumerate()
+        {
+            let i = vertex(m);
             for c in 0..3 {
-                positions_out[m][c] = c0 * x0[i][c] + d0 * g0[i][c] + c1 * x1[i][c] + d1 * g1[i][c];
-                dxdp_out[m][c] = e0 * (x0[i][c] - x1[i][c]) + f0 * g0[i][c] + f1 * g1[i][c];
+                pos[c] = c0 * x0[i][c] + d0 * g0[i][c] + c1 * x1[i][c] + d1 * g1[i][c];
+                dxdp[c] = e0 * (x0[i][c] - x1[i][c]) + f0 * g0[i][c] + f1 * g1[i][c];
             }
         }
-        Ok(())
     }
 
     /// Vertex positions at `pressure_pa` by linear interpolation (for comparison).

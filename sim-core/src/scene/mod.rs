@@ -347,17 +347,84 @@ fn mark(h: &HydraulicState) -> HydraulicMark {
 }
 
 /// One port or wall cell and its faces on fluid.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 struct BoundaryCell {
     cell: u32,
+    /// Its `(i, j, k)` (what the solver's setters take), kept to spare a division per use.
+    at: [u32; 3],
     /// Bit f set: face f (0..6) borders fluid.
     faces: u8,
+}
+
+/// Replaces the entries of `list` (by cell index) in the rows `rows` (sorted) with `fresh` (the
+/// rows' new entries, by cell index), through the scratch `next`: the rows' runs are found by
+/// bisection and the rest is copied in runs.
+fn splice_rows(
+    list: &mut Vec<BoundaryCell>,
+    next: &mut Vec<BoundaryCell>,
+    fresh: &[BoundaryCell],
+    rows: &[u32],
+    nx: usize,
+) {
+    next.clear();
+    let (mut from, mut f) = (0, 0);
+    for &row in rows {
+        let (start, end) = (row as usize * nx, (row as usize + 1) * nx);
+        let a = from + list[from..].partition_point(|b| (b.cell as usize) < start);
+        let b = a + list[a..].partition_point(|b| (b.cell as usize) < end);
+        let g = f + fresh[f..].partition_point(|b| (b.cell as usize) < end);
+        next.extend_from_slice(&list[from..a]);
+        next.extend_from_slice(&fresh[f..g]);
+        (from, f) = (b, g);
+    }
+    next.extend_from_slice(&list[from..]);
+    std::mem::swap(list, next);
+}
+
+/// What [`Scene::relabel_whole_box`] changed: nothing (all zero, all false) when the row-
+/// incremental compositions before it were complete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WholeBoxCheck {
+    /// Solver labels the whole-box pass changed.
+    pub labels_changed: usize,
+    /// Published kinds it changed.
+    pub kinds_changed: usize,
+    /// Whether it changed the port or wall cell lists, their fluid faces or the inflow rim.
+    pub lists_changed: bool,
+    /// Whether it changed the count of fluid cells.
+    pub fluid_cells_changed: bool,
+}
+
+impl WholeBoxCheck {
+    /// Nothing changed.
+    pub fn is_clean(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+/// Adds `row` to `rows` unless `marks` says it is there already.
+fn mark_row(row: usize, marks: &mut [bool], rows: &mut Vec<u32>) {
+    if !marks[row] {
+        marks[row] = true;
+        rows.push(row as u32);
+    }
+}
+
+/// The smallest x range `[first, end)` holding both (an empty range, `first >= end`, holds none).
+fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
+    match (a[0] < a[1], b[0] < b[1]) {
+        (false, _) => b,
+        (_, false) => a,
+        _ => [a[0].min(b[0]), a[1].max(b[1])],
+    }
 }
 
 /// The coupled pipeline.
 pub struct Scene {
     desc: SceneDesc,
     atlas: Atlas,
+    /// The atlas of the cavity surface's vertices alone (what a step replays).
+    surface_atlas: Atlas,
     surface: CavitySurface,
     voxelizer: Voxelizer,
     cells: VoxelBox,
@@ -382,9 +449,28 @@ pub struct Scene {
     wall_velocity: Vec<[f32; 3]>,
     labels_dirty: bool,
     /// Per row `j + ny k`, the x range `[first, end)` of cells that are not solid after the last
-    /// [`Scene::compose_labels`], and the range it visited (that one and the one before).
+    /// [`Scene::compose_labels`].
     kind_extent: Vec<[u32; 2]>,
-    visit_extent: Vec<[u32; 2]>,
+    /// Rows to recompose at the next composition (the voxelizer changed them; a composition adds
+    /// those whose scope cells changed), marked per row.
+    pending_rows: Vec<u32>,
+    row_pending: Vec<bool>,
+    /// The built scope's cells (the sheath's rasterization) and the part each lies in, by cell
+    /// index; scratch for the next pose's.
+    scope_cells: Vec<(u32, ScopePart)>,
+    scope_cells_next: Vec<(u32, ScopePart)>,
+    /// Fluid cells per row, and in all.
+    row_fluid: Vec<u32>,
+    fluid_cells: usize,
+    /// The tip layer's cells with a face on fluid (the inflow port's candidates), by cell index
+    /// like the other boundary lists.
+    tips: Vec<BoundaryCell>,
+    /// Scratch for listing rows anew: the rows and their marks, their new walls, open cells,
+    /// hole-band cells and tip cells, a spliced list.
+    relisted_rows: Vec<u32>,
+    row_relisted: Vec<bool>,
+    fresh: [Vec<BoundaryCell>; 4],
+    spliced: Vec<BoundaryCell>,
     /// The hydraulic pressure the surface was last replayed for, Pa.
     deformed_at_pa: f64,
     topology_revision: u64,
@@ -403,7 +489,8 @@ impl Scene {
         let SceneAssets { mesh, atlas } = assets;
         let mut surface = CavitySurface::new(&mesh)?;
         let top = atlas.pressure_pa[atlas.level_count() - 1];
-        surface.replay(&atlas, top)?;
+        let surface_atlas = surface.compact_atlas(&atlas)?;
+        surface.replay_compact(&surface_atlas, top)?;
         let h = desc.voxel_m();
         let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
         for p in surface.positions_m() {
@@ -466,6 +553,7 @@ impl Scene {
             HydraulicModel::with_compliance(desc.hydraulics.clone(), Box::new(compliance))?;
         let hydraulic_state = *hydraulics.state();
         let n = cells.cell_count();
+        let rows = cells.dims[1] * cells.dims[2];
         let mut counters = Counters::default();
         for s in [Stage::Deformation, Stage::Voxelize] {
             counters.get_mut(s).present = true;
@@ -504,8 +592,19 @@ impl Scene {
             candidates: Vec::with_capacity(n),
             wall_velocity: vec![[0.0; 3]; n],
             labels_dirty: true,
-            kind_extent: vec![[0, 0]; cells.dims[1] * cells.dims[2]],
-            visit_extent: vec![[0, 0]; cells.dims[1] * cells.dims[2]],
+            kind_extent: vec![[0, 0]; rows],
+            // Every row composes the first time.
+            pending_rows: (0..rows as u32).collect(),
+            row_pending: vec![true; rows],
+            scope_cells: Vec::with_capacity(n),
+            scope_cells_next: Vec::with_capacity(n),
+            row_fluid: vec![0; rows],
+            fluid_cells: 0,
+            tips: Vec::with_capacity(n),
+            relisted_rows: Vec::with_capacity(rows),
+            row_relisted: vec![false; rows],
+            fresh: std::array::from_fn(|_| Vec::with_capacity(n)),
+            spliced: Vec::with_capacity(n),
             deformed_at_pa: f64::NAN,
             topology_revision: 1,
             report: StepReport {
@@ -516,6 +615,7 @@ impl Scene {
             particles,
             desc,
             atlas,
+            surface_atlas,
         })
     }
 
@@ -631,7 +731,7 @@ impl Scene {
         let moved = (p - self.deformed_at_pa).abs() > self.desc.skip.pressure_tolerance_pa
             || self.deformed_at_pa.is_nan();
         if moved {
-            self.surface.replay(&self.atlas, p)?;
+            self.surface.replay_compact(&self.surface_atlas, p)?;
             self.deformed_at_pa = p;
             self.report.surface_volume_m3 = self.surface.enclosed_volume_m3();
             if p < self.atlas.pressure_pa[0] {
@@ -654,10 +754,13 @@ impl Scene {
             voxelize::VoxelizeStats::default()
         };
         if stats.moved_vertices > 0 {
-            self.report.counters.get_mut(Stage::Voxelize).ran(ms(t));
             if stats.changed_cells > 0 {
                 self.labels_dirty = true;
+                for m in 0..self.voxelizer.changed_rows().len() {
+                    self.mark_pending(self.voxelizer.changed_rows()[m] as usize);
+                }
             }
+            self.report.counters.get_mut(Stage::Voxelize).ran(ms(t));
         } else {
             self.report.counters.get_mut(Stage::Voxelize).skipped();
         }
@@ -779,7 +882,7 @@ impl Scene {
             if !c.is_finite() {
                 break;
             }
-            self.surface.replay(&self.atlas, c)?;
+            self.surface.replay_compact(&self.surface_atlas, c)?;
             (b, vb) = (a, va);
             (a, va) = (c, self.surface.enclosed_volume_m3());
         }
@@ -852,104 +955,236 @@ impl Scene {
         }
     }
 
-    /// Kinds and labels of every cell from the voxelizer and the scope; rebuilds the boundary
-    /// cell lists. Visits, row by row, only the x range that is or was off solid (the voxelizer's
-    /// extent, the scope's, and the row's last extent): every cell beyond it is solid before and
-    /// after, so the kinds, lists and labels equal those of a pass over the whole box (`whole`,
-    /// which [`Scene::relabel_whole_box`] checks that against).
+    /// Marks row `row` for recomposition by the next [`Scene::compose_labels`].
+    fn mark_pending(&mut self, row: usize) {
+        mark_row(row, &mut self.row_pending, &mut self.pending_rows);
+    }
+
+    /// Marks row `row` for listing its boundary cells anew in this composition.
+    fn mark_relisted(&mut self, row: usize) {
+        mark_row(row, &mut self.row_relisted, &mut self.relisted_rows);
+    }
+
+    /// Rasterizes the scope at its pose now (the cells whose centres lie in the sheath, and
+    /// their parts) and compares it with the built one row by row: a row whose scope cells
+    /// differ is recomposed; one whose cells are the same but lie in other parts (tip layer, hole
+    /// band) keeps its kinds and has its boundary cells listed anew; any other keeps both.
+    fn rasterize_scope(&mut self) {
+        let cells = self.cells;
+        let [nx, ny, nz] = cells.dims;
+        let h = cells.spacing_m;
+        let x0 = cells.origin_m[0];
+        self.scope_cells_next.clear();
+        if let Some(sc) = self.scope {
+            let y0 = cells.origin_m[1];
+            for k in 0..nz {
+                let z = cells.centre_m(0, 0, k)[2];
+                let Some((j0, j1)) = sc.slab_rows(z, y0, h, ny) else {
+                    continue;
+                };
+                for j in j0..=j1 {
+                    let c = cells.centre_m(0, j, k);
+                    if let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) {
+                        let base = cells.index(0, j, k);
+                        for i in a..=b {
+                            let part = sc.part(cells.centre_m(i, j, k), h);
+                            if part != ScopePart::None {
+                                self.scope_cells_next.push(((base + i) as u32, part));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        let (mut a, mut b) = (0, 0);
+        let row_of = |c: &(u32, ScopePart)| c.0 as usize / nx;
+        while a < self.scope_cells.len() || b < self.scope_cells_next.len() {
+            let row = match (self.scope_cells.get(a), self.scope_cells_next.get(b)) {
+                (Some(x), Some(y)) => row_of(x).min(row_of(y)),
+                (Some(x), None) => row_of(x),
+                (None, Some(y)) => row_of(y),
+                (None, None) => break,
+            };
+            let run = |list: &[(u32, ScopePart)], from: usize| {
+                from + list[from..].iter().take_while(|c| row_of(c) == row).count()
+            };
+            let (ea, eb) = (run(&self.scope_cells, a), run(&self.scope_cells_next, b));
+            let (was, now) = (&self.scope_cells[a..ea], &self.scope_cells_next[b..eb]);
+            if was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0) {
+                self.mark_pending(row);
+            } else if was != now {
+                self.mark_relisted(row);
+            }
+            (a, b) = (ea, eb);
+        }
+        std::mem::swap(&mut self.scope_cells, &mut self.scope_cells_next);
+    }
+
+    /// Kinds and labels from the voxelizer and the scope, and the boundary cell lists.
+    /// Incremental in rows: only the pending rows (those the voxelizer changed since the last
+    /// composition, and, when the scope moved, those whose scope cells changed) are
+    /// recomposed, each over the x range that is or was off solid, and only their cells' labels
+    /// go to the solver; only their rows and the four rows beside each (a cell's fluid faces look
+    /// one row across) are listed anew for the boundary cells. Every other row composes as before,
+    /// so the kinds, lists and labels equal those of a pass over every cell of the box (`whole`,
+    /// which [`Scene::relabel_whole_box`] checks them against).
     fn compose_labels(&mut self, whole: bool) -> Result<(), SceneError> {
         let cells = self.cells;
-        let [nx, ny, _] = cells.dims;
+        let [nx, ny, nz] = cells.dims;
         let h = cells.spacing_m;
+        let all = [0, nx as u32];
+        // 1. The rows to recompose.
+        if whole {
+            for row in 0..ny * nz {
+                self.mark_pending(row);
+            }
+        }
+        if whole || self.scope != self.scope_built {
+            self.rasterize_scope();
+        }
+        self.scope_built = self.scope;
+        // The ports' cells are sheath again until the ports are chosen anew below.
+        for b in self.inflow.iter().chain(&self.outflow) {
+            self.kinds[b.cell as usize] = VoxelKind::Scope;
+        }
+
+        // 2. Kinds and labels of the pending rows; their boundary rows.
         let states = self.voxelizer.states();
         let owners = self.voxelizer.owners();
         let extents = self.voxelizer.row_extents();
         let caps = self.surface.cap_triangles() as u32;
-        let hull = |a: [u32; 2], b: [u32; 2]| match (a[0] < a[1], b[0] < b[1]) {
-            (false, _) => b,
-            (_, false) => a,
-            _ => [a[0].min(b[0]), a[1].max(b[1])],
-        };
-        let all = [0, nx as u32];
-        self.scope_built = self.scope;
-        let x0 = cells.origin_m[0];
-        for (row, &vox) in extents.iter().enumerate() {
+        let mut changed = 0;
+        // In row order, as a pass over the box visits them (the solver sees the same sequence).
+        self.pending_rows.sort_unstable();
+        for m in 0..self.pending_rows.len() {
+            let row = self.pending_rows[m] as usize;
+            self.row_pending[row] = false;
             let (j, k) = (row % ny, row / ny);
             let base = cells.index(0, j, k);
             let last = self.kind_extent[row];
+            let vox = extents[row];
             // Cavity first.
+            let mut fluid = 0u32;
             let [a, b] = if whole { all } else { hull(last, vox) };
             for n in base + a as usize..base + b as usize {
-                self.kinds[n] = match states[n] {
+                let kind = match states[n] {
                     state::INSIDE => VoxelKind::Fluid,
                     state::BAND if owners[n] < caps => VoxelKind::Open,
                     state::BAND => VoxelKind::Wall,
                     _ => VoxelKind::Solid,
                 };
+                fluid += u32::from(kind == VoxelKind::Fluid);
+                self.kinds[n] = kind;
             }
             // The scope on top.
             let mut now = vox;
-            if let Some(sc) = self.scope {
-                let c = cells.centre_m(0, j, k);
-                if let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) {
-                    for i in a..=b {
-                        if sc.part(cells.centre_m(i, j, k), h) != ScopePart::None {
-                            self.kinds[base + i] = VoxelKind::Scope;
-                            now = hull(now, [i as u32, i as u32 + 1]);
-                        }
+            let first = self.scope_cells.partition_point(|c| (c.0 as usize) < base);
+            for &(n, _) in &self.scope_cells[first..] {
+                let n = n as usize;
+                if n >= base + nx {
+                    break;
+                }
+                fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
+                self.kinds[n] = VoxelKind::Scope;
+                let i = (n - base) as u32;
+                now = hull(now, [i, i + 1]);
+            }
+            self.kind_extent[row] = now;
+            self.fluid_cells = self.fluid_cells + fluid as usize - self.row_fluid[row] as usize;
+            self.row_fluid[row] = fluid;
+            // Labels into the solver, and cells that stopped being ports or walls move no more.
+            if let Some(solver) = self.fluid.as_mut() {
+                let g = solver.grid_mut();
+                let [a, b] = if whole { all } else { hull(last, now) };
+                for i in a as usize..b as usize {
+                    let n = base + i;
+                    let label = match self.kinds[n] {
+                        VoxelKind::Fluid => CellLabel::Fluid,
+                        VoxelKind::Open => CellLabel::Outflow,
+                        VoxelKind::Solid => CellLabel::Solid,
+                        _ => CellLabel::Velocity,
+                    };
+                    if self.labels[n] != label {
+                        self.labels[n] = label;
+                        g.set_label([i, j, k], label)?;
+                        changed += 1;
+                    }
+                    if label != CellLabel::Velocity && self.wall_velocity[n] != [0.0; 3] {
+                        self.wall_velocity[n] = [0.0; 3];
+                        g.set_velocity([i, j, k], [0.0; 3])?;
                     }
                 }
             }
-            self.kind_extent[row] = now;
-            self.visit_extent[row] = hull(last, now);
+            let beside = [
+                (j > 0).then(|| row - 1),
+                (j + 1 < ny).then_some(row + 1),
+                (k > 0).then(|| row - ny),
+                (k + 1 < nz).then_some(row + ny),
+            ];
+            for r in std::iter::once(row).chain(beside.into_iter().flatten()) {
+                mark_row(r, &mut self.row_relisted, &mut self.relisted_rows);
+            }
         }
-        // Boundary lists: walls beside fluid, port candidates at the tip and in the hole band.
-        self.walls.clear();
-        self.open.clear();
-        self.inflow.clear();
-        self.outflow.clear();
-        self.candidates.clear();
-        let mut fluid_cells = 0usize;
-        for r in 0..self.kind_extent.len() {
-            let (j, k) = (r % ny, r / ny);
-            let [a, b] = if whole { all } else { self.kind_extent[r] };
+        self.pending_rows.clear();
+        self.report.relabelled_cells = changed;
+
+        // 3. The boundary cells of those rows (walls beside fluid, port candidates at the tip and
+        // in the hole band), by cell index, into the kept list in place of the rows' old ones.
+        self.relisted_rows.sort_unstable();
+        for f in &mut self.fresh {
+            f.clear();
+        }
+        for m in 0..self.relisted_rows.len() {
+            let row = self.relisted_rows[m] as usize;
+            let (j, k) = (row % ny, row / ny);
+            let [a, b] = if whole { all } else { self.kind_extent[row] };
             for i in a as usize..b as usize {
                 let n = cells.index(i, j, k);
-                let kind = self.kinds[n];
-                if kind == VoxelKind::Fluid {
-                    fluid_cells += 1;
-                    continue;
-                }
-                if kind == VoxelKind::Solid {
-                    continue;
-                }
-                let faces = self.fluid_faces(i, j, k);
-                if faces == 0 {
-                    continue;
-                }
-                let b = BoundaryCell {
-                    cell: n as u32,
-                    faces,
-                };
-                match kind {
-                    VoxelKind::Wall => self.walls.push(b),
-                    VoxelKind::Open => self.open.push(b),
+                // Into walls, open, hole band, tip layer.
+                let list = match self.kinds[n] {
+                    VoxelKind::Wall => 0,
+                    VoxelKind::Open => 1,
                     VoxelKind::Scope => {
-                        if let Some(sc) = self.scope {
-                            let p = cells.centre_m(i, j, k);
-                            match sc.part(p, h) {
-                                ScopePart::Tip => {
-                                    let g = face_weight(faces, sc.dir);
-                                    let (_, r) = sc.axial_radial(p);
-                                    self.candidates.push((r, b, g));
-                                }
-                                ScopePart::Holes => self.outflow.push(b),
-                                _ => {}
-                            }
+                        match self.scope.map(|sc| sc.part(cells.centre_m(i, j, k), h)) {
+                            Some(ScopePart::Holes) => 2,
+                            Some(ScopePart::Tip) => 3,
+                            _ => continue,
                         }
                     }
-                    _ => {}
+                    _ => continue,
+                };
+                let faces = self.fluid_faces(i, j, k);
+                if faces != 0 {
+                    self.fresh[list].push(BoundaryCell {
+                        cell: n as u32,
+                        at: [i, j, k].map(|x| x as u32),
+                        faces,
+                    });
                 }
+            }
+        }
+        let kept = [
+            &mut self.walls,
+            &mut self.open,
+            &mut self.outflow,
+            &mut self.tips,
+        ];
+        for (list, fresh) in kept.into_iter().zip(&self.fresh) {
+            splice_rows(list, &mut self.spliced, fresh, &self.relisted_rows, nx);
+        }
+        for &row in &self.relisted_rows {
+            self.row_relisted[row as usize] = false;
+        }
+        self.relisted_rows.clear();
+
+        // 4. The inflow port's candidates.
+        self.inflow.clear();
+        self.candidates.clear();
+        if let Some(sc) = self.scope {
+            for &b in &self.tips {
+                let g = face_weight(b.faces, sc.dir);
+                let (_, r) = sc.axial_radial(cells.centre_m_of(b.cell));
+                self.candidates.push((r, b, g));
             }
         }
         // The inflow port: the tip cells whose fluid faces look forward, nearest the axis first,
@@ -982,45 +1217,36 @@ impl Scene {
         for b in &self.outflow {
             self.kinds[b.cell as usize] = VoxelKind::Outflow;
         }
-        self.report.fluid_cells = fluid_cells;
-        self.report.grid_fluid_volume_m3 = fluid_cells as f64 * h * h * h;
-
-        // Labels into the solver, and cells that stopped being ports or walls move no more.
-        let mut changed = 0;
-        if let Some(solver) = self.fluid.as_mut() {
-            let g = solver.grid_mut();
-            for (r, &visit) in self.visit_extent.iter().enumerate() {
-                let (j, k) = (r % ny, r / ny);
-                let [a, b] = if whole { all } else { visit };
-                for i in a as usize..b as usize {
-                    let n = cells.index(i, j, k);
-                    let label = match self.kinds[n] {
-                        VoxelKind::Fluid => CellLabel::Fluid,
-                        VoxelKind::Open => CellLabel::Outflow,
-                        VoxelKind::Solid => CellLabel::Solid,
-                        _ => CellLabel::Velocity,
-                    };
-                    if self.labels[n] != label {
-                        self.labels[n] = label;
-                        g.set_label([i, j, k], label)?;
-                        changed += 1;
-                    }
-                    if label != CellLabel::Velocity && self.wall_velocity[n] != [0.0; 3] {
-                        self.wall_velocity[n] = [0.0; 3];
-                        g.set_velocity([i, j, k], [0.0; 3])?;
-                    }
-                }
-            }
-        }
-        self.report.relabelled_cells = changed;
+        self.report.fluid_cells = self.fluid_cells;
+        self.report.grid_fluid_volume_m3 = self.fluid_cells as f64 * h * h * h;
         Ok(())
     }
 
-    /// Recomposes the kind and label of every cell of the box, visiting every cell, and returns how many solver labels that changed: 0 when the row-limited composition of
-    /// the last step was complete. For verification; the kinds and lists end as a step leaves them.
-    pub fn relabel_whole_box(&mut self) -> Result<usize, SceneError> {
-        self.compose_labels(true)?;
-        Ok(self.report.relabelled_cells)
+    /// Recomposes the kind and label of every cell of the box for the scope pose of the last
+    /// composition, visiting every cell, and says what that changed: nothing when the
+    /// row-incremental compositions of the steps before were complete. For verification; the
+    /// kinds, lists and labels end as a step leaves them.
+    pub fn relabel_whole_box(&mut self) -> Result<WholeBoxCheck, SceneError> {
+        let kinds = self.kinds.clone();
+        let lists = [&self.inflow, &self.outflow, &self.walls, &self.open].map(|l| l.clone());
+        let (fluid_cells, rim) = (self.fluid_cells, self.inflow_rim_fraction);
+        // A pose that moved less than the threshold since is not composed yet (by design).
+        let scope = std::mem::replace(&mut self.scope, self.scope_built);
+        let composed = self.compose_labels(true);
+        self.scope = scope;
+        composed?;
+        let now = [&self.inflow, &self.outflow, &self.walls, &self.open];
+        Ok(WholeBoxCheck {
+            labels_changed: self.report.relabelled_cells,
+            kinds_changed: kinds
+                .iter()
+                .zip(&self.kinds)
+                .filter(|(a, b)| a != b)
+                .count(),
+            lists_changed: lists.iter().zip(now).any(|(a, b)| a != b)
+                || rim != self.inflow_rim_fraction,
+            fluid_cells_changed: fluid_cells != self.fluid_cells,
+        })
     }
 
     /// Bits of the faces of cell `(i, j, k)` that border fluid.
@@ -1051,11 +1277,7 @@ impl Scene {
         let (q_in, q_out, _losses, dvdt) = targets;
         let cells = self.cells;
         let h2 = cells.spacing_m * cells.spacing_m;
-        let [nx, ny, _] = cells.dims;
-        let coords = |n: u32| {
-            let n = n as usize;
-            [n % nx, (n / nx) % ny, n / (nx * ny)]
-        };
+        let coords = |b: &BoundaryCell| b.at.map(|x| x as usize);
         let Some(solver) = self.fluid.as_mut() else {
             return;
         };
@@ -1088,7 +1310,7 @@ impl Scene {
             for (m, b) in self.inflow.iter().enumerate() {
                 let v = sc.dir.map(|d| (share(m) * u * d) as f32);
                 self.wall_velocity[b.cell as usize] = v;
-                let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+                let _ = solver.grid_mut().set_velocity(coords(b), v);
             }
             // Outflow holes: -u r_hat, u = Q_out / G_out.
             let mut g_out = 0.0;
@@ -1102,7 +1324,7 @@ impl Scene {
                 let r = radial(&sc, cells.centre_m_of(b.cell));
                 let v = r.map(|c| (-u * c) as f32);
                 self.wall_velocity[b.cell as usize] = v;
-                let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+                let _ = solver.grid_mut().set_velocity(coords(b), v);
             }
         } else {
             flux.inflow_blocked = q_in > 0.0;
@@ -1151,7 +1373,7 @@ impl Scene {
         for b in &self.walls {
             let v = self.wall_velocity[b.cell as usize].map(|x| (x as f64 * scale) as f32);
             self.wall_velocity[b.cell as usize] = v;
-            let _ = solver.grid_mut().set_velocity(coords(b.cell), v);
+            let _ = solver.grid_mut().set_velocity(coords(b), v);
         }
         flux.hydraulic_inflow_m3_per_s = q_in;
         flux.hydraulic_outflow_m3_per_s = q_out;
@@ -1166,11 +1388,9 @@ impl Scene {
         };
         let cells = self.cells;
         let h2 = cells.spacing_m * cells.spacing_m;
-        let [nx, ny, _] = cells.dims;
         // Flux out of the fluid into boundary cell b.
         let out_of_fluid = |b: &BoundaryCell| -> f64 {
-            let n = b.cell as usize;
-            let c = [n % nx, (n / nx) % ny, n / (nx * ny)];
+            let c = b.at.map(|x| x as usize);
             let mut s = 0.0;
             for f in 0..6 {
                 if b.faces >> f & 1 == 1 {

@@ -75,6 +75,39 @@ impl ScopeGeometry {
         }
     }
 
+    /// The rows `j` (inclusive) of the slab of cell centres at height `z` whose centres may lie
+    /// in the sheath, for a grid whose row `j` has its centres at `y0 + (j + 0.5) h`; `None` if
+    /// none can. Conservative: a centre in the sheath lies within the radius of an axis point,
+    /// so that point is within the radius in z and in y (the caller tests each row).
+    pub fn slab_rows(&self, z: f64, y0: f64, h: f64, ny: usize) -> Option<(usize, usize)> {
+        let (d, r) = (self.dir, self.radius_m);
+        // The axis points `tip + s d`, `-L <= s <= 0`, within the radius of the slab.
+        let (mut lo, mut hi) = (-SHEATH_LENGTH_M, 0.0f64);
+        if d[2].abs() > 1e-12 {
+            let (a, b) = (
+                (z - r - self.tip_m[2]) / d[2],
+                (z + r - self.tip_m[2]) / d[2],
+            );
+            lo = lo.max(a.min(b));
+            hi = hi.min(a.max(b));
+        } else if (self.tip_m[2] - z).abs() > r {
+            return None;
+        }
+        if lo > hi {
+            return None;
+        }
+        let (ya, yb) = (self.tip_m[1] + lo * d[1], self.tip_m[1] + hi * d[1]);
+        let to_row = |y: f64| (y - y0) / h - 0.5;
+        let (a, b) = (
+            to_row(ya.min(yb) - r).floor() - 1.0,
+            to_row(ya.max(yb) + r).ceil() + 1.0,
+        );
+        if b < 0.0 || a > ny as f64 - 1.0 {
+            return None;
+        }
+        Some((a.max(0.0) as usize, b.min(ny as f64 - 1.0) as usize))
+    }
+
     /// The x-interval (cell indices, inclusive) of row `(y, z)` (centres in m) whose centres may
     /// lie in the sheath, for a grid whose cell `i` has its centre at `x0 + (i + 0.5) h`;
     /// `None` if the row misses it. Conservative (the caller tests each centre).
@@ -133,4 +166,51 @@ pub const FACE_NORMALS: [[f64; 3]; 6] = [
 pub fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
     let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
     (n.is_finite() && n > 1e-9).then(|| v.map(|c| c / n))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every cell whose centre lies in the sheath is in a row that `slab_rows` and `row_span`
+    /// keep, for random poses (tilted, axis-parallel, tip in and out of the grid).
+    #[test]
+    fn slab_rows_and_row_spans_hold_every_sheath_cell() {
+        let mut rng = fastrand::Rng::with_seed(7);
+        let (h, n) = (1e-3, [24usize, 20, 28]);
+        let origin = [-0.012, -0.010, -0.014];
+        let mut inside = 0;
+        for pose in 0..200 {
+            let mut dir: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.f64() - 1.0);
+            if pose % 5 == 0 {
+                dir = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]][pose % 3];
+            }
+            let Some(dir) = unit(dir) else { continue };
+            let sc = ScopeGeometry {
+                tip_m: std::array::from_fn(|_| 0.03 * (rng.f64() - 0.5)),
+                dir,
+                radius_m: 1e-3 + 3e-3 * rng.f64(),
+                holes_m: [3e-3, 12e-3],
+            };
+            for k in 0..n[2] {
+                let z = origin[2] + (k as f64 + 0.5) * h;
+                let rows = sc.slab_rows(z, origin[1], h, n[1]);
+                for j in 0..n[1] {
+                    let y = origin[1] + (j as f64 + 0.5) * h;
+                    let span = sc.row_span(y, z, origin[0], h, n[0]);
+                    for i in 0..n[0] {
+                        let x = origin[0] + (i as f64 + 0.5) * h;
+                        if sc.part([x, y, z], h) == ScopePart::None {
+                            continue;
+                        }
+                        inside += 1;
+                        let held = rows.is_some_and(|(a, b)| (a..=b).contains(&j))
+                            && span.is_some_and(|(a, b)| (a..=b).contains(&i));
+                        assert!(held, "pose {pose}: cell ({i}, {j}, {k}) of {sc:?} missed");
+                    }
+                }
+            }
+        }
+        assert!(inside > 10_000, "only {inside} sheath cells tested");
+    }
 }

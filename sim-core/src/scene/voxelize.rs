@@ -125,6 +125,8 @@ pub struct Voxelizer {
     tri_moved: Vec<bool>,
     row_dirty: Vec<bool>,
     dirty_rows: Vec<u32>,
+    /// The rows in which the last call changed a cell's state or owner.
+    changed_rows: Vec<u32>,
     crossings: Vec<(f64, i32)>,
     row_state: Vec<u8>,
     row_owner: Vec<u32>,
@@ -151,6 +153,7 @@ impl Voxelizer {
             tri_moved: vec![false; t],
             row_dirty: vec![false; cells.dims[1] * cells.dims[2]],
             dirty_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
+            changed_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
             crossings: Vec::with_capacity(64),
             row_state: vec![0; cells.dims[0]],
             row_owner: vec![NO_TRIANGLE; cells.dims[0]],
@@ -178,6 +181,11 @@ impl Voxelizer {
     /// [`state::OUTSIDE`] (`[0, 0]` when there is none): every cell beyond it is outside.
     pub fn row_extents(&self) -> &[[u32; 2]] {
         &self.extent
+    }
+    /// The rows `j + ny k` in which the last [`Voxelizer::update`] or [`Voxelizer::full`] changed
+    /// a cell's state or owner, in the order they were re-tested: every other row is as before.
+    pub fn changed_rows(&self) -> &[u32] {
+        &self.changed_rows
     }
     /// The positions (m) the current labels were computed from.
     pub fn voxel_positions_m(&self) -> &[[f32; 3]] {
@@ -307,6 +315,7 @@ impl Voxelizer {
             }
         }
         if moved_vertices == 0 {
+            self.changed_rows.clear();
             return VoxelizeStats::default();
         }
         let mut moved_triangles = 0;
@@ -344,11 +353,15 @@ impl Voxelizer {
         let mut stats = VoxelizeStats::default();
         let rows = std::mem::take(&mut self.dirty_rows);
         let ny = self.cells.dims[1];
+        self.changed_rows.clear();
         for &row in &rows {
-            let row = row as usize;
-            self.row_dirty[row] = false;
-            let (j, k) = (row % ny, row / ny);
-            stats.changed_cells += self.process_row(j, k);
+            self.row_dirty[row as usize] = false;
+            let (j, k) = (row as usize % ny, row as usize / ny);
+            let changed = self.process_row(j, k);
+            if changed > 0 {
+                self.changed_rows.push(row);
+            }
+            stats.changed_cells += changed;
         }
         stats.rows = rows.len();
         self.dirty_rows = rows;
