@@ -1500,6 +1500,8 @@ mod tests {
             ([8, 6, 5], [true, false, true]),
             ([7, 1, 6], [false; 3]),
             ([7, 3, 6], [false, true, false]),
+            ([7, 1, 6], [false, true, false]),
+            ([7, 2, 6], [false, true, false]),
         ]
         .into_iter()
         .enumerate()

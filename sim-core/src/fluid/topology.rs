@@ -275,7 +275,8 @@ fn open_row_range(row: &[CellLabel]) -> [u32; 2] {
 }
 
 /// The face coordinates along one axis (`n` faces, wrapping when `periodic`) within
-/// [`DIRTY_REACH`] of faces `at` and `at + extra`, each with whether it is within one face of them.
+/// [`DIRTY_REACH`] of faces `at` and `at + extra`, each once, with whether it is within one face
+/// of them (on a periodic axis shorter than the span, a face is near if any of its images is).
 fn dirty_span(
     at: usize,
     extra: usize,
@@ -290,7 +291,17 @@ fn dirty_span(
     } else {
         (lo.max(0), hi.min(n_i - 1))
     };
-    (lo..=hi).map(move |x| (x.rem_euclid(n_i) as usize, x >= first - 1 && x <= last + 1))
+    // Faces first - 1 ..= last + 1 are near: `window` positions from first - 1.
+    let window = last - first + 3;
+    (lo..=hi).map(move |x| {
+        let from = x - (first - 1);
+        let near = if periodic {
+            window >= n_i || from.rem_euclid(n_i) < window
+        } else {
+            (0..window).contains(&from)
+        };
+        (x.rem_euclid(n_i) as usize, near)
+    })
 }
 
 #[cfg(test)]
@@ -1178,6 +1189,9 @@ mod tests {
             ([true, true, false], [14, 12, 11]),
             ([false, true, true], [11, 9, 10]),
             ([false; 3], [5, 4, 3]),
+            ([false, true, false], [7, 1, 6]),
+            ([false, true, false], [7, 2, 6]),
+            ([true, false, true], [1, 5, 2]),
         ]
         .into_iter()
         .enumerate()
