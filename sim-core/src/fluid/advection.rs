@@ -948,11 +948,7 @@ impl CentredRows {
     pub fn update(&mut self, open: &[[u32; 2]], dims: [usize; 3], centred: &mut [V4]) {
         let [nx, ny, nz] = dims;
         let r = CENTRED_REACH;
-        let hull = |a: [u32; 2], b: [u32; 2]| match (a[0] < a[1], b[0] < b[1]) {
-            (false, _) => b,
-            (_, false) => a,
-            _ => [a[0].min(b[0]), a[1].max(b[1])],
-        };
+        let hull = super::topology::range_hull;
         // Along y, then along z, then widened along x.
         let tmp = &mut self.along_y;
         tmp.clear();

@@ -46,7 +46,7 @@ pub use grid::FluidGrid;
 pub use labels::CellLabel;
 pub use pressure::ProjectionMethod;
 pub use solver::{FluidParams, FluidSolver, StepStats, LAGGED_REFLECTION_MAX_CFL};
-pub(crate) use topology::open_row_ranges;
+pub(crate) use topology::{open_row_ranges, range_hull};
 pub use viscosity::{ViscosityMode, EXPLICIT_LIMIT};
 
 /// Errors of the fluid solver.

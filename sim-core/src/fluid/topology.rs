@@ -262,6 +262,15 @@ pub(crate) fn update_open_row_ranges(
     }
 }
 
+/// The smallest x range `[first, end)` holding both (an empty range, `first >= end`, holds none).
+pub(crate) fn range_hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
+    match (a[0] < a[1], b[0] < b[1]) {
+        (false, _) => b,
+        (_, false) => a,
+        _ => [a[0].min(b[0]), a[1].max(b[1])],
+    }
+}
+
 /// The x range of the open cells of one cell row (`[0, 0]`: none).
 fn open_row_range(row: &[CellLabel]) -> [u32; 2] {
     let open = |l: &CellLabel| matches!(l, CellLabel::Fluid | CellLabel::Outflow);

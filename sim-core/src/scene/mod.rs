@@ -52,7 +52,9 @@ pub use surface::CavitySurface;
 pub use voxelize::{VoxelBox, Voxelizer};
 
 use crate::atlas::{Atlas, AtlasError};
-use crate::fluid::{CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, StepStats};
+use crate::fluid::{
+    range_hull, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, StepStats,
+};
 use crate::hydraulics::{HydraulicInputs, HydraulicModel, HydraulicState, ParamsError};
 use ports::{unit, FACE_NORMALS};
 use voxelize::{state, NO_TRIANGLE};
@@ -407,15 +409,6 @@ fn mark_row(row: usize, marks: &mut [bool], rows: &mut Vec<u32>) {
     if !marks[row] {
         marks[row] = true;
         rows.push(row as u32);
-    }
-}
-
-/// The smallest x range `[first, end)` holding both (an empty range, `first >= end`, holds none).
-fn hull(a: [u32; 2], b: [u32; 2]) -> [u32; 2] {
-    match (a[0] < a[1], b[0] < b[1]) {
-        (false, _) => b,
-        (_, false) => a,
-        _ => [a[0].min(b[0]), a[1].max(b[1])],
     }
 }
 
@@ -1065,7 +1058,7 @@ impl Scene {
             let vox = extents[row];
             // Cavity first.
             let mut fluid = 0u32;
-            let [a, b] = if whole { all } else { hull(last, vox) };
+            let [a, b] = if whole { all } else { range_hull(last, vox) };
             for n in base + a as usize..base + b as usize {
                 let kind = match states[n] {
                     state::INSIDE => VoxelKind::Fluid,
@@ -1087,7 +1080,7 @@ impl Scene {
                 fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
                 self.kinds[n] = VoxelKind::Scope;
                 let i = (n - base) as u32;
-                now = hull(now, [i, i + 1]);
+                now = range_hull(now, [i, i + 1]);
             }
             self.kind_extent[row] = now;
             self.fluid_cells = self.fluid_cells + fluid as usize - self.row_fluid[row] as usize;
@@ -1095,7 +1088,7 @@ impl Scene {
             // Labels into the solver, and cells that stopped being ports or walls move no more.
             if let Some(solver) = self.fluid.as_mut() {
                 let g = solver.grid_mut();
-                let [a, b] = if whole { all } else { hull(last, now) };
+                let [a, b] = if whole { all } else { range_hull(last, now) };
                 for i in a as usize..b as usize {
                     let n = base + i;
                     let label = match self.kinds[n] {
