@@ -23,12 +23,26 @@
 //! the helper is running waits by spinning [`YIELD_AFTER_POLLS`] polls, then `yield_now`, then
 //! sleeping [`WAIT_SLEEP`] at a time: a `SCHED_FIFO` caller's `yield_now` only lets threads of its
 //! own priority run, the sleep lets the (preempted) helper or anyone else have the core.
+//!
+//! **Contention (the guard).** When a third thread wants one of the two cores (a renderer on the
+//! same machine), the helper, spinning for work, takes turns with the caller on a core, and it is
+//! preempted in the middle of its half while the caller waits for it. Measured on the 0.6 mm scene
+//! beside one busy process: two threads took 8.0-10.6 ms a step against 5.7-7.1 ms for one
+//! (BENCHMARKS.md, "Fork-join under contention"). So every join is timed (three clock reads), and
+//! each window of [`WINDOW_JOINS`] joins is judged: the helper pays when the joins' wall time is
+//! below [`PAYS_BELOW`] of the caller's own halves twice over (what it would have spent doing both
+//! at the speed it saw) and the caller had at least [`MIN_CPU_SHARE`] of a core over the window
+//! (its thread CPU time, Linux). A window in which it does not runs the next
+//! [`SERIAL_WINDOWS_MIN`] windows of joins in the caller, so the helper parks; the window after
+//! them probes the helper again, and each probe that fails doubles the serial stretch (up to
+//! [`SERIAL_WINDOWS_MAX`]). Results never depend on which thread runs a half, so they do not
+//! depend on the guard; [`guard_serial_joins`] counts the joins it ran in the caller.
 
 use std::any::Any;
 use std::cell::UnsafeCell;
 use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
 use std::ptr::NonNull;
-use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU64, AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, AtomicU32, AtomicU64, AtomicU8, Ordering};
 use std::sync::{Mutex, OnceLock};
 use std::thread::{self, Thread};
 use std::time::{Duration, Instant};
@@ -45,6 +59,179 @@ const SLEEP_AFTER_YIELDS: u32 = 64;
 
 /// One sleep of a caller waiting for a preempted helper.
 pub const WAIT_SLEEP: Duration = Duration::from_micros(20);
+
+/// Joins over which the guard judges whether the helper pays (a 0.6 mm fluid step makes about
+/// 220, a 1.2 mm one none: its levels are below the split threshold).
+pub const WINDOW_JOINS: u32 = 256;
+
+/// The helper pays when a window's joins take less than this fraction of the caller's own halves
+/// twice over (without contention: about 0.6-0.8 on the 2-core machine).
+pub const PAYS_BELOW: f64 = 0.9;
+
+/// The helper is judged not to pay when the caller had less than this share of a core over the
+/// window (Linux): a third runnable thread takes turns with the two, and the spinning helper
+/// then takes the caller's time.
+pub const MIN_CPU_SHARE: f64 = 0.8;
+
+/// Windows of joins run in the caller after a window in which the helper did not pay.
+pub const SERIAL_WINDOWS_MIN: u32 = 4;
+
+/// The longest serial stretch, in windows, after probes that failed one after the other.
+pub const SERIAL_WINDOWS_MAX: u32 = 64;
+
+/// What a window of joins decides: `None` keeps the helper; `Some(n)` runs the next `n` windows of
+/// joins in the caller. The window's joins took `wall_ns`, the caller's own halves twice over
+/// `serial_estimate_ns`, and the caller ran `cpu_share` of the window's time (1 where unknown);
+/// `probing`: the window followed a serial stretch of `last` windows.
+fn verdict(
+    wall_ns: u64,
+    serial_estimate_ns: u64,
+    cpu_share: f64,
+    probing: bool,
+    last: u32,
+) -> Option<u32> {
+    if (wall_ns as f64) < PAYS_BELOW * serial_estimate_ns as f64 && cpu_share >= MIN_CPU_SHARE {
+        return None;
+    }
+    Some(if probing {
+        last.saturating_mul(2)
+            .clamp(SERIAL_WINDOWS_MIN, SERIAL_WINDOWS_MAX)
+    } else {
+        SERIAL_WINDOWS_MIN
+    })
+}
+
+/// The calling thread's CPU time and the monotonic time, ns, and its kernel thread id (Linux).
+fn cpu_mark() -> Option<[u64; 3]> {
+    #[cfg(target_os = "linux")]
+    {
+        let read = |clock| {
+            let mut t = libc::timespec {
+                tv_sec: 0,
+                tv_nsec: 0,
+            };
+            // SAFETY: a valid clock id and a timespec to write.
+            (unsafe { libc::clock_gettime(clock, &mut t) } == 0)
+                .then(|| t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64)
+        };
+        let cpu = read(libc::CLOCK_THREAD_CPUTIME_ID)?;
+        let wall = read(libc::CLOCK_MONOTONIC)?;
+        // SAFETY: gettid has no preconditions.
+        Some([cpu, wall, unsafe { libc::gettid() } as u64])
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        None
+    }
+}
+
+/// The guard's state (module doc, "Contention"). Updated with relaxed atomics: concurrent callers
+/// (only when two solvers run at once) can blur one window's figures, never a result.
+struct Guard {
+    enabled: AtomicBool,
+    /// Joins left to run in the caller before the helper is tried again.
+    serial_left: AtomicU32,
+    /// Length of the last serial stretch, windows.
+    serial_windows: AtomicU32,
+    /// Whether the window being measured follows a serial stretch.
+    probing: AtomicBool,
+    joins: AtomicU32,
+    wall_ns: AtomicU64,
+    serial_estimate_ns: AtomicU64,
+    /// The window's start: the caller's [`cpu_mark`] at its first join (all zero: none).
+    start: [AtomicU64; 3],
+    serial_joins: AtomicU64,
+}
+
+static GUARD: Guard = Guard::new();
+
+impl Guard {
+    const fn new() -> Guard {
+        Guard {
+            enabled: AtomicBool::new(true),
+            serial_left: AtomicU32::new(0),
+            serial_windows: AtomicU32::new(0),
+            probing: AtomicBool::new(false),
+            joins: AtomicU32::new(0),
+            wall_ns: AtomicU64::new(0),
+            serial_estimate_ns: AtomicU64::new(0),
+            start: [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)],
+            serial_joins: AtomicU64::new(0),
+        }
+    }
+
+    /// Whether this join runs in the caller (the guard's serial stretch; counts it).
+    fn serial(&self) -> bool {
+        let serial = self
+            .serial_left
+            .fetch_update(Ordering::Relaxed, Ordering::Relaxed, |v| v.checked_sub(1))
+            .is_ok();
+        if serial {
+            self.serial_joins.fetch_add(1, Ordering::Relaxed);
+        }
+        serial
+    }
+
+    /// Records a join whose caller spent `own` on its half and `wall` in all; `mark` reads the
+    /// caller's CPU and wall clocks (once at the first and once at the last join of a window).
+    fn record(&self, own: Duration, wall: Duration, mark: impl Fn() -> Option<[u64; 3]>) {
+        if !self.enabled.load(Ordering::Relaxed) {
+            return;
+        }
+        let wall_ns = self
+            .wall_ns
+            .fetch_add(wall.as_nanos() as u64, Ordering::Relaxed)
+            + wall.as_nanos() as u64;
+        let own2 = 2 * own.as_nanos() as u64;
+        let estimate_ns = self.serial_estimate_ns.fetch_add(own2, Ordering::Relaxed) + own2;
+        let joins = self.joins.fetch_add(1, Ordering::Relaxed) + 1;
+        if joins == 1 {
+            let m = mark().unwrap_or([0; 3]);
+            for (a, v) in self.start.iter().zip(m) {
+                a.store(v, Ordering::Relaxed);
+            }
+        }
+        if joins < WINDOW_JOINS {
+            return;
+        }
+        let start = self.start.each_ref().map(|a| a.load(Ordering::Relaxed));
+        let share = match mark() {
+            Some([cpu, now, tid]) if start[1] != 0 && tid == start[2] && now > start[1] => {
+                cpu.saturating_sub(start[0]) as f64 / (now - start[1]) as f64
+            }
+            _ => 1.0,
+        };
+        self.joins.store(0, Ordering::Relaxed);
+        self.wall_ns.store(0, Ordering::Relaxed);
+        self.serial_estimate_ns.store(0, Ordering::Relaxed);
+        let probing = self.probing.load(Ordering::Relaxed);
+        let last = self.serial_windows.load(Ordering::Relaxed);
+        match verdict(wall_ns, estimate_ns, share, probing, last) {
+            None => self.probing.store(false, Ordering::Relaxed),
+            Some(n) => {
+                self.serial_windows.store(n, Ordering::Relaxed);
+                self.probing.store(true, Ordering::Relaxed);
+                self.serial_left
+                    .store(n.saturating_mul(WINDOW_JOINS), Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+/// Turns the guard on (the default) or off (every join offered to the helper; for benchmarks).
+#[cfg_attr(not(feature = "harness"), allow(dead_code))]
+pub fn set_guard(enabled: bool) {
+    GUARD.enabled.store(enabled, Ordering::Relaxed);
+    if !enabled {
+        GUARD.serial_left.store(0, Ordering::Relaxed);
+    }
+}
+
+/// Joins the guard ran in the caller since the process started.
+#[cfg_attr(not(feature = "harness"), allow(dead_code))]
+pub fn guard_serial_joins() -> u64 {
+    GUARD.serial_joins.load(Ordering::Relaxed)
+}
 
 /// Which fork-join runs the two halves (the home-made helper by default; the others are kept to
 /// measure against, `hydrometra fluid bench --fork-join`).
@@ -273,6 +460,9 @@ pub(crate) fn join<RA: Send, RB: Send>(
     let Some(s) = shared() else {
         return (a(), b());
     };
+    if GUARD.serial() {
+        return (a(), b());
+    }
     if s.state
         .compare_exchange(IDLE, POSTING, Ordering::Acquire, Ordering::Relaxed)
         .is_err()
@@ -300,8 +490,11 @@ pub(crate) fn join<RA: Send, RB: Send>(
             }
         }
         let finish = Finish { s };
+        let start = Instant::now();
         ra = a();
+        let own = start.elapsed();
         drop(finish);
+        GUARD.record(own, start.elapsed(), cpu_mark);
     }
     if s.panicked.swap(false, Ordering::Relaxed) {
         let payload = s.panic.lock().ok().and_then(|mut p| p.take());
@@ -347,6 +540,79 @@ fn chili_join<RA: Send, RB: Send>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Records `n` joins through `guard` that took `wall_us` with the caller's half `own_us`
+    /// (each offered to the helper), the caller having `share` of a core over each window.
+    fn window(guard: &Guard, n: u32, own_us: u64, wall_us: u64, share: f64) {
+        let marks = std::cell::Cell::new(0u64);
+        let mark = || {
+            // The window's start, then its end 1 ms later (a window's first and last join).
+            let k = marks.get();
+            marks.set(k + 1);
+            let dt = (k % 2) * 1_000_000;
+            Some([5_000 + (share * dt as f64) as u64, 9_000 + dt, 7])
+        };
+        for _ in 0..n {
+            assert!(!guard.serial(), "a join of a measured window ran serially");
+            guard.record(
+                Duration::from_micros(own_us),
+                Duration::from_micros(wall_us),
+                mark,
+            );
+        }
+    }
+
+    /// The joins `guard` runs in the caller from now until it offers one to the helper again.
+    fn serial_stretch(guard: &Guard) -> u32 {
+        let mut n = 0;
+        while guard.serial() {
+            n += 1;
+        }
+        n
+    }
+
+    #[test]
+    fn the_guard_runs_joins_serially_while_the_helper_does_not_pay_and_probes_again() {
+        let guard = Guard::new();
+        // The helper pays (wall 0.6 of the caller's half twice over): every join is offered.
+        window(&guard, 3 * WINDOW_JOINS, 10, 12, 1.0);
+        assert_eq!(serial_stretch(&guard), 0);
+        // Just at the threshold it does not (wall = PAYS_BELOW of 2 x 10 us).
+        let at = (PAYS_BELOW * 20.0).round() as u64;
+        window(&guard, WINDOW_JOINS, 10, at, 1.0);
+        let mut total = serial_stretch(&guard);
+        assert_eq!(total, SERIAL_WINDOWS_MIN * WINDOW_JOINS);
+        // Failed probes double the stretch up to the maximum.
+        let mut expected = SERIAL_WINDOWS_MIN;
+        for _ in 0..8 {
+            window(&guard, WINDOW_JOINS, 10, 25, 1.0);
+            expected = (2 * expected).min(SERIAL_WINDOWS_MAX);
+            let n = serial_stretch(&guard);
+            assert_eq!(n, expected * WINDOW_JOINS);
+            total += n;
+        }
+        assert_eq!(expected, SERIAL_WINDOWS_MAX);
+        // A probe that pays keeps the helper; the next failure starts from the shortest stretch.
+        window(&guard, 2 * WINDOW_JOINS, 10, 12, 1.0);
+        assert_eq!(serial_stretch(&guard), 0);
+        window(&guard, WINDOW_JOINS, 10, 25, 1.0);
+        let n = serial_stretch(&guard);
+        assert_eq!(n, SERIAL_WINDOWS_MIN * WINDOW_JOINS);
+        total += n;
+        // The joins pay, but the caller had too little of its core: a third thread takes turns
+        // with the two (the probe after the stretch fails too: doubled).
+        window(&guard, WINDOW_JOINS, 10, 12, 0.95 * MIN_CPU_SHARE);
+        let n = serial_stretch(&guard);
+        assert_eq!(n, 2 * SERIAL_WINDOWS_MIN * WINDOW_JOINS);
+        total += n;
+        window(&guard, WINDOW_JOINS, 10, 12, 1.05 * MIN_CPU_SHARE);
+        assert_eq!(serial_stretch(&guard), 0);
+        assert_eq!(guard.serial_joins.load(Ordering::Relaxed), u64::from(total));
+        // Switched off, it neither measures nor runs anything serially.
+        guard.enabled.store(false, Ordering::Relaxed);
+        window(&guard, 2 * WINDOW_JOINS, 10, 25, 0.1);
+        assert_eq!(serial_stretch(&guard), 0);
+    }
 
     #[test]
     fn join_runs_both_halves_with_borrowed_data() {
@@ -417,6 +683,8 @@ mod tests {
         if !two_cores_or_skip("the_second_half_runs_on_the_helper_thread_where_available") {
             return;
         }
+        // Every join offered to the helper, whatever other tests in this process measured.
+        set_guard(false);
         let caller = thread::current().id();
         let before = helper_tasks();
         let mut on_helper = 0;
@@ -447,6 +715,7 @@ mod tests {
         ) {
             return;
         }
+        set_guard(false);
         let started = AtomicBool::new(false);
         let r = catch_unwind(AssertUnwindSafe(|| {
             join(
@@ -503,6 +772,7 @@ mod tests {
         if !two_cores_or_skip(name) {
             return;
         }
+        set_guard(false);
         // Spawn the helper from a SCHED_FIFO thread if this process may use it.
         let fifo = thread::spawn(|| {
             let param = libc::sched_param { sched_priority: 1 };

@@ -9,6 +9,7 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
+use hydrometra_sim::harness::fork_join::{guard_serial_joins, helper_tasks, set_guard};
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneError, SceneInputs,
@@ -112,9 +113,23 @@ pub struct BenchArgs {
     /// Table 1 and the session-7 figures).
     #[arg(long)]
     max_cfl: Option<f64>,
+    /// The fork-join guard that runs the solver's joins in one thread while the second does not
+    /// pay (another process on its core): `on` (the default, as in the daemon) or `off` (every
+    /// join offered to the helper thread), to measure it.
+    #[arg(long, value_enum, default_value_t = Switch::On)]
+    fork_join_guard: Switch,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
+}
+
+/// An on/off option.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Switch {
+    /// On.
+    On,
+    /// Off.
+    Off,
 }
 
 /// `scene bench --vortex-mode`.
@@ -620,6 +635,7 @@ fn timed_runs(descs: Vec<SceneDesc>, assets: &SceneAssets, a: &BenchArgs) -> Res
         hydraulics: HydraulicsInput::Own,
     };
     let mut runs = Vec::with_capacity(descs.len());
+    let joins_before = (helper_tasks(), guard_serial_joins());
     for desc in descs {
         let mut scene = Scene::new(desc, assets.clone())?;
         for f in 0..a.warmup {
@@ -652,12 +668,17 @@ fn timed_runs(descs: Vec<SceneDesc>, assets: &SceneAssets, a: &BenchArgs) -> Res
             }
         }
     }
+    // Process-wide counts, over the warm-up and the timed steps of every run of this call.
+    let (helper, serial) = (
+        helper_tasks() - joins_before.0,
+        guard_serial_joins() - joins_before.1,
+    );
     Ok(runs
         .into_iter()
         .map(|(run, times)| {
             let per_run = |x: f64| x / run.fluid_runs.max(1) as f64;
             eprintln!(
-                "{} mm{}: {} fluid steps, {} substeps, {} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms",
+                "{} mm{}: {} fluid steps, {} substeps, {} topology rebuilds; per fluid step: topology {:.3} ms, advection {:.3} ms, projection {:.3} ms; halves on the fork-join helper {}, joins the guard ran in one thread {}",
                 run.scene.desc().fluid.voxel_mm,
                 if run.scene.vortices().is_some() { " with vortices" } else { "" },
                 run.fluid_runs,
@@ -665,7 +686,9 @@ fn timed_runs(descs: Vec<SceneDesc>, assets: &SceneAssets, a: &BenchArgs) -> Res
                 times.rebuilds,
                 per_run(times.topology_ms),
                 per_run(times.advect_ms),
-                per_run(times.project_ms)
+                per_run(times.project_ms),
+                helper,
+                serial
             );
             run
         })
@@ -704,6 +727,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
             a.traverse_max_s
         );
     }
+    set_guard(a.fork_join_guard == Switch::On);
     let base = SceneDesc::load(&a.scene.scene)?;
     let (assets, _) = assets(&base, &a.scene)?;
     let dt = 1.0 / a.rate_hz;
