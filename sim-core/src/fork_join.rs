@@ -27,7 +27,7 @@
 //! **Contention (the guard).** When a third thread wants one of the two cores (a renderer on the
 //! same machine), the helper, spinning for work, takes turns with the caller on a core, and it is
 //! preempted in the middle of its half while the caller waits for it. Measured on the 0.6 mm scene
-//! beside one busy process: two threads took 8.0-10.6 ms a step against 5.7-7.1 ms for one
+//! beside one busy process: two threads took 7.6-11.6 ms a step against 5.6-8.1 ms for one
 //! (BENCHMARKS.md, "Fork-join under contention"). So every join is timed (three clock reads), and
 //! each window of [`WINDOW_JOINS`] joins is judged: the helper pays when the joins' wall time is
 //! below [`PAYS_BELOW`] of the caller's own halves twice over (what it would have spent doing both
