@@ -1036,9 +1036,20 @@ impl Scene {
             self.rasterize_scope();
         }
         self.scope_built = self.scope;
-        // The ports' cells are sheath again until the ports are chosen anew below.
+        // The ports' cells are sheath again until the ports are chosen anew below, and move no
+        // fluid (the ports chosen below get their velocities in `set_boundary_velocities`; a cell
+        // that stays sheath would otherwise keep injecting its old port velocity).
         for b in self.inflow.iter().chain(&self.outflow) {
-            self.kinds[b.cell as usize] = VoxelKind::Scope;
+            let n = b.cell as usize;
+            self.kinds[n] = VoxelKind::Scope;
+            if self.wall_velocity[n] != [0.0; 3] {
+                self.wall_velocity[n] = [0.0; 3];
+                if let Some(solver) = self.fluid.as_mut() {
+                    solver
+                        .grid_mut()
+                        .set_velocity(b.at.map(|x| x as usize), [0.0; 3])?;
+                }
+            }
         }
 
         // 2. Kinds and labels of the pending rows; their boundary rows.
@@ -1085,7 +1096,7 @@ impl Scene {
             self.kind_extent[row] = now;
             self.fluid_cells = self.fluid_cells + fluid as usize - self.row_fluid[row] as usize;
             self.row_fluid[row] = fluid;
-            // Labels into the solver, and cells that stopped being ports or walls move no more.
+            // Labels into the solver, and cells that stopped being walls move no more.
             if let Some(solver) = self.fluid.as_mut() {
                 let g = solver.grid_mut();
                 let [a, b] = if whole { all } else { range_hull(last, now) };
@@ -1102,7 +1113,9 @@ impl Scene {
                         g.set_label([i, j, k], label)?;
                         changed += 1;
                     }
-                    if label != CellLabel::Velocity && self.wall_velocity[n] != [0.0; 3] {
+                    // Only walls keep a velocity here (`set_boundary_velocities` sets it anew
+                    // each step); a sheath cell over an old wall cell moves no fluid.
+                    if self.kinds[n] != VoxelKind::Wall && self.wall_velocity[n] != [0.0; 3] {
                         self.wall_velocity[n] = [0.0; 3];
                         g.set_velocity([i, j, k], [0.0; 3])?;
                     }
@@ -1185,7 +1198,10 @@ impl Scene {
         // with the share of its area that completes the channel's, so the port's area on the
         // grid is the channel's at any voxel size and the jet leaves at the hydraulics' port
         // velocity. Fewer forward faces than the channel's area: tissue covers part of the tip.
-        self.candidates.sort_by(|a, b| a.0.total_cmp(&b.0));
+        // Unstable (no scratch buffer on the heap), with the cells' order (that of `tips`) among
+        // equal distances: the order of a stable sort.
+        self.candidates
+            .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cell.cmp(&b.1.cell)));
         let area = self.desc.scope.inflow_channel_area_mm2 * 1e-6;
         let face = h * h;
         let mut g = 0.0;
