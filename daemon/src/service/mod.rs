@@ -247,8 +247,11 @@ fn scene_status_line(
         format!("scene preparing (atlas level {done}/{all})")
     } else {
         let l = thread.log.flow_latency();
+        // The solver's two-thread split (fine grids only): halves the helper thread ran, and
+        // joins its guard ran in one thread because the second core was taken (another process).
+        use hydrometra_sim::harness::fork_join::{guard_serial_joins, helper_tasks};
         format!(
-            "scene {name}: positions {}, flow fields {} (rig-sample-to-flow ms p50 {} p99 {} max {}, n {}), publish errors {}",
+            "scene {name}: positions {}, flow fields {} (rig-sample-to-flow ms p50 {} p99 {} max {}, n {}), publish errors {}, solver halves on the helper thread {}, joins in one thread (second core taken) {}",
             thread.log.positions_published.load(Ordering::Relaxed),
             thread.log.flows_published.load(Ordering::Relaxed),
             ms(l.p50_s),
@@ -256,6 +259,8 @@ fn scene_status_line(
             ms(l.max_s),
             l.count,
             thread.log.publish_errors.load(Ordering::Relaxed),
+            helper_tasks(),
+            guard_serial_joins(),
         )
     })
 }
