@@ -258,9 +258,9 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // within 1 s of it. Late wake-ups are the machine's, not the daemon's: with this test's
     // subscribers on a loaded 2-core machine (load 3-6) the SCHED_FIFO loop woke up to 13 ms late
     // a few times per run, anywhere in it (33-116 misses in 25 s), while its longest tick's work
-    // stayed at 0.07-0.25 ms (release); a debug build under CI's parallel tests once had a tick of
-    // >= 5 ms somewhere in the run (BENCHMARKS.md). So the misses are bounded over the whole run
-    // (1 % of the ticks), not near the kill.
+    // stayed at 0.07-0.25 ms (release); one CI run (dev profile) had a tick of >= 5 ms somewhere
+    // in the run (BENCHMARKS.md, "The SIGKILL check, session 12"). So the misses are bounded over the whole run
+    // (1 % of the ticks); near the kill only where the rise cannot show (below).
     hydrometra_hil_tests::assert_contiguous(&statuses);
     let last = statuses.last().unwrap();
     let killed_after = killed_after.expect("statuses before the kill");
@@ -273,17 +273,34 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         "{} statuses around the kill",
         around_kill.len()
     );
+    // A rise to >= 5 ms shows only while the maximum so far is below 5 ms: if a tick before the
+    // window already took that long (the machine's, once in CI), the kill is checked by the misses
+    // between two statuses instead (a tick held up 10 ms is 10 misses).
+    let max_before = around_kill[0].tick_work_max_s;
     for w in around_kill.windows(2) {
         let (a, b) = (w[0], w[1]);
-        assert!(
-            b.tick_work_max_s <= a.tick_work_max_s || b.tick_work_max_s < 0.005,
-            "a tick's work took {:.3} ms between statuses {} and {} (SIGKILL after \
-             {killed_after}):\n{}",
-            b.tick_work_max_s * 1e3,
-            a.sequence,
-            b.sequence,
-            daemon.log()
-        );
+        if max_before < 0.005 {
+            assert!(
+                b.tick_work_max_s <= a.tick_work_max_s || b.tick_work_max_s < 0.005,
+                "a tick's work took {:.3} ms between statuses {} and {} (SIGKILL after \
+                 {killed_after}):\n{}",
+                b.tick_work_max_s * 1e3,
+                a.sequence,
+                b.sequence,
+                daemon.log()
+            );
+        } else {
+            let jump = b.deadline_misses - a.deadline_misses;
+            assert!(
+                jump < 10,
+                "{jump} deadline misses between statuses {} and {} (SIGKILL after \
+                 {killed_after}; the longest tick's work before was {:.3} ms):\n{}",
+                a.sequence,
+                b.sequence,
+                max_before * 1e3,
+                daemon.log()
+            );
+        }
     }
     eprintln!(
         "longest tick's work over the run {:.3} ms; around the kill {:.3} ms",
