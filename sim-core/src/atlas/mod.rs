@@ -327,7 +327,6 @@ impl Atlas {
         positions_out: &mut [[f32; 3]],
         dxdp_out: &mut [[f32; 3]],
     ) -> Result<(), AtlasError> {
-        let n = self.vertex_count();
         if positions_out.len() != ids.len() || dxdp_out.len() != ids.len() {
             return Err(AtlasError::Argument(format!(
                 "replay_subset: {} ids but {} positions and {} dx/dp outputs",
@@ -336,11 +335,7 @@ impl Atlas {
                 dxdp_out.len()
             )));
         }
-        if let Some(&bad) = ids.iter().find(|&&i| i as usize >= n) {
-            return Err(AtlasError::Argument(format!(
-                "replay_subset: vertex {bad} is not in the atlas ({n} vertices)"
-            )));
-        }
+        self.check_ids("replay_subset", ids)?;
         self.replay_mapped(pressure_pa, |m| ids[m] as usize, positions_out, dxdp_out);
         Ok(())
     }
@@ -365,16 +360,22 @@ impl Atlas {
         Ok(())
     }
 
+    /// An error naming `what` and the first of `ids` that is not a vertex of the atlas.
+    fn check_ids(&self, what: &str, ids: &[u32]) -> Result<(), AtlasError> {
+        let n = self.vertex_count();
+        match ids.iter().find(|&&i| i as usize >= n) {
+            Some(&bad) => Err(AtlasError::Argument(format!(
+                "{what}: vertex {bad} is not in the atlas ({n} vertices)"
+            ))),
+            None => Ok(()),
+        }
+    }
+
     /// The atlas of the vertices `ids` alone (vertex `m` of the result is vertex `ids[m]`): the
     /// same levels, pressures and volumes, and the same stored values, so its replay equals
     /// [`Self::replay_subset`] of `ids` exactly.
     pub fn subset(&self, ids: &[u32]) -> Result<Atlas, AtlasError> {
-        let n = self.vertex_count();
-        if let Some(&bad) = ids.iter().find(|&&i| i as usize >= n) {
-            return Err(AtlasError::Argument(format!(
-                "subset: vertex {bad} is not in the atlas ({n} vertices)"
-            )));
-        }
+        self.check_ids("subset", ids)?;
         let levels = 0..self.level_count();
         let gather =
             |level: &[[f32; 3]]| ids.iter().map(|&i| level[i as usize]).collect::<Vec<_>>();
