@@ -68,6 +68,44 @@ fn own(rig: RigInputs) -> SceneInputs<'static> {
     }
 }
 
+/// The fluid of the scene's last step is incompressible: what the ports and walls let in, less what
+/// they let out, leaves through the open os, up to what the projection tolerance allows (each fluid
+/// cell may keep tol * U * h^2 of flux imbalance) and the closed regions' reported mismatch.
+/// Returns that slack.
+fn assert_incompressible(scene: &Scene, f: usize) -> f64 {
+    let (r, fl) = (scene.report(), scene.report().flux);
+    let h = scene.cells().spacing_m;
+    let u = scene.flow().unwrap().solver().max_speed_m_s().max(1e-3);
+    let slack = r.fluid_cells as f64 * 1e-5 * u * h * h + fl.closed_region_mismatch_m3_per_s.abs();
+    let in_minus_out =
+        fl.fluid_inflow_m3_per_s - fl.fluid_outflow_m3_per_s - fl.fluid_wall_m3_per_s;
+    assert!(
+        (in_minus_out - fl.fluid_open_m3_per_s).abs() <= slack,
+        "frame {f}: the fluid is not incompressible: in - out - walls {in_minus_out:e}, open {:e} \
+         (slack {slack:e})",
+        fl.fluid_open_m3_per_s
+    );
+    slack
+}
+
+/// `home` at frame `f` of a periodic move: a slide of +-2 mm along the view (period 120 frames,
+/// 2 s) and a sway of +-1.5 mm across it (60 frames), so the same poses come back every 2 s.
+fn slide_and_sway(home: ScopePose, f: usize) -> ScopePose {
+    let d = home.view_direction;
+    let m = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    // A unit vector across the view (the view is never along z here: it runs along the canal).
+    let c = [d[1], -d[0], 0.0];
+    let n = (c[0] * c[0] + c[1] * c[1]).sqrt();
+    let tau = std::f64::consts::TAU;
+    let slide = 2.0e-3 * (tau * (f % 120) as f64 / 120.0).sin();
+    let sway = 1.5e-3 * (tau * (f % 60) as f64 / 60.0).sin();
+    let mut s = home;
+    for a in 0..3 {
+        s.tip_position_m[a] += slide * d[a] / m + sway * c[a] / n;
+    }
+    s
+}
+
 #[test]
 fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
     let (desc, assets) = coarse(1.2);
@@ -115,19 +153,7 @@ fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
             fl.hydraulic_dvdt_m3_per_s,
             "walls (dV/dt)",
         );
-        // The open os carries the losses, up to what the projection tolerance allows: each fluid
-        // cell may keep tol * U * h^2 of flux imbalance.
-        let h = scene.cells().spacing_m;
-        let u = scene.flow().unwrap().solver().max_speed_m_s().max(1e-3);
-        let slack =
-            r.fluid_cells as f64 * 1e-5 * u * h * h + fl.closed_region_mismatch_m3_per_s.abs();
-        let in_minus_out =
-            fl.fluid_inflow_m3_per_s - fl.fluid_outflow_m3_per_s - fl.fluid_wall_m3_per_s;
-        assert!(
-            (in_minus_out - fl.fluid_open_m3_per_s).abs() <= slack,
-            "frame {f}: the fluid is not incompressible: in - out - walls {in_minus_out:e}, open {:e}",
-            fl.fluid_open_m3_per_s
-        );
+        let slack = assert_incompressible(&scene, f);
         if !fl.inflow_blocked && !fl.outflow_blocked && fl.closed_region_mismatch_m3_per_s == 0.0 {
             assert!(
                 (fl.fluid_open_m3_per_s - fl.hydraulic_losses_m3_per_s).abs() <= slack,
@@ -350,24 +376,10 @@ fn cells_that_stop_being_ports_move_no_fluid() {
     let (desc, assets) = coarse(1.2);
     let mut scene = Scene::new(desc, assets).unwrap();
     let home = scope_in_cavity(&scene);
-    let d = home.view_direction;
-    let m = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    // A unit vector across the view.
-    let side = {
-        let c = [d[1], -d[0], 0.0];
-        let n = (c[0] * c[0] + c[1] * c[1]).sqrt();
-        [c[0] / n, c[1] / n, 0.0]
-    };
     let (mut checked, mut port_changes) = (0, 0);
     let mut last_inflow = Vec::new();
     for f in 0..240 {
-        let t = f as f64 * DT;
-        let mut s = home;
-        let slide = 2.0e-3 * (2.3 * t).sin();
-        let sway = 1.5e-3 * (3.7 * t).sin();
-        for a in 0..3 {
-            s.tip_position_m[a] += slide * d[a] / m + sway * side[a];
-        }
+        let s = slide_and_sway(home, f);
         scene.step(&own(inputs(1.0, 0.6, 100.0, s)), DT).unwrap();
         let r = scene.report();
         let Some(stats) = r.fluid else { continue };
@@ -391,20 +403,9 @@ fn cells_that_stop_being_ports_move_no_fluid() {
             last_inflow = inflow;
         }
         assert!(stats.projection_converged, "frame {f}: {stats:?}");
-        // The balance as in the flux test (where the sheath closes the os, as here, the losses
-        // cannot leave and the solver reports them as the closed region's mismatch).
-        let fl = r.flux;
-        let h = scene.cells().spacing_m;
-        let u = flow.solver().max_speed_m_s().max(1e-3);
-        let slack =
-            r.fluid_cells as f64 * 1e-5 * u * h * h + fl.closed_region_mismatch_m3_per_s.abs();
-        let in_minus_out =
-            fl.fluid_inflow_m3_per_s - fl.fluid_outflow_m3_per_s - fl.fluid_wall_m3_per_s;
-        assert!(
-            (in_minus_out - fl.fluid_open_m3_per_s).abs() <= slack,
-            "frame {f}: in - out - walls {in_minus_out:e}, open {:e} (slack {slack:e})",
-            fl.fluid_open_m3_per_s
-        );
+        // Where the sheath closes the os, as here, the losses cannot leave and the solver
+        // reports them as the closed region's mismatch.
+        assert_incompressible(&scene, f);
         checked += 1;
     }
     assert!(checked > 200, "the fluid ran {checked} times");
@@ -489,23 +490,7 @@ fn steps_with_a_moving_scope_do_not_allocate_once_its_moves_were_seen() {
     let (desc, assets) = coarse(1.2);
     let mut scene = Scene::new(desc, assets).unwrap();
     let home = scope_in_cavity(&scene);
-    let d = home.view_direction;
-    let m = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-    let side = {
-        let c = [d[1], -d[0], 0.0];
-        let n = (c[0] * c[0] + c[1] * c[1]).sqrt();
-        [c[0] / n, c[1] / n, 0.0]
-    };
-    let pose = |f: usize| {
-        let tau = std::f64::consts::TAU;
-        let slide = 2.0e-3 * (tau * (f % 120) as f64 / 120.0).sin();
-        let sway = 1.5e-3 * (tau * (f % 60) as f64 / 60.0).sin();
-        let mut s = home;
-        for a in 0..3 {
-            s.tip_position_m[a] += slide * d[a] / m + sway * side[a];
-        }
-        s
-    };
+    let pose = |f: usize| slide_and_sway(home, f);
     for f in 0..1200 {
         scene
             .step(&own(inputs(1.0, 0.5, 100.0, pose(f))), DT)
