@@ -61,11 +61,11 @@ const SLEEP_AFTER_YIELDS: u32 = 64;
 pub const WAIT_SLEEP: Duration = Duration::from_micros(20);
 
 /// Joins over which the guard judges whether the helper pays (a 0.6 mm fluid step makes about
-/// 220, a 1.2 mm one none: its levels are below the split threshold).
+/// 210; a 1.2 mm one only the topology rebuild's, its levels being below the split threshold).
 pub const WINDOW_JOINS: u32 = 256;
 
 /// The helper pays when a window's joins take less than this fraction of the caller's own halves
-/// twice over (without contention: about 0.6-0.8 on the 2-core machine).
+/// twice over.
 pub const PAYS_BELOW: f64 = 0.9;
 
 /// The helper is judged not to pay when the caller had less than this share of a core over the
