@@ -611,7 +611,7 @@ impl FaceSet {
             if !self.row_dirty[row] {
                 // A stretch of clean rows: their entries are contiguous in every old list, so
                 // they move as one slice per list.
-                let end = (row + 1..rows).find(|&r| self.row_dirty[r]).unwrap_or(rows);
+                let end = self.clean_stretch_end(row);
                 let (from, to) = (old.row_at[row], old.row_at[end]);
                 let now = self.list_lengths();
                 for at in &old.row_at[row..end] {
@@ -855,7 +855,7 @@ impl FaceSet {
             }
             if !self.row_dirty[row] {
                 // A stretch of clean rows, as above.
-                let end = (row + 1..rows).find(|&r| self.row_dirty[r]).unwrap_or(rows);
+                let end = self.clean_stretch_end(row);
                 let (from, to) = (old.row_at[row], old.row_at[end]);
                 for (at, was) in self.row_at[row..end].iter_mut().zip(&old.row_at[row..end]) {
                     for l in 0..3 {
@@ -1010,6 +1010,14 @@ impl FaceSet {
         for &f in &self.dirty {
             self.marked[face_index(f)] = 0;
         }
+    }
+
+    /// The end of the stretch of clean face rows that starts at `row` (clean): the next dirty row,
+    /// or the number of rows. Both passes of an update carry such a stretch over as one slice per
+    /// list, so they must find the same stretches.
+    fn clean_stretch_end(&self, row: usize) -> usize {
+        let rows = self.row_dirty.len();
+        (row + 1..rows).find(|&r| self.row_dirty[r]).unwrap_or(rows)
     }
 
     /// The lengths of the lists [`FaceSet::row_at`] indexes that are built with the classes
