@@ -31,8 +31,9 @@
 //! (BENCHMARKS.md, "Fork-join under contention"). So every join is timed (three clock reads), and
 //! each window of [`WINDOW_JOINS`] joins is judged: the helper pays when the joins' wall time is
 //! below [`PAYS_BELOW`] of the caller's own halves twice over (what it would have spent doing both
-//! at the speed it saw) and the caller had at least [`MIN_CPU_SHARE`] of a core over the window
-//! (its thread CPU time, Linux). A window in which it does not runs the next
+//! at the speed it saw) and the caller had at least [`MIN_CPU_SHARE`] of a core in its busy spans
+//! (its thread CPU time over each fluid step, [`BusySpan`], Linux: not over the window's wall
+//! time, which holds the daemon's sleeps between frames). A window in which it does not runs the next
 //! [`SERIAL_WINDOWS_MIN`] windows of joins in the caller, so the helper parks; the window after
 //! them probes the helper again, and each probe that fails doubles the serial stretch (up to
 //! [`SERIAL_WINDOWS_MAX`]). Results never depend on which thread runs a half, so they do not
@@ -101,23 +102,17 @@ fn verdict(
     })
 }
 
-/// The calling thread's CPU time and the monotonic time, ns, and its kernel thread id (Linux).
-fn cpu_mark() -> Option<[u64; 3]> {
+/// The calling thread's CPU time, ns (Linux; `None` elsewhere).
+fn thread_cpu_ns() -> Option<u64> {
     #[cfg(target_os = "linux")]
     {
-        let read = |clock| {
-            let mut t = libc::timespec {
-                tv_sec: 0,
-                tv_nsec: 0,
-            };
-            // SAFETY: a valid clock id and a timespec to write.
-            (unsafe { libc::clock_gettime(clock, &mut t) } == 0)
-                .then(|| t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64)
+        let mut t = libc::timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
         };
-        let cpu = read(libc::CLOCK_THREAD_CPUTIME_ID)?;
-        let wall = read(libc::CLOCK_MONOTONIC)?;
-        // SAFETY: gettid has no preconditions.
-        Some([cpu, wall, unsafe { libc::gettid() } as u64])
+        // SAFETY: a valid clock id and a timespec to write.
+        (unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0)
+            .then(|| t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64)
     }
     #[cfg(not(target_os = "linux"))]
     {
@@ -138,8 +133,9 @@ struct Guard {
     joins: AtomicU32,
     wall_ns: AtomicU64,
     serial_estimate_ns: AtomicU64,
-    /// The window's start: the caller's [`cpu_mark`] at its first join (all zero: none).
-    start: [AtomicU64; 3],
+    /// Wall time and the caller's CPU time over the [`BusySpan`]s that ended in the window, ns.
+    busy_wall_ns: AtomicU64,
+    busy_cpu_ns: AtomicU64,
     serial_joins: AtomicU64,
 }
 
@@ -155,7 +151,8 @@ impl Guard {
             joins: AtomicU32::new(0),
             wall_ns: AtomicU64::new(0),
             serial_estimate_ns: AtomicU64::new(0),
-            start: [AtomicU64::new(0), AtomicU64::new(0), AtomicU64::new(0)],
+            busy_wall_ns: AtomicU64::new(0),
+            busy_cpu_ns: AtomicU64::new(0),
             serial_joins: AtomicU64::new(0),
         }
     }
@@ -172,38 +169,37 @@ impl Guard {
         serial
     }
 
-    /// Records a join whose caller spent `own` on its half and `wall` in all; `mark` reads the
-    /// caller's CPU and wall clocks (once at the first and once at the last join of a window).
-    fn record(&self, own: Duration, wall: Duration, mark: impl Fn() -> Option<[u64; 3]>) {
+    /// Adds a busy span of `wall` in which the caller ran `cpu`.
+    fn record_busy(&self, wall: Duration, cpu: Duration) {
+        self.busy_wall_ns
+            .fetch_add(wall.as_nanos() as u64, Ordering::Relaxed);
+        self.busy_cpu_ns
+            .fetch_add(cpu.as_nanos() as u64, Ordering::Relaxed);
+    }
+
+    /// Records a join whose caller spent `own` on its half and `wall` in all.
+    fn record(&self, own: Duration, wall: Duration) {
         if !self.enabled.load(Ordering::Relaxed) {
             return;
         }
-        let wall_ns = self
-            .wall_ns
-            .fetch_add(wall.as_nanos() as u64, Ordering::Relaxed)
-            + wall.as_nanos() as u64;
-        let own2 = 2 * own.as_nanos() as u64;
-        let estimate_ns = self.serial_estimate_ns.fetch_add(own2, Ordering::Relaxed) + own2;
-        let joins = self.joins.fetch_add(1, Ordering::Relaxed) + 1;
-        if joins == 1 {
-            let m = mark().unwrap_or([0; 3]);
-            for (a, v) in self.start.iter().zip(m) {
-                a.store(v, Ordering::Relaxed);
-            }
-        }
-        if joins < WINDOW_JOINS {
+        let add = |a: &AtomicU64, v: u64| a.fetch_add(v, Ordering::Relaxed) + v;
+        let wall_ns = add(&self.wall_ns, wall.as_nanos() as u64);
+        let estimate_ns = add(&self.serial_estimate_ns, 2 * own.as_nanos() as u64);
+        if self.joins.fetch_add(1, Ordering::Relaxed) + 1 < WINDOW_JOINS {
             return;
         }
-        let start = self.start.each_ref().map(|a| a.load(Ordering::Relaxed));
-        let share = match mark() {
-            Some([cpu, now, tid]) if start[1] != 0 && tid == start[2] && now > start[1] => {
-                cpu.saturating_sub(start[0]) as f64 / (now - start[1]) as f64
-            }
-            _ => 1.0,
-        };
+        let busy_wall = self.busy_wall_ns.swap(0, Ordering::Relaxed);
+        let busy_cpu = self.busy_cpu_ns.swap(0, Ordering::Relaxed);
+        for a in [&self.wall_ns, &self.serial_estimate_ns] {
+            a.store(0, Ordering::Relaxed);
+        }
         self.joins.store(0, Ordering::Relaxed);
-        self.wall_ns.store(0, Ordering::Relaxed);
-        self.serial_estimate_ns.store(0, Ordering::Relaxed);
+        // The share of a core the caller had in its busy spans (1 where none ended).
+        let share = if busy_wall > 0 {
+            busy_cpu as f64 / busy_wall as f64
+        } else {
+            1.0
+        };
         let probing = self.probing.load(Ordering::Relaxed);
         let last = self.serial_windows.load(Ordering::Relaxed);
         match verdict(wall_ns, estimate_ns, share, probing, last) {
@@ -224,6 +220,36 @@ pub fn set_guard(enabled: bool) {
     GUARD.enabled.store(enabled, Ordering::Relaxed);
     if !enabled {
         GUARD.serial_left.store(0, Ordering::Relaxed);
+    }
+}
+
+/// A stretch of work in which the calling thread never waits for anything but the helper (a fluid
+/// step): while it lives, its wall time and the thread's CPU time are measured (two clock reads and
+/// two system calls), and the guard judges the caller's share of a core over such spans, not over
+/// the sleeps between them (a daemon's scene thread sleeps between frames).
+pub(crate) struct BusySpan {
+    start: Option<(Instant, u64)>,
+}
+
+impl BusySpan {
+    pub(crate) fn start() -> BusySpan {
+        let on = GUARD.enabled.load(Ordering::Relaxed) && rayon::current_num_threads() >= 2;
+        BusySpan {
+            start: on
+                .then(|| thread_cpu_ns().map(|cpu| (Instant::now(), cpu)))
+                .flatten(),
+        }
+    }
+}
+
+impl Drop for BusySpan {
+    fn drop(&mut self) {
+        if let (Some((wall, cpu)), Some(now)) = (self.start, thread_cpu_ns()) {
+            GUARD.record_busy(
+                wall.elapsed(),
+                Duration::from_nanos(now.saturating_sub(cpu)),
+            );
+        }
     }
 }
 
@@ -494,7 +520,7 @@ pub(crate) fn join<RA: Send, RB: Send>(
         ra = a();
         let own = start.elapsed();
         drop(finish);
-        GUARD.record(own, start.elapsed(), cpu_mark);
+        GUARD.record(own, start.elapsed());
     }
     if s.panicked.swap(false, Ordering::Relaxed) {
         let payload = s.panic.lock().ok().and_then(|mut p| p.take());
@@ -542,23 +568,13 @@ mod tests {
     use super::*;
 
     /// Records `n` joins through `guard` that took `wall_us` with the caller's half `own_us`
-    /// (each offered to the helper), the caller having `share` of a core over each window.
+    /// (each offered to the helper), the caller having `share` of a core in a busy span of each.
     fn window(guard: &Guard, n: u32, own_us: u64, wall_us: u64, share: f64) {
-        let marks = std::cell::Cell::new(0u64);
-        let mark = || {
-            // The window's start, then its end 1 ms later (a window's first and last join).
-            let k = marks.get();
-            marks.set(k + 1);
-            let dt = (k % 2) * 1_000_000;
-            Some([5_000 + (share * dt as f64) as u64, 9_000 + dt, 7])
-        };
         for _ in 0..n {
             assert!(!guard.serial(), "a join of a measured window ran serially");
-            guard.record(
-                Duration::from_micros(own_us),
-                Duration::from_micros(wall_us),
-                mark,
-            );
+            let wall = Duration::from_micros(wall_us);
+            guard.record_busy(wall, wall.mul_f64(share));
+            guard.record(Duration::from_micros(own_us), wall);
         }
     }
 

@@ -247,11 +247,12 @@ fn scene_status_line(
         format!("scene preparing (atlas level {done}/{all})")
     } else {
         let l = thread.log.flow_latency();
-        // The solver's two-thread split (fine grids only): halves the helper thread ran, and
-        // joins its guard ran in one thread because the second core was taken (another process).
+        // The solver's two-thread split: halves the helper thread ran, and joins its guard ran in
+        // one thread because the helper did not pay (the second core taken by another process, or
+        // joins too small to be worth waking a parked helper).
         use hydrometra_sim::harness::fork_join::{guard_serial_joins, helper_tasks};
         format!(
-            "scene {name}: positions {}, flow fields {} (rig-sample-to-flow ms p50 {} p99 {} max {}, n {}), publish errors {}, solver halves on the helper thread {}, joins in one thread (second core taken) {}",
+            "scene {name}: positions {}, flow fields {} (rig-sample-to-flow ms p50 {} p99 {} max {}, n {}), publish errors {}, solver halves on the helper thread {}, joins in one thread (the helper did not pay) {}",
             thread.log.positions_published.load(Ordering::Relaxed),
             thread.log.flows_published.load(Ordering::Relaxed),
             ms(l.p50_s),

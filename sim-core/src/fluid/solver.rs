@@ -671,6 +671,8 @@ impl FluidSolver {
             });
         }
         let t0 = Instant::now();
+        // The fork-join guard judges the share of a core this thread gets over its steps.
+        let _busy = crate::fork_join::BusySpan::start();
         let mut stats = StepStats {
             projection_converged: true,
             ..Default::default()
