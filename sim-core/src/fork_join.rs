@@ -32,7 +32,7 @@
 //! each window of [`WINDOW_JOINS`] joins is judged: the helper pays when the joins' wall time is
 //! below [`PAYS_BELOW`] of the caller's own halves twice over (what it would have spent doing both
 //! at the speed it saw) and the caller had at least [`MIN_CPU_SHARE`] of a core in its busy spans
-//! (its thread CPU time over each fluid step, [`BusySpan`], Linux: not over the window's wall
+//! (its thread CPU time over each fluid step, [`BusySpan`]: not over the window's wall
 //! time, which holds the daemon's sleeps between frames). A window in which it does not runs the next
 //! [`SERIAL_WINDOWS_MIN`] windows of joins in the caller, so the helper parks; the window after
 //! them probes the helper again, and each probe that fails doubles the serial stretch (up to
@@ -102,22 +102,30 @@ fn verdict(
     })
 }
 
-/// The calling thread's CPU time, ns (Linux; `None` elsewhere).
-fn thread_cpu_ns() -> Option<u64> {
-    #[cfg(target_os = "linux")]
-    {
-        let mut t = libc::timespec {
-            tv_sec: 0,
-            tv_nsec: 0,
-        };
-        // SAFETY: a valid clock id and a timespec to write.
-        (unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0)
-            .then(|| t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64)
-    }
-    #[cfg(not(target_os = "linux"))]
-    {
-        None
-    }
+/// Which CPU-time clock [`cpu_time_ns`] reads.
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum CpuClock {
+    /// Every thread of the process.
+    #[cfg_attr(not(feature = "harness"), allow(dead_code))]
+    Process,
+    /// The calling thread.
+    Thread,
+}
+
+/// CPU time consumed so far on `clock`, ns (`None` where the clock cannot be read). A thread's
+/// CPU clock has no vDSO path: each read is a system call.
+pub(crate) fn cpu_time_ns(clock: CpuClock) -> Option<u64> {
+    let id = match clock {
+        CpuClock::Process => libc::CLOCK_PROCESS_CPUTIME_ID,
+        CpuClock::Thread => libc::CLOCK_THREAD_CPUTIME_ID,
+    };
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: a valid clock id and a timespec to write.
+    (unsafe { libc::clock_gettime(id, &mut t) } == 0)
+        .then(|| t.tv_sec as u64 * 1_000_000_000 + t.tv_nsec as u64)
 }
 
 /// The guard's state (module doc, "Contention"). Updated with relaxed atomics: concurrent callers
@@ -236,7 +244,7 @@ impl BusySpan {
         let on = GUARD.enabled.load(Ordering::Relaxed) && rayon::current_num_threads() >= 2;
         BusySpan {
             start: on
-                .then(|| thread_cpu_ns().map(|cpu| (Instant::now(), cpu)))
+                .then(|| cpu_time_ns(CpuClock::Thread).map(|cpu| (Instant::now(), cpu)))
                 .flatten(),
         }
     }
@@ -244,7 +252,7 @@ impl BusySpan {
 
 impl Drop for BusySpan {
     fn drop(&mut self) {
-        if let (Some((wall, cpu)), Some(now)) = (self.start, thread_cpu_ns()) {
+        if let (Some((wall, cpu)), Some(now)) = (self.start, cpu_time_ns(CpuClock::Thread)) {
             GUARD.record_busy(
                 wall.elapsed(),
                 Duration::from_nanos(now.saturating_sub(cpu)),
@@ -254,7 +262,6 @@ impl Drop for BusySpan {
 }
 
 /// Joins the guard ran in the caller since the process started.
-#[cfg_attr(not(feature = "harness"), allow(dead_code))]
 pub fn guard_serial_joins() -> u64 {
     GUARD.serial_joins.load(Ordering::Relaxed)
 }
@@ -289,7 +296,6 @@ pub fn set_backend(backend: Backend) {
 }
 
 /// Tasks the helper thread has run since the process started (0 if it never ran one).
-#[cfg_attr(not(feature = "harness"), allow(dead_code))]
 pub fn helper_tasks() -> u64 {
     HELPER_TASKS.load(Ordering::Relaxed)
 }

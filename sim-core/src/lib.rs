@@ -9,6 +9,10 @@ pub mod atlas;
 pub mod fem;
 pub mod fluid;
 mod fork_join;
+/// How the solver's kernels split over two threads: the halves the helper thread ran and the joins
+/// its guard ran in the calling thread because the helper did not pay (process-wide counts, for
+/// logs and benchmarks; `sim-core/src/fork_join.rs`).
+pub use fork_join::{guard_serial_joins, helper_tasks};
 #[cfg(any(test, feature = "harness"))]
 pub mod harness;
 pub mod hydraulics;

@@ -9,13 +9,14 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::harness::fork_join::{guard_serial_joins, helper_tasks, set_guard};
+use hydrometra_sim::harness::fork_join::set_guard;
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneError, SceneInputs,
     ScopePose, Stage, StepReport, VoxelKind,
 };
 use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
+use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
 use crate::service::hydraulics::load_scenario;
 
@@ -113,23 +114,14 @@ pub struct BenchArgs {
     /// Table 1 and the session-7 figures).
     #[arg(long)]
     max_cfl: Option<f64>,
-    /// The fork-join guard that runs the solver's joins in one thread while the second does not
-    /// pay (another process on its core): `on` (the default, as in the daemon) or `off` (every
-    /// join offered to the helper thread), to measure it.
-    #[arg(long, value_enum, default_value_t = Switch::On)]
-    fork_join_guard: Switch,
+    /// Turn off the fork-join guard (on in the daemon: it runs the solver's joins in one thread
+    /// while the helper thread does not pay, e.g. another process on its core): every join is
+    /// offered to the helper, to measure the guard against.
+    #[arg(long)]
+    no_fork_join_guard: bool,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
-}
-
-/// An on/off option.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Switch {
-    /// On.
-    On,
-    /// Off.
-    Off,
 }
 
 /// `scene bench --vortex-mode`.
@@ -727,7 +719,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
             a.traverse_max_s
         );
     }
-    set_guard(a.fork_join_guard == Switch::On);
+    set_guard(!a.no_fork_join_guard);
     let base = SceneDesc::load(&a.scene.scene)?;
     let (assets, _) = assets(&base, &a.scene)?;
     let dt = 1.0 / a.rate_hz;

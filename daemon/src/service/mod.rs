@@ -250,7 +250,7 @@ fn scene_status_line(
         // The solver's two-thread split: halves the helper thread ran, and joins its guard ran in
         // one thread because the helper did not pay (the second core taken by another process, or
         // joins too small to be worth waking a parked helper).
-        use hydrometra_sim::harness::fork_join::{guard_serial_joins, helper_tasks};
+        use hydrometra_sim::{guard_serial_joins, helper_tasks};
         format!(
             "scene {name}: positions {}, flow fields {} (rig-sample-to-flow ms p50 {} p99 {} max {}, n {}), publish errors {}, solver halves on the helper thread {}, joins in one thread (the helper did not pay) {}",
             thread.log.positions_published.load(Ordering::Relaxed),

@@ -7,6 +7,7 @@ use serde::Serialize;
 
 use super::cavity::{ellipsoid_cavity, uterine_cavity};
 use super::{FluidError, FluidParams, FluidSolver, ProjectionMethod};
+use crate::fork_join::{cpu_time_ns, CpuClock};
 
 /// The paper's voxel sizes (m).
 pub const PAPER_VOXELS_M: [f64; 5] = [0.0006, 0.0009, 0.0012, 0.0015, 0.0018];
@@ -157,27 +158,7 @@ pub fn bench_shape(
 }
 
 /// Which CPU clock.
-#[derive(Clone, Copy)]
-enum CpuClock {
-    /// Every thread of the process.
-    Process,
-    /// The calling thread.
-    Thread,
-}
-
 /// CPU time consumed so far on `clock`, s (nanosecond resolution; NaN where unavailable).
 fn cpu_s(clock: CpuClock) -> f64 {
-    let id = match clock {
-        CpuClock::Process => libc::CLOCK_PROCESS_CPUTIME_ID,
-        CpuClock::Thread => libc::CLOCK_THREAD_CPUTIME_ID,
-    };
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: a valid clock id and a valid timespec to write.
-    if unsafe { libc::clock_gettime(id, &mut ts) } != 0 {
-        return f64::NAN;
-    }
-    ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9
+    cpu_time_ns(clock).map_or(f64::NAN, |ns| ns as f64 * 1e-9)
 }

@@ -28,5 +28,5 @@ pub mod validation;
 
 /// The solver's two-way fork-join, switchable to `rayon::join` or chili to measure against.
 pub mod fork_join {
-    pub use crate::fork_join::{guard_serial_joins, helper_tasks, set_backend, set_guard, Backend};
+    pub use crate::fork_join::{set_backend, set_guard, Backend};
 }

@@ -1040,15 +1040,15 @@ impl Scene {
         // fluid (the ports chosen below get their velocities in `set_boundary_velocities`; a cell
         // that stays sheath would otherwise keep injecting its old port velocity).
         for b in self.inflow.iter().chain(&self.outflow) {
-            let n = b.cell as usize;
-            self.kinds[n] = VoxelKind::Scope;
-            if self.wall_velocity[n] != [0.0; 3] {
-                self.wall_velocity[n] = [0.0; 3];
-                if let Some(solver) = self.fluid.as_mut() {
-                    solver
-                        .grid_mut()
-                        .set_velocity(b.at.map(|x| x as usize), [0.0; 3])?;
-                }
+            self.kinds[b.cell as usize] = VoxelKind::Scope;
+            if let Some(solver) = self.fluid.as_mut() {
+                let at = b.at.map(|x| x as usize);
+                still(
+                    &mut self.wall_velocity,
+                    solver.grid_mut(),
+                    b.cell as usize,
+                    at,
+                )?;
             }
         }
 
@@ -1115,9 +1115,8 @@ impl Scene {
                     }
                     // Only walls keep a velocity here (`set_boundary_velocities` sets it anew
                     // each step); a sheath cell over an old wall cell moves no fluid.
-                    if self.kinds[n] != VoxelKind::Wall && self.wall_velocity[n] != [0.0; 3] {
-                        self.wall_velocity[n] = [0.0; 3];
-                        g.set_velocity([i, j, k], [0.0; 3])?;
+                    if self.kinds[n] != VoxelKind::Wall {
+                        still(&mut self.wall_velocity, g, n, [i, j, k])?;
                     }
                 }
             }
@@ -1462,4 +1461,20 @@ fn radial(sc: &ScopeGeometry, p: [f64; 3]) -> [f64; 3] {
 
 fn ms(t: Instant) -> f64 {
     t.elapsed().as_secs_f64() * 1e3
+}
+
+/// Cell `n` (at `at`) moves no fluid: its prescribed velocity is zeroed where it had one (a cell
+/// that left the ports or the walls; those that are ports or walls get theirs in
+/// `set_boundary_velocities` each step).
+fn still(
+    wall_velocity: &mut [[f32; 3]],
+    grid: &mut FluidGrid,
+    n: usize,
+    at: [usize; 3],
+) -> Result<(), FluidError> {
+    if wall_velocity[n] != [0.0; 3] {
+        wall_velocity[n] = [0.0; 3];
+        grid.set_velocity(at, [0.0; 3])?;
+    }
+    Ok(())
 }
