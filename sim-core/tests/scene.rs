@@ -368,9 +368,10 @@ fn incremental_labels_equal_a_pass_over_the_whole_box() {
 
 /// The scope slides and sways every frame with both valves open, so the tip layer's port cells and
 /// the hole band change: a cell that stops being a port but is still sheath moves no fluid. Every
-/// sheath cell that is not a port holds zero velocity, and the fluid's balance holds every frame
-/// (in - out - walls = what leaves through the open os, within the projection's tolerance), which a
-/// stale port velocity breaks: its flux enters the cavity unaccounted and leaves through the os.
+/// sheath cell that is not a port holds zero velocity in the solver's grid (the check that fails
+/// without the fix, from frame 1), and the fluid's balance holds every frame as in the flux test.
+/// The balance alone would not catch a stale port: here the sheath closes the os, and a closed
+/// region's extra inflow shows as its reported mismatch, which the balance allows for.
 #[test]
 fn cells_that_stop_being_ports_move_no_fluid() {
     let (desc, assets) = coarse(1.2);
