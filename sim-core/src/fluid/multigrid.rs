@@ -23,6 +23,7 @@
 //! Level 0 can also build the compressed rows (fluid cells numbered in order, with neighbour lists)
 //! that the reference solvers and the baseline use, when one of them runs.
 
+use super::regions::Real;
 use super::topology::NONE;
 
 /// Label codes of a level.
@@ -36,6 +37,12 @@ const CHUNK: usize = 128;
 /// work on non-fluid cells for longer vector loops; on the benchmark cavity 48 beat 12 by ~15 % of
 /// the projection at 0.6 and 1.2 mm, 128 gained nothing more).
 const SPAN_GAP: usize = 48;
+
+/// The fixed cost of a span in a kernel, in cells: splitting a level's kernels in two halves of
+/// equal cells left the half with the cavity's fragmented end (342 spans against 29 on the 0.6 mm
+/// scene) taking 1.5-1.7 times as long as the other in every kernel; fitted to those times, a span
+/// costs as much as about 33 cells (BENCHMARKS.md, "Residual maximum and the split, session 13").
+const SPAN_COST: usize = 32;
 
 /// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies).
 const LANES: usize = 8;
@@ -482,14 +489,24 @@ pub(crate) fn for_spans<T: Send>(
     ra.max(rb)
 }
 
-/// Largest `|v|` over the level's spans (in two halves on a `parallel` level).
-pub(crate) fn max_abs_spans(level: &Level, v: &[f64]) -> f64 {
+/// Largest `|v|` over the level's spans (NaN skipped), in two halves on a `parallel` level like
+/// every kernel: each thread reads the half its kernels wrote. One thread reading the whole
+/// vector cost more than the scan: the other core's half crossed over, and that core's next
+/// write to it waited for the lines back (BENCHMARKS.md, "Residual maximum, session 13").
+pub(crate) fn max_abs_spans<T: Real + PartialOrd + Sync>(level: &Level, v: &[T]) -> f64 {
     let max = |spans: &[[u32; 2]]| {
-        spans.iter().fold(0.0f64, |m, &[s, e]| {
-            v[s as usize..e as usize]
-                .iter()
-                .fold(m, |m, &x| m.max(x.abs()))
-        })
+        let m = spans.iter().fold(T::from_f64(0.0), |m, &[s, e]| {
+            v[s as usize..e as usize].iter().fold(m, |m, &x| {
+                // Not `max`: a plain comparison vectorizes (NaN is skipped by both).
+                let a = x.abs();
+                if a > m {
+                    a
+                } else {
+                    m
+                }
+            })
+        });
+        m.to_f64()
     };
     let k = level.split_span;
     if !level.parallel || k == 0 || k >= level.spans.len() {
@@ -983,15 +1000,18 @@ impl Level {
         if !self.periodic.iter().any(|&p| p) {
             round_spans(&mut self.spans, len - self.sz);
         }
-        let total: u32 = self.spans.iter().map(|&[s, e]| e - s).sum();
+        // The halves are balanced by their cost, a span's fixed part included (a fragmented end
+        // of the cavity holds many short spans, a wide one a few long ones).
+        let cost = |&[s, e]: &[u32; 2]| (e - s) as usize + SPAN_COST;
+        let total: usize = self.spans.iter().map(cost).sum();
         let mut acc = 0;
         self.split_span = self.spans.len();
-        for (n, &[s, e]) in self.spans.iter().enumerate() {
+        for (n, span) in self.spans.iter().enumerate() {
             if 2 * acc >= total {
                 self.split_span = n;
                 break;
             }
-            acc += e - s;
+            acc += cost(span);
         }
     }
 

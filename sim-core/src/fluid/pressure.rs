@@ -15,7 +15,7 @@ use std::mem::take;
 
 use rayon::prelude::*;
 
-use super::multigrid::{for_spans, run, Level, Multigrid, SpanOp};
+use super::multigrid::{for_spans, max_abs_spans, run, Level, Multigrid, SpanOp};
 use super::regions::Regions;
 use super::topology::NONE;
 use serde::{Deserialize, Serialize};
@@ -117,21 +117,6 @@ fn matvec(l: &Level, x: &[f64], y: &mut [f64], parallel: bool) {
             *yv = row_op(row, x);
         }
     }
-}
-
-/// Largest `|v|` over the fluid cells of `level` (`v` zero on its other cells).
-fn max_abs_f32(level: &Level, v: &[f32]) -> f32 {
-    level.spans.iter().fold(0.0f32, |m, &[s, e]| {
-        v[s as usize..e as usize].iter().fold(m, |m, &x| {
-            // Not f32::max: a plain comparison vectorizes (NaN is skipped by both).
-            let a = x.abs();
-            if a > m {
-                a
-            } else {
-                m
-            }
-        })
-    })
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -344,7 +329,7 @@ impl PressureSolver {
             l0.b = r0;
             if regions.any_closed() {
                 regions.remove_closed_means_dense(&mut l0.b);
-                max_abs_f32(l0, &l0.b)
+                max_abs_spans(l0, &l0.b) as f32
             } else {
                 l0max
             }
@@ -446,7 +431,7 @@ impl PressureSolver {
                 rmax = if regions.all_closed() {
                     regions.closed_max_abs as f32
                 } else {
-                    max_abs_f32(l0, &l0.b)
+                    max_abs_spans(l0, &l0.b) as f32
                 };
             }
             if rmax <= tol {

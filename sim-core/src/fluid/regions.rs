@@ -276,6 +276,7 @@ impl Regions {
 pub(crate) trait Real: Copy {
     fn to_f64(self) -> f64;
     fn from_f64(v: f64) -> Self;
+    fn abs(self) -> Self;
 }
 
 impl Real for f32 {
@@ -285,6 +286,9 @@ impl Real for f32 {
     fn from_f64(v: f64) -> Self {
         v as f32
     }
+    fn abs(self) -> Self {
+        f32::abs(self)
+    }
 }
 
 impl Real for f64 {
@@ -293,6 +297,9 @@ impl Real for f64 {
     }
     fn from_f64(v: f64) -> Self {
         v
+    }
+    fn abs(self) -> Self {
+        f64::abs(self)
     }
 }
 
