@@ -50,6 +50,51 @@ pub fn ellipsoid_cavity(voxel_m: f64, jet_m_s: f32) -> Result<FluidGrid, FluidEr
     )
 }
 
+/// Turns blocks of 2 x 2 x 2 solid cells deep in the grid's solid corners (every cell around
+/// them solid) into fluid, at most `max_blocks`: each block a closed region beside the open
+/// cavity, as a voxelized wall leaves stray cells (a block, not one cell, so its cells couple and
+/// a solver's rounding does not cancel within it). Returns the cells turned.
+pub fn add_stray_blocks(grid: &mut FluidGrid, max_blocks: usize) -> Vec<[usize; 3]> {
+    let dims = grid.dims();
+    // Every cell of the 4 x 4 x 4 block around the 2 x 2 x 2 one at `c` is in the grid and solid.
+    let solid_around = |g: &FluidGrid, c: [usize; 3]| {
+        (0..64).all(|n| {
+            let q = [n % 4, (n / 4) % 4, n / 16];
+            let q = [0, 1, 2].map(|a| (c[a] + q[a]).checked_sub(1));
+            match q {
+                [Some(i), Some(j), Some(k)] if i < dims[0] && j < dims[1] && k < dims[2] => {
+                    g.label_at(g.index([i, j, k])) == CellLabel::Solid
+                }
+                _ => false,
+            }
+        })
+    };
+    let mut corners: Vec<[usize; 3]> = Vec::new();
+    for k in 1..dims[2] {
+        for j in 1..dims[1] {
+            for i in 1..dims[0] {
+                let c = [i, j, k];
+                let apart = corners
+                    .iter()
+                    .all(|s| (0..3).any(|a| s[a].abs_diff(c[a]) > 4));
+                if corners.len() < max_blocks && apart && solid_around(grid, c) {
+                    corners.push(c);
+                }
+            }
+        }
+    }
+    let mut cells = Vec::new();
+    for c in corners {
+        for n in 0..8 {
+            let cell = [c[0] + n % 2, c[1] + (n / 2) % 2, c[2] + n / 4];
+            // In range: `solid_around` checked the block.
+            let _ = grid.set_label(cell, CellLabel::Fluid);
+            cells.push(cell);
+        }
+    }
+    cells
+}
+
 /// The uterine benchmark cavity (a flattened pear: `(x/a)^2 + (y/b(x))^2 + (z/c)^2 <= 1` with
 /// `b(x) = b0 (1 + taper x/a)`, 44 mm long, 13 mm thick, 8.2 ml) voxelized at `voxel_m` (cells
 /// with all corners inside), with the jet leaving the scope tip at `jet_m_s`.

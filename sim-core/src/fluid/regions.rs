@@ -225,6 +225,31 @@ impl Regions {
         worst
     }
 
+    /// Largest `|v|` over the closed regions' cells of a dense (padded) vector, NaN skipped.
+    pub fn closed_max_abs_dense(&self, v: &[f32]) -> f32 {
+        self.closed_runs.iter().fold(0.0f32, |m, &[_, s, e]| {
+            v[s as usize..e as usize].iter().fold(m, |m, &x| {
+                let a = x.abs();
+                if a > m {
+                    a
+                } else {
+                    m
+                }
+            })
+        })
+    }
+
+    /// `x = inv b` on the closed regions' cells of dense vectors: where a kernel wrote `x` from a
+    /// `b` whose closed means were removed after it, these cells are written again.
+    pub fn closed_scale_dense(&self, x: &mut [f32], b: &[f32], inv: &[f32]) {
+        for &[_, s, e] in &self.closed_runs {
+            let r = s as usize..e as usize;
+            for ((x, &b), &i) in x[r.clone()].iter_mut().zip(&b[r.clone()]).zip(&inv[r]) {
+                *x = b * i;
+            }
+        }
+    }
+
     /// As [`Regions::remove_closed_means`] for a dense (padded) vector of the level the regions
     /// were built on; the means are accumulated in f64.
     pub fn remove_closed_means_dense<T: Real>(&mut self, v: &mut [T]) -> f64 {
