@@ -972,12 +972,13 @@ impl CentredRows {
                 });
             }
         }
-        // The z-slab before which half the cells lie.
+        // The z-slab before which half the work lies: a row's cells and its fixed cost.
         let slab_cells = |k: usize| -> usize {
             let ranges = &self.ranges[ny * k..ny * (k + 1)];
             ranges
                 .iter()
-                .map(|&[a, b]| b.saturating_sub(a) as usize)
+                .filter(|&&[a, b]| a < b)
+                .map(|&[a, b]| (b - a) as usize + ROW_COST)
                 .sum()
         };
         let cells: usize = (0..nz).map(slab_cells).sum();
@@ -1009,6 +1010,12 @@ impl CentredRows {
         }
     }
 }
+
+/// The fixed cost of a row of [`update_centred`], in cells: its halves, balanced by cells alone,
+/// took 88 and 44 us on the 0.6 mm scene, the fragmented end of the cavity (many short rows) in
+/// the first; 32 gave 70 / 54 us, 64 gives 46-49 / 47-49 us (BENCHMARKS.md, "Residual maximum and
+/// the split, session 13").
+const ROW_COST: usize = 64;
 
 /// Averages the face velocities to the (padded) cell centres, row by row (z-slabs in parallel if
 /// `parallel`): every cell, or only the cells of `rows` (not on a periodic layout).

@@ -706,6 +706,15 @@ impl Level {
         out
     }
 
+    /// The padded index at which the level's kernels split in two halves (the first cell of
+    /// the second half's spans; the vector's end when they do not split).
+    pub fn split_at(&self) -> usize {
+        match self.spans.get(self.split_span) {
+            Some(&[p, _]) if self.split_span > 0 => p as usize,
+            _ => self.mask.len(),
+        }
+    }
+
     /// Padded index of interior cell (i, j, k).
     #[inline]
     pub fn pad(&self, i: usize, j: usize, k: usize) -> usize {
@@ -1406,9 +1415,18 @@ fn transfer(fine: &Level, coarse: &Level, restrict: Option<f32>, out: &mut [f32]
             fine_x,
         })
     };
-    let k_mid = rows.get(rows.len() / 2).map_or(0, |r| r[1]);
+    // The coarse plane whose fine planes start nearest the fine level's own split, so each
+    // thread transfers the fine cells its kernels work on (the middle coarse row instead put a
+    // band of fine planes on the other core every V-cycle).
+    let split = fine.split_at();
+    let k_mid = if fine.parallel && split < fine.mask.len() {
+        // Padded plane `split / sz` is interior plane `split / sz - 1`; its coarse plane rounds up.
+        (split / fine.sz / 2) as u32
+    } else {
+        rows.get(rows.len() / 2).map_or(0, |r| r[1])
+    };
     let m = rows.partition_point(|r| r[1] < k_mid);
-    if !coarse.parallel || m == 0 {
+    if !coarse.parallel || m == 0 || m == rows.len() {
         return whole(rows, 0, out);
     }
     let k = k_mid as usize;

@@ -1098,13 +1098,13 @@ impl FluidSolver {
             }
         };
         let rows = &l0.row_spans[..];
-        if l0.parallel && rows.len() >= 2 {
-            let m = rows.len() / 2;
-            let mid = l0.pad(
-                rows[m][2] as usize,
-                rows[m][0] as usize,
-                rows[m][1] as usize,
-            );
+        // Split where the level's kernels split, so each thread writes the half of `bd` it
+        // reads in the solve.
+        let pad = |r: &[u32; 4]| l0.pad(r[2] as usize, r[0] as usize, r[1] as usize);
+        let mid = l0.split_at();
+        let m = rows.partition_point(|r| pad(r) < mid);
+        if l0.parallel && m > 0 && m < rows.len() {
+            let mid = pad(&rows[m]);
             let (a, b) = ps.bd.split_at_mut(mid);
             let (ra, rb) = rows.split_at(m);
             crate::fork_join::join(|| rows_kernel(ra, a, 0), || rows_kernel(rb, b, mid));
@@ -1124,6 +1124,7 @@ impl FluidSolver {
         let l0 = &self.pressure.mg.levels[0];
         let q = &self.pressure.dq;
         let strides = [1, l0.sy, l0.sz];
+        let split = l0.split_at();
         for c in 0..3 {
             let st = strides[c];
             // `u` holds the full face array from index `off`.
@@ -1137,8 +1138,10 @@ impl FluidSolver {
                 }
             };
             let (runs, cells) = (&self.faces[c].runs[..], &self.run_cells[c][..]);
-            if l0.parallel && runs.len() >= 2 {
-                let m = runs.len() / 2;
+            // Split at the level's split: each thread reads the half of `q` the solve wrote there
+            // (a run's cells are consecutive, `run_cells` holds the first's padded index).
+            let m = cells.partition_point(|&p| (p as usize) < split);
+            if l0.parallel && m > 0 && m < runs.len() {
                 let mid = runs[m][0] as usize;
                 let (a, b) = self.u[c].split_at_mut(mid);
                 let ((ra, rb), (ca, cb)) = (runs.split_at(m), cells.split_at(m));
