@@ -474,23 +474,6 @@ impl Drop for Finish<'_> {
     }
 }
 
-/// Wakes the helper if it is parked, for a caller that will post a join after a short serial
-/// part: the helper's wake-up (tens of microseconds) then overlaps that part instead of the join,
-/// and it spins for [`SPIN`] waiting for the join. Nothing when joins would run serially.
-pub(crate) fn wake() {
-    let serial = GUARD.serial_left.load(Ordering::Relaxed) > 0;
-    if rayon::current_num_threads() < 2 || BACKEND.load(Ordering::Relaxed) != 0 || serial {
-        return;
-    }
-    if let Some(s) = shared() {
-        if s.sleeping.load(Ordering::SeqCst) {
-            if let Some(t) = s.helper.get() {
-                t.unpark();
-            }
-        }
-    }
-}
-
 /// Runs `a` here and `b` on the helper thread (or here, after `a`, if the helper has not started
 /// it by then), and returns both results.
 pub(crate) fn join<RA: Send, RB: Send>(

@@ -673,9 +673,6 @@ impl FluidSolver {
         let t0 = Instant::now();
         // The fork-join guard judges the share of a core this thread gets over its steps.
         let _busy = crate::fork_join::BusySpan::start();
-        // The helper parks between frames: it wakes while the topology's serial part (or the
-        // first pass's setup) runs, not when the first join is posted.
-        crate::fork_join::wake();
         let mut stats = StepStats {
             projection_converged: true,
             ..Default::default()
