@@ -23,7 +23,6 @@
 //! Level 0 can also build the compressed rows (fluid cells numbered in order, with neighbour lists)
 //! that the reference solvers and the baseline use, when one of them runs.
 
-use super::regions::Real;
 use super::topology::NONE;
 
 /// Label codes of a level.
@@ -515,6 +514,37 @@ pub(crate) fn max_abs_spans<T: Real + PartialOrd + Sync>(level: &Level, v: &[T])
     let (sa, sb) = level.spans.split_at(k);
     let (ra, rb) = crate::fork_join::join(|| max(sa), || max(sb));
     ra.max(rb)
+}
+
+/// The vector element types of the pressure solve.
+pub(crate) trait Real: Copy {
+    fn to_f64(self) -> f64;
+    fn from_f64(v: f64) -> Self;
+    fn abs(self) -> Self;
+}
+
+impl Real for f32 {
+    fn to_f64(self) -> f64 {
+        self as f64
+    }
+    fn from_f64(v: f64) -> Self {
+        v as f32
+    }
+    fn abs(self) -> Self {
+        f32::abs(self)
+    }
+}
+
+impl Real for f64 {
+    fn to_f64(self) -> f64 {
+        self
+    }
+    fn from_f64(v: f64) -> Self {
+        v
+    }
+    fn abs(self) -> Self {
+        f64::abs(self)
+    }
 }
 
 /// Padded index of interior cell (i, j, k) in a box of strides `sy`, `sz` with one ghost layer.

@@ -5,7 +5,7 @@
 //! subtract the region mean from the right-hand side (the part of the divergence no pressure can
 //! remove, e.g. a flux mismatch of its ports) and keep iterates mean-free in that region.
 
-use super::multigrid::{Level, L_FLUID, L_OPEN};
+use super::multigrid::{Level, Real, L_FLUID, L_OPEN};
 use super::topology::NONE;
 
 /// Fluid regions of the finest level.
@@ -294,37 +294,6 @@ impl Regions {
         }
         self.removed_total = total;
         worst
-    }
-}
-
-/// The vector element types of the pressure solve.
-pub(crate) trait Real: Copy {
-    fn to_f64(self) -> f64;
-    fn from_f64(v: f64) -> Self;
-    fn abs(self) -> Self;
-}
-
-impl Real for f32 {
-    fn to_f64(self) -> f64 {
-        self as f64
-    }
-    fn from_f64(v: f64) -> Self {
-        v as f32
-    }
-    fn abs(self) -> Self {
-        f32::abs(self)
-    }
-}
-
-impl Real for f64 {
-    fn to_f64(self) -> f64 {
-        self
-    }
-    fn from_f64(v: f64) -> Self {
-        v
-    }
-    fn abs(self) -> Self {
-        f64::abs(self)
     }
 }
 
