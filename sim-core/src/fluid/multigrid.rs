@@ -547,6 +547,31 @@ impl Real for f64 {
     }
 }
 
+/// The linear indices one step down and up an axis from `index` (coordinate `at` of `n` along
+/// it, `stride` apart): `None` past a non-periodic wall, wrapped on a periodic axis (onto `index`
+/// itself when the axis is one long). The one rule of [`Level::neighbour_cells`] and
+/// [`Level::neighbour_rows`].
+#[inline(always)]
+fn step_along(
+    index: usize,
+    at: usize,
+    n: usize,
+    stride: usize,
+    periodic: bool,
+) -> [Option<usize>; 2] {
+    let down = if at > 0 {
+        Some(index - stride)
+    } else {
+        periodic.then(|| index + (n - 1) * stride)
+    };
+    let up = if at + 1 < n {
+        Some(index + stride)
+    } else {
+        periodic.then(|| index - (n - 1) * stride)
+    };
+    [down, up]
+}
+
 /// Padded index of interior cell (i, j, k) in a box of strides `sy`, `sz` with one ghost layer.
 #[inline]
 fn pad_index(sy: usize, sz: usize, i: usize, j: usize, k: usize) -> usize {
@@ -721,16 +746,9 @@ impl Level {
         let stride = [1, nx, nx * ny];
         let mut out = [usize::MAX; 6];
         for a in 0..3 {
-            let (n, st) = (self.dims[a], stride[a]);
-            if c[a] > 0 {
-                out[2 * a] = ci - st;
-            } else if self.periodic[a] {
-                out[2 * a] = ci + (n - 1) * st;
-            }
-            if c[a] + 1 < n {
-                out[2 * a + 1] = ci + st;
-            } else if self.periodic[a] {
-                out[2 * a + 1] = ci - (n - 1) * st;
+            let beside = step_along(ci, c[a], self.dims[a], stride[a], self.periodic[a]);
+            for (o, b) in out[2 * a..2 * a + 2].iter_mut().zip(beside) {
+                *o = b.unwrap_or(usize::MAX);
             }
         }
         out
@@ -757,21 +775,8 @@ impl Level {
     pub(super) fn neighbour_rows(&self, j: usize, k: usize) -> [Option<usize>; 4] {
         let [nx, ny, nz] = self.dims;
         let row = nx * (j + ny * k);
-        let step = |at: usize, n: usize, stride: usize, periodic: bool| {
-            let down = if at > 0 {
-                Some(row - stride)
-            } else {
-                periodic.then(|| row + (n - 1) * stride)
-            };
-            let up = if at + 1 < n {
-                Some(row + stride)
-            } else {
-                periodic.then(|| row - (n - 1) * stride)
-            };
-            [down, up]
-        };
-        let [ym, yp] = step(j, ny, nx, self.periodic[1]);
-        let [zm, zp] = step(k, nz, nx * ny, self.periodic[2]);
+        let [ym, yp] = step_along(row, j, ny, nx, self.periodic[1]);
+        let [zm, zp] = step_along(row, k, nz, nx * ny, self.periodic[2]);
         [ym, yp, zm, zp]
     }
 
