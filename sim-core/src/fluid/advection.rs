@@ -1816,6 +1816,7 @@ pub(crate) mod avx2 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fluid::topology::extend_runs;
 
     /// Face values of the three components, uniform in [-0.5, 0.5).
     fn random_faces(layout: &Layout, rng: &mut fastrand::Rng) -> Vec<Vec<f32>> {
@@ -1898,13 +1899,9 @@ mod tests {
                 // Runs of consecutive active faces within an x row, as the face sets keep them.
                 let runs: Vec<Vec<[u32; 3]>> = (0..3)
                     .map(|c| {
-                        let nx = layout.fdims[c][0] as u32;
                         let mut runs: Vec<[u32; 3]> = Vec::new();
                         for (n, &idx) in active[c].iter().enumerate() {
-                            match runs.last_mut() {
-                                Some(r) if r[0] + r[2] == idx && idx % nx != 0 => r[2] += 1,
-                                _ => runs.push([idx, n as u32, 1]),
-                            }
+                            extend_runs(&mut runs, idx, n as u32, layout.fdims[c][0]);
                         }
                         runs
                     })

@@ -236,6 +236,31 @@ impl FluidGrid {
     }
 }
 
+/// The linear indices one step down and up an axis from `index` (coordinate `at` of `n` along
+/// it, `stride` apart): `None` past a non-periodic wall, wrapped on a periodic axis (onto `index`
+/// itself when the axis is one long). The one rule of the multigrid levels' and the scene's
+/// neighbour steps.
+#[inline(always)]
+pub(crate) fn step_along(
+    index: usize,
+    at: usize,
+    n: usize,
+    stride: usize,
+    periodic: bool,
+) -> [Option<usize>; 2] {
+    let down = if at > 0 {
+        Some(index - stride)
+    } else {
+        periodic.then(|| index + (n - 1) * stride)
+    };
+    let up = if at + 1 < n {
+        Some(index + stride)
+    } else {
+        periodic.then(|| index - (n - 1) * stride)
+    };
+    [down, up]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

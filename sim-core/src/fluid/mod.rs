@@ -42,6 +42,7 @@ pub use advection::AdvectionScheme;
 #[cfg(target_arch = "x86_64")]
 pub(crate) use advection::avx2;
 pub(crate) use advection::{v4, V4};
+pub(crate) use grid::step_along;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;
 pub use pressure::ProjectionMethod;

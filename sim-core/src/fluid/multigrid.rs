@@ -23,6 +23,7 @@
 //! Level 0 can also build the compressed rows (fluid cells numbered in order, with neighbour lists)
 //! that the reference solvers and the baseline use, when one of them runs.
 
+use super::grid::step_along;
 use super::topology::NONE;
 
 /// Label codes of a level.
@@ -545,31 +546,6 @@ impl Real for f64 {
     fn abs(self) -> Self {
         f64::abs(self)
     }
-}
-
-/// The linear indices one step down and up an axis from `index` (coordinate `at` of `n` along
-/// it, `stride` apart): `None` past a non-periodic wall, wrapped on a periodic axis (onto `index`
-/// itself when the axis is one long). The one rule of [`Level::neighbour_cells`] and
-/// [`Level::neighbour_rows`].
-#[inline(always)]
-fn step_along(
-    index: usize,
-    at: usize,
-    n: usize,
-    stride: usize,
-    periodic: bool,
-) -> [Option<usize>; 2] {
-    let down = if at > 0 {
-        Some(index - stride)
-    } else {
-        periodic.then(|| index + (n - 1) * stride)
-    };
-    let up = if at + 1 < n {
-        Some(index + stride)
-    } else {
-        periodic.then(|| index - (n - 1) * stride)
-    };
-    [down, up]
 }
 
 /// Padded index of interior cell (i, j, k) in a box of strides `sy`, `sz` with one ghost layer.

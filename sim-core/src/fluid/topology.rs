@@ -235,6 +235,22 @@ fn neighbours(
     }
 }
 
+/// Adds face `idx` (compact index `n`) to `runs` (`[full, compact, len]`, see
+/// [`FaceSet::runs`]): it lengthens the last run when it follows that run's last face in both
+/// arrays within one x row of `row_len` faces, else it starts a run.
+pub(crate) fn extend_runs(runs: &mut Vec<[u32; 3]>, idx: u32, n: u32, row_len: usize) {
+    match runs.last_mut() {
+        Some(r)
+            if r[0] + r[2] == idx
+                && r[1] + r[2] == n
+                && !(idx as usize).is_multiple_of(row_len) =>
+        {
+            r[2] += 1
+        }
+        _ => runs.push([idx, n, 1]),
+    }
+}
+
 /// The x range `[first, end)` of the open (fluid or outflow) cells of every cell row `(j, k)`
 /// (index `j + ny k`; `[0, 0]` when the row has none): the only rows whose faces can be active or
 /// fixed, so a rebuild costs the fluid region, not the box.
@@ -883,16 +899,7 @@ impl FaceSet {
             row += 1;
             for n in a0..a1 {
                 let idx = self.active[n];
-                let push = |runs: &mut Vec<[u32; 3]>| match runs.last_mut() {
-                    Some(r)
-                        if r[0] + r[2] == idx
-                            && r[1] + r[2] == n as u32
-                            && !(idx as usize).is_multiple_of(d[0]) =>
-                    {
-                        r[2] += 1
-                    }
-                    _ => runs.push([idx, n as u32, 1]),
-                };
+                let push = |runs: &mut Vec<[u32; 3]>| extend_runs(runs, idx, n as u32, d[0]);
                 push(&mut self.runs);
                 let i = idx as usize;
                 let plain = self.self_diag[n] == 6.0

@@ -53,7 +53,7 @@ pub use voxelize::{VoxelBox, Voxelizer};
 
 use crate::atlas::{Atlas, AtlasError};
 use crate::fluid::{
-    range_hull, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, StepStats,
+    range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, StepStats,
 };
 use crate::hydraulics::{HydraulicInputs, HydraulicModel, HydraulicState, ParamsError};
 use ports::{unit, FACE_NORMALS};
@@ -1121,12 +1121,10 @@ impl Scene {
                 }
             }
             let beside = [
-                (j > 0).then(|| row - 1),
-                (j + 1 < ny).then_some(row + 1),
-                (k > 0).then(|| row - ny),
-                (k + 1 < nz).then_some(row + ny),
+                step_along(row, j, ny, 1, false),
+                step_along(row, k, nz, ny, false),
             ];
-            for r in std::iter::once(row).chain(beside.into_iter().flatten()) {
+            for r in std::iter::once(row).chain(beside.into_iter().flatten().flatten()) {
                 mark_row(r, &mut self.row_relisted, &mut self.relisted_rows);
             }
         }
@@ -1260,20 +1258,15 @@ impl Scene {
     /// Bits of the faces of cell `(i, j, k)` that border fluid.
     fn fluid_faces(&self, i: usize, j: usize, k: usize) -> u8 {
         let c = &self.cells;
-        let [nx, ny, nz] = c.dims;
+        let [nx, ny, _] = c.dims;
+        let (at, n) = ([i, j, k], c.index(i, j, k));
+        let stride = [1, nx, nx * ny];
         let mut bits = 0u8;
-        let neighbours = [
-            (i > 0).then(|| c.index(i.wrapping_sub(1), j, k)),
-            (i + 1 < nx).then(|| c.index(i + 1, j, k)),
-            (j > 0).then(|| c.index(i, j.wrapping_sub(1), k)),
-            (j + 1 < ny).then(|| c.index(i, j + 1, k)),
-            (k > 0).then(|| c.index(i, j, k.wrapping_sub(1))),
-            (k + 1 < nz).then(|| c.index(i, j, k + 1)),
-        ];
-        for (f, n) in neighbours.iter().enumerate() {
-            if let Some(n) = n {
-                if self.kinds[*n] == VoxelKind::Fluid {
-                    bits |= 1 << f;
+        for a in 0..3 {
+            let beside = step_along(n, at[a], c.dims[a], stride[a], false);
+            for (s, m) in beside.into_iter().enumerate() {
+                if m.is_some_and(|m| self.kinds[m] == VoxelKind::Fluid) {
+                    bits |= 1 << (2 * a + s);
                 }
             }
         }
