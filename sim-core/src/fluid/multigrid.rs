@@ -489,22 +489,29 @@ pub(crate) fn for_spans<T: Send>(
     ra.max(rb)
 }
 
+/// The larger of `m` and the largest `|x|` of `v`, NaN skipped (not `max`: a plain comparison
+/// vectorizes, `max` adds a NaN blend).
+#[inline]
+pub(crate) fn max_abs_from<T: Real + PartialOrd>(m: T, v: &[T]) -> T {
+    v.iter().fold(m, |m, &x| {
+        let a = x.abs();
+        if a > m {
+            a
+        } else {
+            m
+        }
+    })
+}
+
 /// Largest `|v|` over the level's spans (NaN skipped), in two halves on a `parallel` level like
 /// every kernel: each thread reads the half its kernels wrote. One thread reading the whole
 /// vector cost more than the scan: the other core's half crossed over, and that core's next
 /// write to it waited for the lines back (BENCHMARKS.md, "Residual maximum, session 13").
 pub(crate) fn max_abs_spans<T: Real + PartialOrd + Sync>(level: &Level, v: &[T]) -> f64 {
     let max = |spans: &[[u32; 2]]| {
-        let m = spans.iter().fold(T::from_f64(0.0), |m, &[s, e]| {
-            v[s as usize..e as usize].iter().fold(m, |m, &x| {
-                // Not `max`: a plain comparison vectorizes (NaN is skipped by both).
-                let a = x.abs();
-                if a > m {
-                    a
-                } else {
-                    m
-                }
-            })
+        let zero = T::from_f64(0.0);
+        let m = spans.iter().fold(zero, |m, &[s, e]| {
+            max_abs_from(m, &v[s as usize..e as usize])
         });
         m.to_f64()
     };

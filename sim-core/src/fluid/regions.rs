@@ -5,7 +5,7 @@
 //! subtract the region mean from the right-hand side (the part of the divergence no pressure can
 //! remove, e.g. a flux mismatch of its ports) and keep iterates mean-free in that region.
 
-use super::multigrid::{Level, Real, L_FLUID, L_OPEN};
+use super::multigrid::{max_abs_from, Level, Real, L_FLUID, L_OPEN};
 use super::topology::NONE;
 
 /// Fluid regions of the finest level.
@@ -228,14 +228,7 @@ impl Regions {
     /// Largest `|v|` over the closed regions' cells of a dense (padded) vector, NaN skipped.
     pub fn closed_max_abs_dense(&self, v: &[f32]) -> f32 {
         self.closed_runs.iter().fold(0.0f32, |m, &[_, s, e]| {
-            v[s as usize..e as usize].iter().fold(m, |m, &x| {
-                let a = x.abs();
-                if a > m {
-                    a
-                } else {
-                    m
-                }
-            })
+            max_abs_from(m, &v[s as usize..e as usize])
         })
     }
 
