@@ -83,9 +83,10 @@ pub(crate) struct PressureSolver {
     dap: Vec<f32>,
     /// Rows above which the reference solver's matrix-vector product runs on rayon.
     parallel_rows: usize,
-    /// The multigrid CG's update leaves the V-cycle's first half-sweep to the V-cycle whenever a
-    /// region is closed (as before the fusion): the reference a test compares the fused update
-    /// with, bit for bit.
+    /// Tests only: the multigrid CG's update leaves the V-cycle's first half-sweep to the V-cycle
+    /// whenever a region is closed (as before the fusion), the reference a test compares the
+    /// fused update with, bit for bit.
+    #[cfg(test)]
     pub plain_update: bool,
 }
 
@@ -345,6 +346,10 @@ impl PressureSolver {
     /// products accumulated in f64), and `q += d` in f64, so the f32 rounding only ever applies to
     /// the (small) correction.
     fn solve_multigrid(&mut self, tol_abs: f64, max_iterations: usize) -> SolveOutcome {
+        #[cfg(test)]
+        let plain_update = self.plain_update;
+        #[cfg(not(test))]
+        let plain_update = false;
         let l0max = self.warm_start_residual();
         let PressureSolver {
             mg,
@@ -353,7 +358,6 @@ impl PressureSolver {
             dd,
             dp,
             dap,
-            plain_update,
             ..
         } = self;
         let periodic = mg.levels[0].periodic.iter().any(|&p| p);
@@ -415,7 +419,7 @@ impl PressureSolver {
             // The V-cycle's first half-sweep on the new residual runs in the same pass (and its
             // maximum), except when every cell is in a closed region: closed regions are often a
             // few stray cells beside the open cavity, whose values are fixed up below.
-            let plain = *plain_update && regions.any_closed();
+            let plain = plain_update && regions.any_closed();
             let fused = !(regions.all_closed() || plain);
             let mut r = std::mem::take(&mut l0.b);
             let mut x = std::mem::take(&mut l0.x);
