@@ -238,10 +238,15 @@ fn doc_layout(doc: &str, type_name: &str) -> (usize, usize, Vec<Row>) {
     (size, align, rows)
 }
 
+/// The contract's text.
+fn ipc_doc() -> String {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/ipc.md");
+    std::fs::read_to_string(path).expect("docs/ipc.md")
+}
+
 #[test]
 fn docs_layout_tables_match_the_structs() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/ipc.md");
-    let doc = std::fs::read_to_string(path).expect("docs/ipc.md");
+    let doc = ipc_doc();
     for Layout {
         type_name,
         size,
@@ -292,18 +297,12 @@ fn stated_sizes_and_alignments(doc: &str, type_name: &str) -> Vec<(usize, usize)
 
 #[test]
 fn docs_state_the_size_and_alignment_of_every_type_as_the_structs_have_them() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/ipc.md");
-    let doc = std::fs::read_to_string(path).expect("docs/ipc.md");
-    for Layout {
-        type_name,
-        size,
-        align,
-        ..
-    } in layouts()
-    {
+    let doc = ipc_doc();
+    for layout in layouts() {
+        let (type_name, size, align) = (&layout.type_name, layout.size, layout.align);
         // The services table names every payload and user-header type with its size and
         // alignment: a renderer declares its struct from them (C's `alignas`).
-        let stated = stated_sizes_and_alignments(&doc, &type_name);
+        let stated = stated_sizes_and_alignments(&doc, type_name);
         assert!(
             !stated.is_empty(),
             "docs/ipc.md never states `{type_name}` (N B, align A)"
