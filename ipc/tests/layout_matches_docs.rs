@@ -1,5 +1,6 @@
 //! `docs/ipc.md` is the contract renderer authors read: its layout tables must match the structs
-//! byte for byte (offset, size, type and field name, in order, and the total size).
+//! byte for byte (offset, size, type and field name, in order, the total size and the alignment),
+//! and wherever it states a type's size and alignment in prose, so must that.
 
 use hydrometra_ipc::control::{ControlRequest, ControlResponse};
 use hydrometra_ipc::field::FlowFieldHeader;
@@ -7,10 +8,18 @@ use hydrometra_ipc::mesh::{MeshPositionsHeader, MeshTopologyHeader};
 use hydrometra_ipc::particles::{Particle, ParticlesHeader};
 use hydrometra_ipc::Status;
 use iceoryx2::prelude::ZeroCopySend;
-use std::mem::{offset_of, size_of};
+use std::mem::{align_of, offset_of, size_of};
 
 /// (field, offset, size, type) of one field.
 type Row = (String, usize, usize, String);
+
+/// A contract type as the Rust code declares it: type name, size, alignment, fields.
+struct Layout {
+    type_name: String,
+    size: usize,
+    align: usize,
+    rows: Vec<Row>,
+}
 
 fn size_of_return<T, F>(_: impl Fn(&T) -> &F) -> usize {
     size_of::<F>()
@@ -33,11 +42,16 @@ macro_rules! layout {
             end = offset + size;
         }
         assert_eq!(end, size_of::<$t>(), "{}: fields do not cover the struct", stringify!($t));
-        (unsafe { <$t as ZeroCopySend>::type_name() }.to_string(), size_of::<$t>(), rows)
+        Layout {
+            type_name: unsafe { <$t as ZeroCopySend>::type_name() }.to_string(),
+            size: size_of::<$t>(),
+            align: align_of::<$t>(),
+            rows,
+        }
     }};
 }
 
-fn layouts() -> Vec<(String, usize, Vec<Row>)> {
+fn layouts() -> Vec<Layout> {
     vec![
         layout!(Status {
             schema_version: "u32",
@@ -175,14 +189,35 @@ fn layouts() -> Vec<(String, usize, Vec<Row>)> {
     ]
 }
 
-/// Parses the table that follows `<!-- layout: NAME size=N -->` in docs/ipc.md.
-fn doc_layout(doc: &str, type_name: &str) -> (usize, Vec<Row>) {
+/// Parses the table that follows `<!-- layout: NAME size=N -->` in docs/ipc.md and the caption
+/// that heads it, `` `NAME` (N B, align A): ``: (size, alignment, rows). The marker keeps its
+/// plain form: `daemon/examples/python/read_recording.py` reads the Status table by it.
+fn doc_layout(doc: &str, type_name: &str) -> (usize, usize, Vec<Row>) {
     let marker = format!("<!-- layout: {type_name} size=");
     let start = doc
         .find(&marker)
         .unwrap_or_else(|| panic!("docs/ipc.md has no layout table for {type_name}"));
     let rest = &doc[start + marker.len()..];
     let size: usize = rest[..rest.find(" -->").unwrap()].parse().unwrap();
+    // The caption: the last non-blank line before the marker, visible where the marker is not.
+    let caption = doc[..start]
+        .lines()
+        .rev()
+        .find(|l| !l.trim().is_empty())
+        .unwrap_or("");
+    let (caption_size, align) = stated_sizes_and_alignments(caption, type_name)
+        .first()
+        .copied()
+        .unwrap_or_else(|| {
+            panic!(
+                "docs/ipc.md: the layout table of {type_name} is not headed by \
+                 `{type_name}` (N B, align A):, found `{caption}`"
+            )
+        });
+    assert_eq!(
+        caption_size, size,
+        "docs/ipc.md: {type_name}: the caption's size and the marker's differ"
+    );
     let rows = rest
         .lines()
         .skip(1)
@@ -200,26 +235,103 @@ fn doc_layout(doc: &str, type_name: &str) -> (usize, Vec<Row>) {
             )
         })
         .collect();
-    (size, rows)
+    (size, align, rows)
+}
+
+/// The contract's text.
+fn ipc_doc() -> String {
+    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/ipc.md");
+    std::fs::read_to_string(path).expect("docs/ipc.md")
 }
 
 #[test]
 fn docs_layout_tables_match_the_structs() {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/ipc.md");
-    let doc = std::fs::read_to_string(path).expect("docs/ipc.md");
-    for (type_name, size, rows) in layouts() {
+    let doc = ipc_doc();
+    for Layout {
+        type_name,
+        size,
+        align,
+        rows,
+    } in layouts()
+    {
         if std::env::var_os("PRINT_LAYOUT").is_some() {
             // Helps when editing the docs: prints the table skeleton.
+            println!("`{type_name}` ({size} B, align {align}):\n");
             println!("<!-- layout: {type_name} size={size} -->");
             for (n, o, s, t) in &rows {
                 println!("| {o} | {s} | {t} | `{n}` |");
             }
             continue;
         }
-        let (doc_size, doc_rows) = doc_layout(&doc, &type_name);
+        let (doc_size, doc_align, doc_rows) = doc_layout(&doc, &type_name);
         assert_eq!(doc_size, size, "{type_name}: size in docs/ipc.md");
+        assert_eq!(doc_align, align, "{type_name}: alignment in docs/ipc.md");
         assert_eq!(doc_rows, rows, "{type_name}: layout table in docs/ipc.md");
     }
+}
+
+/// Every `(..., N B, align A)` that follows `` `type_name` `` in `doc`: (N, A) as written.
+fn stated_sizes_and_alignments(doc: &str, type_name: &str) -> Vec<(usize, usize)> {
+    let quoted = format!("`{type_name}` (");
+    doc.match_indices(&quoted)
+        .filter_map(|(i, m)| {
+            let inside = &doc[i + m.len()..];
+            let inside = &inside[..inside.find(')')?];
+            let mut size = None;
+            let mut align = None;
+            for part in inside.split(',').map(str::trim) {
+                if let Some(n) = part.strip_suffix(" B") {
+                    size = n.parse().ok();
+                } else if let Some(n) = part.strip_prefix("align ") {
+                    align = n.parse().ok();
+                }
+            }
+            match (size, align) {
+                (Some(s), Some(a)) => Some((s, a)),
+                (None, None) => None, // a parenthesis that states neither
+                _ => panic!("docs/ipc.md: `{type_name} ({inside})` states size or alignment alone"),
+            }
+        })
+        .collect()
+}
+
+#[test]
+fn docs_state_the_size_and_alignment_of_every_type_as_the_structs_have_them() {
+    let doc = ipc_doc();
+    for layout in layouts() {
+        let (type_name, size, align) = (&layout.type_name, layout.size, layout.align);
+        // The services table names every payload and user-header type with its size and
+        // alignment: a renderer declares its struct from them (C's `alignas`).
+        let stated = stated_sizes_and_alignments(&doc, type_name);
+        assert!(
+            !stated.is_empty(),
+            "docs/ipc.md never states `{type_name}` (N B, align A)"
+        );
+        for (doc_size, doc_align) in stated {
+            assert_eq!(doc_size, size, "{type_name}: size stated in docs/ipc.md");
+            assert_eq!(
+                doc_align, align,
+                "{type_name}: alignment stated in docs/ipc.md"
+            );
+        }
+    }
+}
+
+#[test]
+fn a_wrong_size_or_alignment_in_the_prose_is_found() {
+    // The check above must not pass by reading nothing.
+    let doc = "| `hydrometra.v1.X` (dynamic, 32 B, align 4) | `hydrometra.v1.Y` (24 B, align 8) |";
+    assert_eq!(
+        stated_sizes_and_alignments(doc, "hydrometra.v1.X"),
+        vec![(32, 4)]
+    );
+    assert_eq!(
+        stated_sizes_and_alignments(doc, "hydrometra.v1.Y"),
+        vec![(24, 8)]
+    );
+    assert!(stated_sizes_and_alignments(doc, "hydrometra.v1.Z").is_empty());
+    let table = "`hydrometra.v1.Y` (24 B, align 8):\n\n<!-- layout: hydrometra.v1.Y size=24 -->\n";
+    assert_eq!(doc_layout(table, "hydrometra.v1.Y").1, 8);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -239,6 +351,7 @@ struct Declaration {
     fields: Vec<(String, String)>,
     type_name: Option<String>,
     asserted_sizes: Vec<usize>,
+    asserted_aligns: Vec<usize>,
 }
 
 /// (size, alignment) of a scalar type in the docs' notation.
@@ -252,8 +365,8 @@ fn scalar(ty: &str) -> (usize, usize) {
     }
 }
 
-/// Offsets and size of fields laid out with the C rules; types like `f64[3]`.
-fn c_layout(fields: &[(String, String)]) -> (usize, Vec<Row>) {
+/// Size, alignment and offsets of fields laid out with the C rules; types like `f64[3]`.
+fn c_layout(fields: &[(String, String)]) -> (usize, usize, Vec<Row>) {
     let (mut end, mut max_align) = (0usize, 1usize);
     let mut rows = Vec::new();
     for (name, ty) in fields {
@@ -267,7 +380,7 @@ fn c_layout(fields: &[(String, String)]) -> (usize, Vec<Row>) {
         end = offset + size * count;
         max_align = max_align.max(align);
     }
-    (end.div_ceil(max_align) * max_align, rows)
+    (end.div_ceil(max_align) * max_align, max_align, rows)
 }
 
 fn cpp_type(t: &str, origin: &str) -> String {
@@ -347,6 +460,7 @@ fn cpp_declarations(code: &str, origin: &str) -> Vec<Declaration> {
             }
         }
         let asserted_sizes = numbers_after(code, &format!("sizeof({name}) =="));
+        let asserted_aligns = numbers_after(code, &format!("alignof({name}) =="));
         out.push(Declaration {
             origin: origin.to_string(),
             language: "C++",
@@ -354,6 +468,7 @@ fn cpp_declarations(code: &str, origin: &str) -> Vec<Declaration> {
             fields,
             type_name,
             asserted_sizes,
+            asserted_aligns,
         });
         rest = &after[close..];
     }
@@ -442,6 +557,7 @@ fn python_declarations(code: &str, origin: &str) -> Vec<Declaration> {
         // A docstring that states the size ("hydrometra.v1.Status: 123 bytes") must be right too.
         let stated = format!("{}: ", type_name.as_deref().unwrap_or(&name));
         asserted_sizes.extend(numbers_after(body, &stated));
+        let asserted_aligns = numbers_after(code, &format!("ctypes.alignment({name}) =="));
         out.push(Declaration {
             origin: origin.to_string(),
             language: "Python",
@@ -449,6 +565,7 @@ fn python_declarations(code: &str, origin: &str) -> Vec<Declaration> {
             fields,
             type_name,
             asserted_sizes,
+            asserted_aligns,
         });
     }
     out
@@ -526,23 +643,32 @@ fn cpp_and_python_declarations_in_docs_and_examples_match_the_structs() {
     let declarations = foreign_declarations();
     let mut checked = Vec::new();
     for d in &declarations {
-        let Some((type_name, size, rows)) = layouts
+        let Some(Layout {
+            type_name,
+            size,
+            align,
+            rows,
+        }) = layouts
             .iter()
-            .find(|(t, _, _)| t.rsplit('.').next() == Some(d.name.as_str()))
+            .find(|l| l.type_name.rsplit('.').next() == Some(d.name.as_str()))
         else {
             continue; // Not a contract type (a helper struct of the example).
         };
         let what = format!("{} {} `{}` in {}", d.language, type_name, d.name, d.origin);
-        let (c_size, c_rows) = c_layout(&d.fields);
+        let (c_size, c_align, c_rows) = c_layout(&d.fields);
         let names = |r: &[Row]| r.iter().map(|x| x.0.clone()).collect::<Vec<_>>();
         assert_eq!(names(&c_rows), names(rows), "{what}: field names and order");
         assert_eq!(&c_rows, rows, "{what}: field types and offsets");
         assert_eq!(c_size, *size, "{what}: size");
+        assert_eq!(c_align, *align, "{what}: alignment");
         for asserted in &d.asserted_sizes {
             assert_eq!(
                 asserted, size,
                 "{what}: the size the code asserts or states"
             );
+        }
+        for asserted in &d.asserted_aligns {
+            assert_eq!(asserted, align, "{what}: the alignment the code asserts");
         }
         if let Some(t) = &d.type_name {
             assert_eq!(t, type_name, "{what}: type name");
