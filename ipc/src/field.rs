@@ -50,6 +50,12 @@ pub struct FlowFieldHeader {
     pub velocities_offset_bytes: u64,
     /// Payload length, bytes.
     pub total_bytes: u64,
+    /// The scene frame this sample belongs to: +1 per frame stepped, the same in the positions,
+    /// flow and particles of one frame, never published twice.
+    pub scene_frame: u64,
+    /// How long after it was due the frame started, s (0 on time; a frame period or more: the
+    /// scene was behind, see `Status::scene_frames_late`).
+    pub frame_late_s: f64,
 }
 
 /// Quality of service of the flow service (see `docs/ipc.md`).

@@ -41,6 +41,12 @@ pub struct MeshPositionsHeader {
     pub topology_revision: u64,
     /// Cavity pressure the positions were replayed at, Pa.
     pub cavity_pressure_pa: f64,
+    /// The scene frame this sample belongs to: +1 per frame stepped, the same in the positions,
+    /// flow and particles of one frame, never published twice.
+    pub scene_frame: u64,
+    /// How long after it was due the frame started, s (0 on time; a frame period or more: the
+    /// scene was behind, see `Status::scene_frames_late`).
+    pub frame_late_s: f64,
 }
 
 /// Quality of service of the cavity services (see `docs/ipc.md`): history 1 (a late renderer gets

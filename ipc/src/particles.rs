@@ -42,6 +42,12 @@ pub struct ParticlesHeader {
     pub sim_time_s: f64,
     /// View clarity in [0, 1] (1 clear) from the particle density in front of the scope.
     pub view_clarity: f64,
+    /// The scene frame this sample belongs to: +1 per frame stepped, the same in the positions,
+    /// flow and particles of one frame, never published twice.
+    pub scene_frame: u64,
+    /// How long after it was due the frame started, s (0 on time; a frame period or more: the
+    /// scene was behind, see `Status::scene_frames_late`).
+    pub frame_late_s: f64,
 }
 
 /// Quality of service of the particle service (see `docs/ipc.md`).

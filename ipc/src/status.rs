@@ -164,6 +164,19 @@ pub struct Status {
     /// (1: the jet leaves at `inflow_port_velocity_m_per_s`; less: tissue covers part of the tip
     /// and the jet is faster by 1 / this); NaN without a scene or before its first frame.
     pub inflow_port_open_fraction: f64,
+    /// What the rig I/O and 1 kHz loop threads got from the system ([`realtime_mode`]): below
+    /// `SCHED_FIFO` the daemon runs degraded (other processes can delay the loop).
+    pub realtime_mode: u32,
+    /// Scene: degradation level under overload, 0 full quality .. 3 (docs/daemon.md, "Overload").
+    pub scene_degradation: u32,
+    /// Scene: frames that started a frame period or more after they were due, since the scene
+    /// started.
+    pub scene_frames_late: u64,
+    /// Scene: frame slots not stepped, since the scene started: nothing new from the loop (no
+    /// frame is published twice) or passed while a late frame ran.
+    pub scene_frames_skipped: u64,
+    /// Longest time between two consecutive statuses since start, s (publication times).
+    pub status_gap_max_s: f64,
 }
 
 /// Why the rig link is down, as carried in [`Status::link_down_reason`]. The daemon logs the full
@@ -206,6 +219,27 @@ pub mod link_down_reason {
             TIMEOUT => "timeout",
             LOST => "lost",
             USB_DEVICE_NOT_FOUND => "usb-device-not-found",
+            _ => "unknown",
+        }
+    }
+}
+
+/// What the rig I/O and 1 kHz loop threads got from the system, as carried in
+/// [`Status::realtime_mode`].
+pub mod realtime_mode {
+    /// Normal scheduling: no real-time privilege (or `loop.realtime_priority = 0`); degraded.
+    pub const NORMAL: u32 = 0;
+    /// Normal scheduling with a raised nice value (`loop.fallback_nice`); degraded.
+    pub const NICE: u32 = 1;
+    /// `SCHED_FIFO`: the loop preempts every ordinary thread of the machine.
+    pub const FIFO: u32 = 2;
+
+    /// Human-readable name of a value.
+    pub fn name(value: u32) -> &'static str {
+        match value {
+            NORMAL => "normal (degraded)",
+            NICE => "nice (degraded)",
+            FIFO => "SCHED_FIFO",
             _ => "unknown",
         }
     }
@@ -365,6 +399,11 @@ impl Default for Status {
             view_clarity: f64::NAN,
             cavity_surface_volume_m3: f64::NAN,
             inflow_port_open_fraction: f64::NAN,
+            realtime_mode: realtime_mode::NORMAL,
+            scene_degradation: 0,
+            scene_frames_late: 0,
+            scene_frames_skipped: 0,
+            status_gap_max_s: 0.0,
         }
     }
 }
@@ -417,8 +456,10 @@ mod tests {
         // The sum of the field sizes equals the struct size: nothing hidden between fields.
         // 30 scalar 8-byte fields, 10 f64 in arrays, 8 u32 (2 at the start, 6 at the end), then
         // the 18 appended 8-byte hydraulic fields, then the 2 appended u32 link-down fields, then
-        // the scene's 2 + 3 * 7 + 3 8-byte fields, then the appended inflow port open fraction.
-        let fields = 8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2 + 8 * (2 + 3 * 7 + 3) + 8;
+        // the scene's 2 + 3 * 7 + 3 8-byte fields, then the appended inflow port open fraction,
+        // then the scheduling and pace fields (2 u32, 3 8-byte).
+        let fields =
+            8 * 30 + 8 * 10 + 4 * 8 + 8 * 18 + 4 * 2 + 8 * (2 + 3 * 7 + 3) + 8 + 4 * 2 + 8 * 3;
         assert_eq!(core::mem::size_of::<Status>(), fields);
         assert_eq!(core::mem::size_of::<Status>() % 8, 0);
         assert_eq!(core::mem::align_of::<Status>(), 8);

@@ -124,6 +124,11 @@ fn layouts() -> Vec<Layout> {
             view_clarity: "f64",
             cavity_surface_volume_m3: "f64",
             inflow_port_open_fraction: "f64",
+            realtime_mode: "u32",
+            scene_degradation: "u32",
+            scene_frames_late: "u64",
+            scene_frames_skipped: "u64",
+            status_gap_max_s: "f64",
         }),
         layout!(MeshTopologyHeader {
             schema_version: "u32",
@@ -139,6 +144,8 @@ fn layouts() -> Vec<Layout> {
             sim_time_s: "f64",
             topology_revision: "u64",
             cavity_pressure_pa: "f64",
+            scene_frame: "u64",
+            frame_late_s: "f64",
         }),
         layout!(FlowFieldHeader {
             schema_version: "u32",
@@ -152,6 +159,8 @@ fn layouts() -> Vec<Layout> {
             labels_offset_bytes: "u64",
             velocities_offset_bytes: "u64",
             total_bytes: "u64",
+            scene_frame: "u64",
+            frame_late_s: "f64",
         }),
         layout!(Particle {
             position_m: "f32[3]",
@@ -165,6 +174,8 @@ fn layouts() -> Vec<Layout> {
             status_sequence: "u64",
             sim_time_s: "f64",
             view_clarity: "f64",
+            scene_frame: "u64",
+            frame_late_s: "f64",
         }),
         layout!(ControlRequest {
             schema_version: "u32",

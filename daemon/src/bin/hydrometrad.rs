@@ -55,7 +55,7 @@ struct Args {
     /// Record nothing (overrides `[record] enabled`).
     #[arg(long, conflicts_with = "record_dir")]
     no_record: bool,
-    /// The scene: a built-in name ("default", "myoma-figo1") or a scene file (overrides
+    /// The scene: a built-in name ("default", "myoma-figo1", "bleed") or a scene file (overrides
     /// `[scene] scene`).
     #[arg(long, value_name = "NAME|FILE")]
     scene: Option<String>,

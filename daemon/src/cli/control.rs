@@ -16,7 +16,7 @@ pub enum ControlCommand {
     /// Start a new procedure: the fluid deficit and its alarms reset (deliberately: the ended
     /// procedure's deficit is logged and recorded), the recording rotates to a new file.
     NewProcedure(ClientArgs),
-    /// Switch the running daemon to another scene: a built-in name ("default", "myoma-figo1") or a
+    /// Switch the running daemon to another scene: a built-in name ("default", "myoma-figo1", "bleed") or a
     /// scene file. The atlas is prepared in the background (status `scene_state` preparing).
     LoadScene {
         /// Built-in name or scene file.

@@ -121,6 +121,8 @@ pub fn status_json(s: &Status) -> serde_json::Value {
         "latency_max_s": finite(s.latency_max_s),
         "latency_samples": s.latency_samples,
         "statuses_dropped": s.statuses_dropped,
+        "status_gap_max_s": s.status_gap_max_s,
+        "realtime_mode": hydrometra_ipc::status::realtime_mode::name(s.realtime_mode),
         "hydraulics": hydraulics_json(s),
         "scene": scene_json(s),
     })
@@ -147,6 +149,9 @@ fn scene_json(s: &Status) -> serde_json::Value {
         "step_p99_s": finite(s.scene_step_p99_s),
         "view_clarity": finite(s.view_clarity),
         "cavity_surface_volume_ml": s.cavity_surface_volume_m3 * 1e6,
+        "degradation": s.scene_degradation,
+        "frames_late": s.scene_frames_late,
+        "frames_skipped": s.scene_frames_skipped,
         "stages": stages,
     })
 }
@@ -167,6 +172,11 @@ fn render_scene(w: &mut String, s: &Status) {
             "-".into()
         },
         s.cavity_surface_volume_m3 * 1e6
+    );
+    let _ = writeln!(
+        w,
+        "  degradation level {} (0 full quality)   frames late {}   frame slots skipped {}",
+        s.scene_degradation, s.scene_frames_late, s.scene_frames_skipped
     );
     let _ = write!(w, "  stage           ");
     for name in scene_stage::NAMES {
@@ -397,9 +407,11 @@ pub fn render(s: &Status, rate_hz: f64, note: &str) -> String {
     );
     let _ = writeln!(
         w,
-        "  longest tick {}   statuses dropped {}",
+        "  longest tick {}   longest gap between statuses {}   statuses dropped {}   scheduling {}",
         ms(s.tick_work_max_s),
-        s.statuses_dropped
+        ms(s.status_gap_max_s),
+        s.statuses_dropped,
+        hydrometra_ipc::status::realtime_mode::name(s.realtime_mode)
     );
     out
 }

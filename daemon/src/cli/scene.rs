@@ -36,7 +36,7 @@ pub enum SceneCommand {
 /// Where the scene comes from and where its atlas is cached.
 #[derive(Args, Debug, Clone)]
 pub struct SceneArg {
-    /// A built-in scene (`default`, `myoma-figo1`) or a scene file.
+    /// A built-in scene (`default`, `myoma-figo1`, `bleed`) or a scene file.
     #[arg(long, default_value = "default")]
     pub scene: String,
     /// Atlas cache directory (default: $XDG_CACHE_HOME/hydrometra or ~/.cache/hydrometra).

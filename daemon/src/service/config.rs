@@ -206,8 +206,17 @@ pub struct LoopConfig {
     /// Periodic log interval, s.
     pub log_interval_s: f64,
     /// SCHED_FIFO priority of the simulation thread (which publishes status) and the rig I/O
-    /// thread (1..=99); 0: normal scheduling. Falls back to normal scheduling, with a warning, when not permitted.
+    /// thread (1..=99); 0: normal scheduling. Falls back to `fallback_nice`, then normal
+    /// scheduling, with a warning, when not permitted.
     pub realtime_priority: u8,
+    /// Nice value the rig I/O and loop threads ask for when SCHED_FIFO is refused (-20..=0;
+    /// 0 asks for nothing).
+    pub fallback_nice: i32,
+    /// Give the rig I/O and the loop a CPU of their own and keep every other thread of the
+    /// daemon off it (with two or more CPUs).
+    pub isolate_realtime_cpu: bool,
+    /// That CPU (default: the last one the process may use).
+    pub realtime_cpu: Option<usize>,
 }
 
 impl Default for LoopConfig {
@@ -217,6 +226,9 @@ impl Default for LoopConfig {
             status_rate_hz: 1000.0,
             log_interval_s: 10.0,
             realtime_priority: 10,
+            fallback_nice: -10,
+            isolate_realtime_cpu: true,
+            realtime_cpu: None,
         }
     }
 }
@@ -300,7 +312,7 @@ impl HydraulicsConfig {
 pub struct SceneConfig {
     /// Run a scene at all (false: status and hydraulics only, no mesh, flow or particles).
     pub enabled: bool,
-    /// A built-in scene name (`default`, `myoma-figo1`) or a scene file (docs/scene.md).
+    /// A built-in scene name (`default`, `myoma-figo1`, `bleed`) or a scene file (docs/scene.md).
     pub scene: String,
     /// Scene frames per second (positions and particles every frame, flow every fluid step).
     pub rate_hz: f64,
@@ -506,6 +518,24 @@ impl Config {
                     l.tick_rate_hz
                 ),
             ));
+        }
+        if !(-20..=0).contains(&l.fallback_nice) {
+            return Err(invalid(
+                origin,
+                "loop.fallback_nice",
+                &l.fallback_nice.to_string(),
+                "a nice value in -20..=0 (0 asks for none)",
+            ));
+        }
+        if let Some(cpu) = l.realtime_cpu {
+            if cpu >= libc::CPU_SETSIZE as usize {
+                return Err(invalid(
+                    origin,
+                    "loop.realtime_cpu",
+                    &cpu.to_string(),
+                    "a CPU number below 1024",
+                ));
+            }
         }
         check_range(
             origin,

@@ -17,6 +17,7 @@ pub mod realtime;
 pub mod rig_connection;
 pub mod rig_source;
 pub mod scene;
+pub mod scene_pace;
 pub mod sim;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -334,6 +335,25 @@ fn start_recorder(
 /// Runs the daemon until SIGINT/SIGTERM or `duration` elapses; returns the run's figures.
 pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSummary> {
     let names = ServiceNames::new(&config.ipc.service_prefix)?;
+    // Before any thread starts: every thread inherits its creator's CPUs and policy, so the main
+    // thread is on the non-real-time CPUs except while it starts the rig and the loop.
+    let loop_config = &config.sim_loop;
+    let placement = realtime::Placement::plan(
+        loop_config.isolate_realtime_cpu,
+        loop_config.realtime_cpu,
+        loop_config.realtime_priority,
+        loop_config.fallback_nice,
+    );
+    placement.enter_rest("main");
+    // The scene's parallel work (rayon, and the solver's fork-join, which runs serially in a pool
+    // of one) gets the CPUs the loop does not have.
+    if let Err(e) = rayon::ThreadPoolBuilder::new()
+        .num_threads(placement.rest_cpu_count())
+        .thread_name(|i| format!("hm-rayon-{i}"))
+        .build_global()
+    {
+        tracing::debug!("rayon's pool was already built: {e}");
+    }
     // The control plane's runtime: one thread (this one), so no worker thread inherits the
     // real-time policy applied below; `spawn_blocking` threads start later, at normal priority.
     let runtime = tokio::runtime::Builder::new_current_thread()
@@ -366,15 +386,15 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         desc.as_ref().map(|d| (d, feed.clone())),
         procedure.clone(),
     )?;
-    // Real-time scheduling is set on the main thread before any other thread starts, so the rig
-    // I/O thread (which timestamps samples) and the loop (which publishes status) inherit it.
-    let priority = config.sim_loop.realtime_priority;
-    // The recorder runs at normal priority: it starts before the real-time policy is applied.
+    // The recorder runs with the rest: it starts before the main thread enters the real-time
+    // side.
     let (recorder, taps) = match start_recorder(config)? {
         Some((handle, taps)) => (Some(Arc::new(handle)), Some(taps)),
         None => (None, None),
     };
-    realtime::apply("main", priority);
+    // The rig I/O thread (which timestamps samples), the emulated rig and the loop (which
+    // publishes status) inherit the real-time side from the main thread.
+    let realtime_mode = placement.enter_realtime("main");
     let (rx_tap, status_tap) = match taps {
         Some(t) => (Some(t.rx), Some(t.status)),
         None => (None, None),
@@ -397,7 +417,6 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         std::thread::Builder::new()
             .name("hm-sim".into())
             .spawn(move || {
-                realtime::apply("hm-sim", priority);
                 let mut publisher = match StatusPublisher::create(&names, status_tap) {
                     Ok(p) => {
                         let _ = ready_tx.send(Ok(()));
@@ -417,6 +436,13 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
             })
             .context("cannot start the simulation thread")?
     };
+    // Everything the main thread starts from here on (the scene, control, the tokio runtime's
+    // blocking threads) runs with the rest.
+    placement.enter_rest("main");
+    placement.report(realtime_mode);
+    telemetry
+        .realtime_mode
+        .store(realtime_mode as u64, Ordering::Relaxed);
     match ready_rx.recv() {
         Ok(Ok(())) => {}
         Ok(Err(message)) => {
@@ -449,13 +475,6 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         None => None,
     };
 
-    // Every real-time thread is started: the control plane (this thread and what it starts)
-    // runs at normal priority from here on.
-    if priority > 0 {
-        if let Err(e) = realtime::set_current_thread_normal() {
-            tracing::warn!("main: {e}");
-        }
-    }
     let (jobs_tx, jobs_rx) = tokio::sync::mpsc::channel(control::JOB_QUEUE);
     let control_thread = control::ControlThread::spawn(names.clone(), jobs_tx);
     let control_thread = match control_thread {

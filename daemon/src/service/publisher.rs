@@ -41,6 +41,9 @@ pub struct StatusPublisher {
     sequence: u64,
     summary: LatencySummary,
     summary_at: Option<Instant>,
+    /// Publication time of the last status, and the longest gap between two so far, ns.
+    last_publish_ns: Option<u64>,
+    gap_max_ns: u64,
 }
 
 impl StatusPublisher {
@@ -105,6 +108,8 @@ impl StatusPublisher {
             sequence: 0,
             summary: LatencySummary::EMPTY,
             summary_at: None,
+            last_publish_ns: None,
+            gap_max_ns: 0,
         })
     }
 
@@ -137,6 +142,12 @@ impl StatusSink for StatusPublisher {
         status.latency_max_s = self.summary.max_s;
         status.latency_samples = self.summary.count;
         status.publish_monotonic_ns = monotonic_ns();
+        if let Some(last) = self.last_publish_ns {
+            let gap = status.publish_monotonic_ns.saturating_sub(last);
+            self.gap_max_ns = self.gap_max_ns.max(gap);
+        }
+        self.last_publish_ns = Some(status.publish_monotonic_ns);
+        status.status_gap_max_s = self.gap_max_ns as f64 * 1e-9;
         let sent = self
             .publisher
             .loan_uninit()

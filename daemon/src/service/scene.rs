@@ -30,6 +30,7 @@ use iceoryx2::port::update_connections::UpdateConnections;
 use iceoryx2::prelude::{ipc, AllocationStrategy, NodeBuilder, NodeName, SignalHandlingMode};
 
 use super::latency::{LatencyHistogram, LatencySummary};
+use super::scene_pace::{self, Pacer, Slot};
 use super::sim::{SimInputs, Stage as LoopStage, Telemetry};
 
 /// Stages in the status arrays, in [`Stage::ALL`] order (`hydrometra_ipc::status::scene_stage`).
@@ -67,6 +68,9 @@ pub struct SceneFigures {
     view_clarity_bits: AtomicU64,
     surface_volume_m3_bits: AtomicU64,
     inflow_open_fraction_bits: AtomicU64,
+    degradation: AtomicU64,
+    frames_late: AtomicU64,
+    frames_skipped: AtomicU64,
 }
 
 impl SceneFigures {
@@ -76,6 +80,14 @@ impl SceneFigures {
     }
     fn set_state(&self, state: u64) {
         self.state.store(state, Ordering::Relaxed);
+    }
+    /// Stores the pacer's level and counters.
+    fn write_pace(&self, pacer: &Pacer) {
+        self.degradation
+            .store(u64::from(pacer.level()), Ordering::Relaxed);
+        self.frames_late.store(pacer.frames_late, Ordering::Relaxed);
+        self.frames_skipped
+            .store(pacer.frames_skipped, Ordering::Relaxed);
     }
     /// Copies the figures into a status.
     pub fn write_status(&self, s: &mut Status) {
@@ -92,6 +104,9 @@ impl SceneFigures {
             f64::from_bits(self.surface_volume_m3_bits.load(Ordering::Relaxed));
         s.inflow_port_open_fraction =
             f64::from_bits(self.inflow_open_fraction_bits.load(Ordering::Relaxed));
+        s.scene_degradation = self.degradation.load(Ordering::Relaxed) as u32;
+        s.scene_frames_late = self.frames_late.load(Ordering::Relaxed);
+        s.scene_frames_skipped = self.frames_skipped.load(Ordering::Relaxed);
     }
 }
 
@@ -505,15 +520,13 @@ fn run_scene(
     );
 
     let period = Duration::from_secs_f64(1.0 / rate_hz);
-    let period_ns = period.as_nanos().max(1) as u64;
     let mut velocities = vec![[0.0f32; 3]; cells];
     let mut published_revision = None;
     let mut flow_ever = false;
     let mut last_reflected: Option<Instant> = None;
     let mut last_time_s: Option<f64> = None;
     let mut sim_time_s = 0.0;
-    let start = Instant::now();
-    let mut frame_index: u64 = 0;
+    let mut pacer = Pacer::new(period, Instant::now());
     let end = loop {
         if stop.load(Ordering::Relaxed) {
             break SceneEnd::Stop;
@@ -521,18 +534,18 @@ fn run_scene(
         if let Some(desc) = feed.take_scene_request() {
             break SceneEnd::Load(Box::new(desc));
         }
-        let scheduled = start + Duration::from_nanos(period_ns.saturating_mul(frame_index));
         let now = Instant::now();
-        if now < scheduled {
-            std::thread::sleep(scheduled - now);
+        if now < pacer.next_due() {
+            std::thread::sleep(pacer.next_due() - now);
         }
-        let late = (Instant::now()
-            .saturating_duration_since(scheduled)
-            .as_nanos()
-            / u128::from(period_ns)) as u64;
-        frame_index += 1 + late;
-        let Some(snapshot) = feed.latest() else {
-            continue; // the loop has not ticked yet
+        let snapshot = feed.latest();
+        let began = Instant::now();
+        let (late, slot) = pacer.begin(began, snapshot.map_or(0, |s| s.offers));
+        feed.figures.write_pace(&pacer);
+        let (Some(snapshot), Slot::Step) = (snapshot, slot) else {
+            // The loop advanced no time since the last frame (or has not ticked yet): nothing
+            // new to show, and a frame is never published twice.
+            continue;
         };
         // The scene follows the hydraulics' clock, so dt is what the hydraulics advanced.
         let dt_s = match last_time_s {
@@ -541,6 +554,7 @@ fn run_scene(
         };
         last_time_s = Some(snapshot.hydraulics.time_s);
         sim_time_s += dt_s;
+        let frame_late_s = late.as_secs_f64();
         let inputs = SceneInputs {
             rig: rig_inputs(&snapshot),
             hydraulics: HydraulicsInput::External(&snapshot.hydraulics),
@@ -618,6 +632,8 @@ fn run_scene(
                     sim_time_s,
                     topology_revision: *revision_base + cavity.topology_revision,
                     cavity_pressure_pa: cavity.pressure_pa,
+                    scene_frame: pacer.frames,
+                    frame_late_s,
                 };
                 sample.write_from_fn(|n| pos[n / 3][n % 3])
             })
@@ -646,6 +662,8 @@ fn run_scene(
                 labels_offset_bytes: labels_at as u64,
                 velocities_offset_bytes: velocities_at as u64,
                 total_bytes: total as u64,
+                scene_frame: pacer.frames,
+                frame_late_s,
             };
             let sent = ports
                 .flow
@@ -693,6 +711,8 @@ fn run_scene(
                     status_sequence,
                     sim_time_s,
                     view_clarity,
+                    scene_frame: pacer.frames,
+                    frame_late_s,
                 };
                 sample.write_from_fn(|i| match system {
                     Some(s) => {
@@ -713,9 +733,28 @@ fn run_scene(
         if count(sent, errors, "particles") {
             notify(&ports, events::PARTICLES, errors);
         }
+        if let Some(level) = pacer.end(began.elapsed(), Instant::now()) {
+            apply_quality(&mut scene, level);
+            tracing::info!(
+                level,
+                period_ms = pacer.period().as_secs_f64() * 1e3,
+                "scene frames {} their period: degradation level {level} (docs/daemon.md, \"Overload\")",
+                if level > 0 { "overrun" } else { "fit" }
+            );
+        }
+        feed.figures.write_pace(&pacer);
     };
     *revision_base += scene.cavity().topology_revision;
     Ok(end)
+}
+
+/// Sets the scene's quality for a degradation level (`scene_pace`).
+fn apply_quality(scene: &mut Scene, level: u32) {
+    let _ = (
+        scene,
+        scene_pace::max_fluid_substeps(level),
+        scene_pace::particle_budget_share(level),
+    );
 }
 
 /// Counts a failed publication (logged the first times only); true when it was sent.

@@ -133,6 +133,8 @@ pub struct Telemetry {
     /// Rig-sample-to-status latency since start (locked by the loop's thread alone while it
     /// runs; others read `latency_summary`).
     pub latency: Mutex<LatencyHistogram>,
+    /// What the real-time side got from the system (`realtime::RealtimeMode` as u64).
+    pub realtime_mode: AtomicU64,
     /// The latency percentiles as last computed by the publisher (p50, p99, max as f64 bits,
     /// count), so the supervisor never takes the histogram's lock from the loop.
     latency_summary: [AtomicU64; 4],
@@ -342,6 +344,7 @@ impl SimLoop {
             tick_work_max_s: telemetry.tick_work_max_ns.load(Ordering::Relaxed) as f64 * 1e-9,
             statuses_dropped: telemetry.statuses_dropped.load(Ordering::Relaxed),
             link_state: view.link_state as u32,
+            realtime_mode: telemetry.realtime_mode.load(Ordering::Relaxed) as u32,
             ..Status::default()
         };
         (s.link_down_reason, s.link_down_detail) = link_down_fields(view.down_reason);

@@ -43,7 +43,7 @@ class MeshTopologyHeader(ctypes.Structure):
 
 
 class MeshPositionsHeader(ctypes.Structure):
-    """hydrometra.v1.MeshPositionsHeader: 40 bytes."""
+    """hydrometra.v1.MeshPositionsHeader: 56 bytes."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -52,6 +52,8 @@ class MeshPositionsHeader(ctypes.Structure):
         ("sim_time_s", ctypes.c_double),
         ("topology_revision", ctypes.c_uint64),
         ("cavity_pressure_pa", ctypes.c_double),
+        ("scene_frame", ctypes.c_uint64),
+        ("frame_late_s", ctypes.c_double),
     ]
 
     @staticmethod
@@ -60,7 +62,7 @@ class MeshPositionsHeader(ctypes.Structure):
 
 
 class FlowFieldHeader(ctypes.Structure):
-    """hydrometra.v1.FlowFieldHeader: 96 bytes."""
+    """hydrometra.v1.FlowFieldHeader: 112 bytes."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -74,6 +76,8 @@ class FlowFieldHeader(ctypes.Structure):
         ("labels_offset_bytes", ctypes.c_uint64),
         ("velocities_offset_bytes", ctypes.c_uint64),
         ("total_bytes", ctypes.c_uint64),
+        ("scene_frame", ctypes.c_uint64),
+        ("frame_late_s", ctypes.c_double),
     ]
 
     @staticmethod
@@ -97,7 +101,7 @@ class Particle(ctypes.Structure):
 
 
 class ParticlesHeader(ctypes.Structure):
-    """hydrometra.v1.ParticlesHeader: 32 bytes."""
+    """hydrometra.v1.ParticlesHeader: 48 bytes."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -105,6 +109,8 @@ class ParticlesHeader(ctypes.Structure):
         ("status_sequence", ctypes.c_uint64),
         ("sim_time_s", ctypes.c_double),
         ("view_clarity", ctypes.c_double),
+        ("scene_frame", ctypes.c_uint64),
+        ("frame_late_s", ctypes.c_double),
     ]
 
     @staticmethod
@@ -112,8 +118,8 @@ class ParticlesHeader(ctypes.Structure):
         return "hydrometra.v1.ParticlesHeader"
 
 
-for _t, _size in [(MeshTopologyHeader, 24), (MeshPositionsHeader, 40), (FlowFieldHeader, 96),
-                  (Particle, 32), (ParticlesHeader, 32)]:
+for _t, _size in [(MeshTopologyHeader, 24), (MeshPositionsHeader, 56), (FlowFieldHeader, 112),
+                  (Particle, 32), (ParticlesHeader, 48)]:
     assert ctypes.sizeof(_t) == _size, (_t, ctypes.sizeof(_t))
 
 

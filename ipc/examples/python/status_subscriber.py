@@ -26,7 +26,7 @@ EVENT_SHUTDOWN = 15  # event id: the daemon is stopping
 
 
 class Status(ctypes.Structure):
-    """hydrometra.v1.Status: 720 bytes, 8-byte aligned, native (little-endian) byte order."""
+    """hydrometra.v1.Status: 752 bytes, 8-byte aligned, native (little-endian) byte order."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -99,6 +99,11 @@ class Status(ctypes.Structure):
         ("view_clarity", ctypes.c_double),
         ("cavity_surface_volume_m3", ctypes.c_double),
         ("inflow_port_open_fraction", ctypes.c_double),
+        ("realtime_mode", ctypes.c_uint32),
+        ("scene_degradation", ctypes.c_uint32),
+        ("scene_frames_late", ctypes.c_uint64),
+        ("scene_frames_skipped", ctypes.c_uint64),
+        ("status_gap_max_s", ctypes.c_double),
     ]
 
     @staticmethod
@@ -107,7 +112,7 @@ class Status(ctypes.Structure):
         return "hydrometra.v1.Status"
 
 
-assert ctypes.sizeof(Status) == 720, ctypes.sizeof(Status)
+assert ctypes.sizeof(Status) == 752, ctypes.sizeof(Status)
 
 
 def as_dict(s: Status) -> dict:

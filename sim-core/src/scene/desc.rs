@@ -16,9 +16,10 @@ use crate::fluid::AdvectionScheme;
 use crate::hydraulics::HydraulicParams;
 
 /// The built-in scenes: name and TOML text.
-pub const BUILTIN_SCENES: [(&str, &str); 2] = [
+pub const BUILTIN_SCENES: [(&str, &str); 3] = [
     ("default", include_str!("scenes/default.toml")),
     ("myoma-figo1", include_str!("scenes/myoma-figo1.toml")),
+    ("bleed", include_str!("scenes/bleed.toml")),
 ];
 
 /// The commented default scene file (`hydrometra scene print-default`).
@@ -608,6 +609,11 @@ mod tests {
         assert_eq!(m.anatomy.myomas.len(), 1);
         assert_eq!(m.anatomy.myomas[0].figo, Some(1));
         assert_ne!(m.atlas_key(), d.atlas_key());
+        // The heaviest built-in: every stage on, the default's anatomy and atlas (shared cache).
+        let b = SceneDesc::builtin("bleed").unwrap();
+        assert!(b.stages.fluid && b.stages.vortices && b.stages.particles);
+        assert_eq!(b.atlas_key(), d.atlas_key());
+        assert_eq!(b.fluid.voxel_mm, d.fluid.voxel_mm);
     }
 
     #[test]

@@ -1,0 +1,111 @@
+//! The 1 kHz loop under the heaviest built-in scene (`bleed`: vortices, bubbles and a bleed's
+//! particles at the default voxel size): it never starves. Emulated rig -> `hydrometrad` -> a
+//! status subscriber and a positions subscriber, as a renderer would read them.
+
+use std::time::{Duration, Instant};
+
+use hydrometra_hil_tests::{unique_prefix, Daemon, StatusReader};
+use hydrometra_ipc::mesh::MeshPositionsHeader;
+use hydrometra_ipc::status::{realtime_mode, scene_state};
+use hydrometra_ipc::{slice, ServiceNames};
+
+/// Seconds the loop is measured once the scene runs (the issue's figure).
+const MEASURED_S: u64 = 60;
+
+/// Deadline misses at most this share of the ticks, and no two consecutive statuses further
+/// apart than `MAX_GAP_S` (docs/daemon.md, "Real-time scheduling"; product target: <= 0.1 %,
+/// <= 5 ms on the slower 2-core machine).
+const MAX_MISS_SHARE: f64 = 0.001;
+const MAX_GAP_S: f64 = 0.005;
+
+#[test]
+fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_republished() {
+    let prefix = unique_prefix("rt-heavy");
+    let daemon = Daemon::start(
+        &prefix,
+        &["--emulated", "default", "--scene", "bleed", "--no-record"],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(20));
+    reader.until("the scene running", Duration::from_secs(180), |s| {
+        s.scene_state == scene_state::RUNNING || s.scene_state == scene_state::IDLE
+    });
+    // A renderer's positions subscriber, read while the statuses are collected.
+    let names = ServiceNames::new(&prefix).expect("prefix");
+    let positions = slice::open::<slice::Positions, _>(&reader.node, &names)
+        .expect("positions service")
+        .subscriber_builder()
+        .create()
+        .expect("positions subscriber");
+    let mut frames: Vec<MeshPositionsHeader> = Vec::new();
+    let mut statuses = Vec::new();
+    let started = Instant::now();
+    while started.elapsed() < Duration::from_secs(MEASURED_S) {
+        statuses.extend(reader.drain());
+        while let Some(sample) = positions.receive().expect("receive positions") {
+            frames.push(*sample.user_header());
+        }
+        std::thread::sleep(Duration::from_millis(2));
+    }
+    statuses.extend(reader.drain());
+    let (first, last) = (statuses[0], *statuses.last().expect("statuses"));
+    let ticks = last.ticks - first.ticks;
+    let misses = last.deadline_misses - first.deadline_misses;
+    // The gap between consecutive statuses, where the subscriber has both (it reads every 2 ms
+    // into a 64-deep buffer: a gap in its own reading is not the daemon's).
+    let pairs: Vec<f64> = statuses
+        .windows(2)
+        .filter(|w| w[1].sequence == w[0].sequence + 1)
+        .map(|w| (w[1].publish_monotonic_ns - w[0].publish_monotonic_ns) as f64 * 1e-9)
+        .collect();
+    let gap_max_s = pairs.iter().copied().fold(0.0, f64::max);
+    let late = last.scene_frames_late - first.scene_frames_late;
+    eprintln!(
+        "{MEASURED_S} s under the `bleed` scene ({}): ticks {ticks}, deadline misses {misses} \
+         ({:.4} %), longest gap between statuses {:.3} ms over {} consecutive pairs of {} \
+         statuses; scene frames {}, late {late}, degradation level {}, particles stage runs {}",
+        realtime_mode::name(last.realtime_mode),
+        100.0 * misses as f64 / ticks as f64,
+        gap_max_s * 1e3,
+        pairs.len(),
+        statuses.len(),
+        last.scene_frames - first.scene_frames,
+        last.scene_degradation,
+        last.scene_stage_runs[6] - first.scene_stage_runs[6],
+    );
+    assert!(
+        pairs.len() as f64 >= 0.95 * statuses.len() as f64,
+        "the subscriber missed too many statuses to measure gaps: {} pairs of {}",
+        pairs.len(),
+        statuses.len()
+    );
+    assert!(
+        ticks >= MEASURED_S * 1000 * 99 / 100,
+        "{ticks} ticks in {MEASURED_S} s"
+    );
+    assert!(
+        misses as f64 <= MAX_MISS_SHARE * ticks as f64,
+        "deadline misses {misses} of {ticks} ticks:\n{}",
+        daemon.log()
+    );
+    assert!(
+        gap_max_s <= MAX_GAP_S,
+        "two statuses {:.3} ms apart:\n{}",
+        gap_max_s * 1e3,
+        daemon.log()
+    );
+    // The scene ran its heavy stages, and every positions frame is new: strictly increasing frame
+    // numbers and scene time (a frame is never published twice).
+    assert!(
+        last.scene_stage_runs[6] > first.scene_stage_runs[6],
+        "the particle stage never ran"
+    );
+    assert!(frames.len() > 100, "{} positions frames", frames.len());
+    for w in frames.windows(2) {
+        assert!(
+            w[1].scene_frame > w[0].scene_frame && w[1].sim_time_s > w[0].sim_time_s,
+            "positions frame republished or out of order: {:?} then {:?}",
+            w[0],
+            w[1]
+        );
+    }
+}
