@@ -170,11 +170,22 @@ impl HydraulicModel {
         self.compliance.as_ref()
     }
 
-    /// Swaps the compliance (e.g. when the atlas is loaded). The cavity keeps its volume; its
-    /// pressure follows from the new curve at the next step.
+    /// Swaps the compliance (the atlas's P-V curve once the scene has loaded it, or another
+    /// scene's). The cavity keeps its *pressure*, so status never jumps: a curve that starts from
+    /// another resting volume would otherwise map the cavity's volume to a pressure far from the
+    /// one just published (negative, for a cavity larger at rest). Its volume becomes the new
+    /// curve's volume at that pressure; the change is the model's, not fluid gained or lost, so
+    /// the procedure's volume baseline moves with it and the deficit (`in - collected - change of
+    /// cavity volume`) is unchanged.
     pub fn set_compliance(&mut self, compliance: Box<dyn CavityCompliance>) {
-        if let Some(p) = compliance.pressure_pa(self.state.cavity_volume_m3) {
-            self.state.cavity_pressure_pa = p;
+        let s = &mut self.state;
+        let p = s.cavity_pressure_pa;
+        let v = compliance.volume_m3(p);
+        if p.is_finite() && v.is_finite() && v > 0.0 {
+            s.initial_cavity_volume_m3 += v - s.cavity_volume_m3;
+            s.cavity_volume_m3 = v;
+        } else if let Some(p) = compliance.pressure_pa(s.cavity_volume_m3) {
+            s.cavity_pressure_pa = p;
         }
         self.compliance = compliance;
     }

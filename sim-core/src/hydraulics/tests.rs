@@ -489,3 +489,69 @@ fn a_restored_procedure_continues_exactly_as_if_never_interrupted() {
     }
     assert!(a.state().perforated && a.state().deficit.deficit_m3 > 0.0);
 }
+
+/// A compliance swap mid-procedure (the daemon's hydraulics run on the parameters' curve until
+/// the scene's atlas arrives, then on the atlas's) keeps the published pressure and the deficit
+/// continuous, for any pair of curves: the new curve's resting volume may be larger than the
+/// cavity's volume (which the atlas's maps to a negative pressure) or smaller.
+#[test]
+fn swapping_the_compliance_keeps_pressure_and_deficit_continuous_whatever_the_curves() {
+    let mut rng = Rng::new(28);
+    for case in 0..40 {
+        let mut model = HydraulicModel::new(random_params(&mut rng)).unwrap();
+        model.start_new_procedure(ProcedureInfo {
+            id: 1,
+            started_unix_ms: 1,
+        });
+        let pump = rng.range(20.0, 150.0);
+        run(
+            &mut model,
+            &inputs(rng.uniform(), rng.uniform(), pump),
+            rng.range(0.1, 5.0),
+            1e-3,
+        );
+        let before = *model.state();
+        // The new curve holds from a tenth to ten times the cavity's volume at its pressure now
+        // (the old volume then maps to a pressure far above or below it, possibly negative).
+        let compliance_m3_per_pa = ml_to_m3(rng.range(0.005, 0.2)) / mmhg_to_pa(1.0);
+        let curve = LinearCompliance {
+            volume_at_zero_m3: before.cavity_volume_m3 * 10f64.powf(rng.range(-1.0, 1.0))
+                - compliance_m3_per_pa * before.cavity_pressure_pa,
+            compliance_m3_per_pa,
+        };
+        model.set_compliance(Box::new(curve));
+        let after = *model.state();
+        assert_eq!(
+            after.cavity_pressure_pa, before.cavity_pressure_pa,
+            "case {case}"
+        );
+        assert_eq!(
+            after.cavity_volume_m3,
+            curve.volume_m3(before.cavity_pressure_pa)
+        );
+        assert_eq!(after.deficit.deficit_m3, before.deficit.deficit_m3);
+        let tolerance = 1e-12 + 1e-9 * before.totals.inflow_m3;
+        assert!(
+            (after.deficit_by_balance_m3() - before.deficit_by_balance_m3()).abs() <= tolerance,
+            "case {case}: the balance moved from {} to {}",
+            before.deficit_by_balance_m3(),
+            after.deficit_by_balance_m3()
+        );
+        // The next tick goes on from there: the pressure moves by what one tick can move it.
+        model.step(&inputs(0.0, 0.0, 0.0), 1e-3);
+        let next = model.state();
+        assert!(
+            (next.cavity_pressure_pa - after.cavity_pressure_pa).abs() < mmhg_to_pa(2.0),
+            "case {case}: {} -> {} mmHg in one tick",
+            pa_to_mmhg(after.cavity_pressure_pa),
+            pa_to_mmhg(next.cavity_pressure_pa)
+        );
+        assert!(
+            (next.deficit_by_balance_m3() - next.deficit.deficit_m3).abs()
+                <= 1e-9 + 1e-6 * next.totals.inflow_m3,
+            "case {case}: balance {} against accumulated {}",
+            next.deficit_by_balance_m3(),
+            next.deficit.deficit_m3
+        );
+    }
+}
