@@ -1,5 +1,4 @@
 //! Internals shared by the `hydrometrad` service and the `hydrometra` CLI.
 
 pub mod cli;
-pub mod record;
 pub mod service;

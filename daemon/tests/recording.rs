@@ -5,9 +5,6 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use hydrometra_daemon::record::debrief::{self, DebriefSettings};
-use hydrometra_daemon::record::reader::Recording;
-use hydrometra_daemon::record::recorder::{RecorderHandle, RecorderSettings, RecorderTaps};
 use hydrometra_drivers::calibration::Calibration;
 use hydrometra_drivers::emulator::{EmulatedRig, EmulatorOptions, Scenario};
 use hydrometra_drivers::framing::FrameDecoder;
@@ -15,6 +12,9 @@ use hydrometra_drivers::state::RigState;
 use hydrometra_drivers::transport::{monotonic_ns, DeviceTarget, LinkConfig, RigLink};
 use hydrometra_drivers::wire::Message;
 use hydrometra_ipc::{alarms, Status};
+use hydrometra_record::debrief::{self, DebriefSettings};
+use hydrometra_record::reader::Recording;
+use hydrometra_record::recorder::{RecorderHandle, RecorderSettings, RecorderTaps};
 
 fn temp_dir(tag: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!(

@@ -7,8 +7,8 @@ use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::units::mmhg_to_pa;
 
-use crate::record::debrief::{self, DebriefSettings};
-use crate::record::reader::Recording;
+use hydrometra_record::debrief::{self, DebriefSettings};
+use hydrometra_record::reader::Recording;
 
 /// Recording tools.
 #[derive(Subcommand, Debug)]

@@ -160,7 +160,7 @@ fn replay(
     link: Option<PathBuf>,
     run_for: Option<Duration>,
 ) -> Result<()> {
-    let recording = crate::record::reader::Recording::load(file)?;
+    let recording = hydrometra_record::reader::Recording::load(file)?;
     let script = recording.replay_script();
     let length_s = script.duration_s() / speed;
     let rig = EmulatedRig::start_replay(script, speed, link)

@@ -32,7 +32,7 @@ use tokio::sync::{mpsc, oneshot};
 
 use super::hydraulics::ProcedureControl;
 use super::scene::SceneFeed;
-use crate::record::recorder::{RecorderHandle, RecorderStatus};
+use hydrometra_record::recorder::{RecorderHandle, RecorderStatus};
 
 /// How often the control thread looks for requests while none is in flight: a request waits at
 /// most this long before its handler starts. Control is a human's command, so 50 ms is

@@ -30,8 +30,8 @@ use hydrometra_drivers::state::LinkDownReason;
 use hydrometra_drivers::transport::RigLink;
 use hydrometra_ipc::ServiceNames;
 
-use crate::record::recorder::{self, RecorderHandle};
 use config::Config;
+use hydrometra_record::recorder::{self, RecorderHandle};
 use latency::LatencySummary;
 use publisher::StatusPublisher;
 use rig_source::RigSource;
@@ -275,7 +275,7 @@ fn replayed_config(config: &Config) -> anyhow::Result<Option<Config>> {
     let Some(file) = &config.rig.replay.file else {
         return Ok(None);
     };
-    let recording = crate::record::reader::Recording::load(file)
+    let recording = hydrometra_record::reader::Recording::load(file)
         .with_context(|| format!("rig.replay.file = {}", file.display()))?;
     match recording.metadata.get("config_toml") {
         Some(text) => {

@@ -21,7 +21,7 @@ use iceoryx2::service::port_factory::{event, publish_subscribe};
 
 use super::latency::LatencySummary;
 use super::sim::{StatusFrame, StatusSink, Telemetry};
-use crate::record::recorder::StatusTap;
+use hydrometra_record::recorder::StatusTap;
 
 /// Host `CLOCK_MONOTONIC`, ns (the clock `Instant` uses on Linux), comparable across processes.
 pub use hydrometra_drivers::transport::monotonic_ns;

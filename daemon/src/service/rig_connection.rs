@@ -77,7 +77,7 @@ impl RigConnection {
                     .file
                     .as_ref()
                     .context("rig.mode = \"replay\" needs rig.replay.file")?;
-                let recording = crate::record::reader::Recording::load(file)
+                let recording = hydrometra_record::reader::Recording::load(file)
                     .with_context(|| format!("rig.replay.file = {}", file.display()))?;
                 let script = recording.replay_script();
                 let rig = EmulatedRig::start_replay(script, config.replay.speed, None)

@@ -1,4 +1,5 @@
-//! Procedure recordings: one MCAP file per procedure (`docs/recording.md`).
+//! Procedure recordings: one MCAP file per procedure (`docs/recording.md`), used by `hydrometrad`
+//! (recorder), the `hydrometra` CLI (reader, debrief) and the instructor's station (debriefs).
 //!
 //! - [`format`]: topics, schemas and message layouts (the one copy of them).
 //! - [`recorder`]: the recorder thread and its handle (start, stop, rotate), fed by non-blocking
