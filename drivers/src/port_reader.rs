@@ -39,6 +39,7 @@ impl PortReader {
         // SAFETY: termios is plain data that tcgetattr fills; the descriptor is open.
         let mut termios: libc::termios = unsafe { std::mem::zeroed() };
         check(
+            // SAFETY: `termios` is a valid, writable termios; the descriptor is open.
             unsafe { libc::tcgetattr(port_fd, &mut termios) },
             "tcgetattr",
         )?;

@@ -18,7 +18,7 @@ use hydrometra_sim::scene::{
 use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
 use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
-use crate::service::hydraulics::load_scenario;
+use crate::scenario::load_scenario;
 
 /// `hydrometra scene ...`
 #[derive(Subcommand, Debug)]
