@@ -356,6 +356,31 @@ fn ports(
     cells: usize,
     particles: usize,
 ) -> anyhow::Result<Ports> {
+    let needs = [
+        (
+            "cavity/topology",
+            slice::shared_memory_bytes::<slice::Topology>(3 * triangles),
+        ),
+        (
+            "cavity/positions",
+            slice::shared_memory_bytes::<slice::Positions>(3 * vertices),
+        ),
+        (
+            "flow",
+            slice::shared_memory_bytes::<slice::Flow>(flow_layout(cells).2),
+        ),
+        (
+            "particles",
+            slice::shared_memory_bytes::<slice::Particles>(particles),
+        ),
+    ];
+    let reserved = super::shm::daemon_services().iter().map(|s| s.1).sum();
+    super::shm::check(
+        std::path::Path::new(super::shm::SHM_DIR),
+        "the scene's services",
+        &needs,
+        reserved,
+    )?;
     let node_name = NodeName::new("hydrometrad-scene").map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let node = NodeBuilder::new()
         .name(&node_name)
