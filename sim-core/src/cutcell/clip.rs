@@ -261,3 +261,65 @@ pub(crate) fn clip_segment(s: &Segment, axis: usize, lo: f64, hi: f64) -> Option
         Segment { p: start, q: end }
     })
 }
+
+/// The tie rule's exception: when triangle `v` lies in a grid plane normal to `axis` (its three
+/// coordinates there equal and integral) with the enclosed region on the plane's upper side (its
+/// normal, times `sign` to make it outward, pointing down), that plane. Such a triangle belongs
+/// to the cell above the plane, on its fluid side, instead of the one below; and the face in the
+/// plane is open only where the region lies on both sides of it.
+#[inline]
+pub(crate) fn flat_below_region(v: &[P3; 3], axis: usize, sign: f64) -> Option<f64> {
+    let m = v[0][axis];
+    if v[1][axis] != m || v[2][axis] != m || m != m.round() {
+        return None;
+    }
+    let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+    let n = (v[1][b] - v[0][b]) * (v[2][c] - v[0][c]) - (v[1][c] - v[0][c]) * (v[2][b] - v[0][b]);
+    (sign * n < 0.0).then_some(m)
+}
+
+/// Cuts `poly` along x into cells `(c, c+1]` and calls `f(c, piece)` for every cell `c < nx` it
+/// reaches, with `c = -1` for its part left of the box (`x <= 0`); with `forced = Some(c)` the
+/// whole polygon goes to cell `c` (a triangle in an x-plane under the tie rule's exception).
+#[inline]
+pub(crate) fn split_along_x(
+    mut poly: Polygon,
+    nx: usize,
+    forced: Option<f64>,
+    mut f: impl FnMut(i64, &Polygon),
+) {
+    let nxf = nx as f64;
+    if let Some(c) = forced {
+        if c < nxf {
+            f((c as i64).max(-1), &poly);
+        }
+        return;
+    }
+    let (xmin, xmax) = poly.extent(0);
+    let mut c = cell_of(xmin);
+    let last = cell_of(xmax);
+    if c >= nxf {
+        return;
+    }
+    let mut below = Polygon::EMPTY;
+    let mut above = Polygon::EMPTY;
+    if c < 0.0 {
+        if last < 0.0 {
+            f(-1, &poly);
+            return;
+        }
+        split(&poly, 0, 0.0, &mut below, &mut above);
+        f(-1, &below);
+        poly = above;
+        c = 0.0;
+    }
+    while c < last && c < nxf {
+        split(&poly, 0, c + 1.0, &mut below, &mut above);
+        f(c as i64, &below);
+        poly = above;
+        c += 1.0;
+    }
+    if c < nxf {
+        f(c as i64, &poly);
+    }
+}

@@ -232,7 +232,7 @@ impl SurfaceFractions {
     }
 
     /// Refuses positions that are the wrong number, not finite or implausibly far.
-    fn check_positions(&self, positions_m: &[[f32; 3]]) -> Result<(), CutCellError> {
+    pub(crate) fn check_positions(&self, positions_m: &[[f32; 3]]) -> Result<(), CutCellError> {
         if positions_m.len() != self.pos.len() {
             return Err(CutCellError::Surface {
                 surface: self.name.clone(),
@@ -270,6 +270,13 @@ impl SurfaceFractions {
         for a in 0..3 {
             let lo = v[0][a].min(v[1][a]).min(v[2][a]);
             let hi = v[0][a].max(v[1][a]).max(v[2][a]);
+            // A triangle in a grid plane with the region above also reaches the cell above
+            // (where it belongs) and the plane (whose face it closes).
+            let hi = if clip::flat_below_region(&v, a, self.sign).is_some() {
+                hi + 1.0
+            } else {
+                hi
+            };
             let n = self.cells.dims[a] as f64;
             r.lo[a] = cell_of(lo).clamp(-1.0, n) as i32;
             r.hi[a] = cell_of(hi).clamp(-1.0, n) as i32;
@@ -530,46 +537,44 @@ impl SurfaceFractions {
         self.acc_area.fill([0.0; 3]);
         let mut left = 0.0;
         let (y0, z0) = (j as f64, k as f64);
-        let nxf = nx as f64;
+        let sign = self.sign;
         for n in 0..self.candidates.len() {
             let t = self.candidates[n] as usize;
             let v = self.triangles[t].map(|i| self.pos[i as usize]);
             let mut poly = Polygon::triangle(v[0], v[1], v[2]);
-            clip::clip_slab(&mut poly, 1, y0, y0 + 1.0);
+            // A triangle in a y- or z-plane with the region above belongs to the row above.
+            match clip::flat_below_region(&v, 1, sign) {
+                Some(m) if m != y0 => continue,
+                Some(_) => {}
+                None => clip::clip_slab(&mut poly, 1, y0, y0 + 1.0),
+            }
             if poly.n == 0 {
                 continue;
             }
-            clip::clip_slab(&mut poly, 2, z0, z0 + 1.0);
+            match clip::flat_below_region(&v, 2, sign) {
+                Some(m) if m != z0 => continue,
+                Some(_) => {}
+                None => clip::clip_slab(&mut poly, 2, z0, z0 + 1.0),
+            }
             if poly.n == 0 {
                 continue;
             }
-            let (xmin, xmax) = poly.extent(0);
-            let mut c = cell_of(xmin);
-            let last = cell_of(xmax);
-            if c >= nxf {
-                continue;
-            }
-            let mut below = Polygon::EMPTY;
-            let mut above = Polygon::EMPTY;
-            if c < 0.0 {
-                if last < 0.0 {
-                    left += poly.area_and_x_moment(0.0).0[0];
-                    continue;
+            let forced = clip::flat_below_region(&v, 0, sign);
+            clip::split_along_x(poly, nx, forced, |c, piece| {
+                if piece.n < 3 {
+                    return;
                 }
-                clip::split(&poly, 0, 0.0, &mut below, &mut above);
-                left += below.area_and_x_moment(0.0).0[0];
-                poly = above;
-                c = 0.0;
-            }
-            while c < last && c < nxf {
-                clip::split(&poly, 0, c + 1.0, &mut below, &mut above);
-                self.accumulate(c as usize, &below);
-                poly = above;
-                c += 1.0;
-            }
-            if c < nxf {
-                self.accumulate(c as usize, &poly);
-            }
+                if c < 0 {
+                    left += piece.area_and_x_moment(0.0).0[0];
+                    return;
+                }
+                let (s, moment) = piece.area_and_x_moment(c as f64);
+                let a = &mut self.acc_area[c as usize];
+                a[0] += s[0];
+                a[1] += s[1];
+                a[2] += s[2];
+                self.acc_moment[c as usize] += moment;
+            });
         }
         let sign = self.sign;
         let base = self.cells.index(0, j, k);
@@ -597,19 +602,6 @@ impl SurfaceFractions {
         (cells, faces)
     }
 
-    #[inline]
-    fn accumulate(&mut self, c: usize, piece: &Polygon) {
-        if piece.n < 3 {
-            return;
-        }
-        let (s, moment) = piece.area_and_x_moment(c as f64);
-        let a = &mut self.acc_area[c];
-        a[0] += s[0];
-        a[1] += s[1];
-        a[2] += s[2];
-        self.acc_moment[c] += moment;
-    }
-
     /// Recomputes the strip on plane `axis = p` (axis 1: y-strip `(p, q)`, across z in
     /// `(q, q+1]`; axis 2: z-strip `(q, p)`, across y in `(q, q+1]`); returns how many faces
     /// changed.
@@ -628,9 +620,12 @@ impl SurfaceFractions {
                 && r.lo[0] < nxi
         });
         self.acc_moment.fill(0.0);
-        // The x-component of the outward normal times length, per face: `acc_area[i][0]`.
+        // Per face: `acc_area[i][0]`, the x-component of the outward normal times length of the
+        // cross-section; `acc_area[i][1]`, the (raw, negative outward) area of the triangles in
+        // the plane with the region above, which close the face (the tie rule's exception).
         for s in &mut self.acc_area {
             s[0] = 0.0;
+            s[1] = 0.0;
         }
         let mut left = 0.0;
         let m = plane as f64;
@@ -650,6 +645,19 @@ impl SurfaceFractions {
             let t = self.candidates[n] as usize;
             let ids = self.triangles[t];
             let v = ids.map(|i| self.pos[i as usize]);
+            if clip::flat_below_region(&v, axis, self.sign) == Some(m) {
+                let mut poly = Polygon::triangle(v[0], v[1], v[2]);
+                clip::clip_slab(&mut poly, across_axis, lo, lo + 1.0);
+                if poly.n < 3 {
+                    continue;
+                }
+                clip::split_along_x(poly, nx, None, |c, piece| {
+                    if c >= 0 && piece.n >= 3 {
+                        self.acc_area[c as usize][1] += piece.area_and_x_moment(0.0).0[axis];
+                    }
+                });
+                continue;
+            }
             let Some(seg) = clip::plane_section(&ids, &v, axis, m) else {
                 continue;
             };
@@ -698,7 +706,7 @@ impl SurfaceFractions {
         let mut edge = -left;
         for i in 0..nx {
             let next = edge - self.acc_area[i][0];
-            let area = self.acc_moment[i] + next;
+            let area = self.acc_moment[i] + next + self.acc_area[i][1];
             edge = next;
             faces += store(&mut f[fbase + i], unit(sign * area));
         }

@@ -3,12 +3,15 @@
 //!
 //! (Module docs: see the end of the work; placeholder.)
 
+mod cells;
 mod clip;
 mod fractions;
 pub mod mesh;
 mod mesh_io;
 pub mod shapes;
+pub mod small;
 
+pub use cells::{CutCellStats, CutCells, Layer, Phase, SmallCellParams};
 pub use fractions::{FractionStats, SurfaceFractions, MAX_CELLS_AWAY};
 
 use crate::scene::voxelize::VoxelBox;

@@ -385,3 +385,93 @@ pub fn circle_rect_area(r: f64, x0: f64, x1: f64, y0: f64, y1: f64) -> f64 {
     }
     area
 }
+
+/// A bipyramid over a regular `n`-gon of radius `r` in the plane normal to `R e_z` through `c`,
+/// apexes `top` and `bottom` along that normal: convex whatever the rounding of its vertices, so
+/// the half-spaces of its triangles describe it exactly.
+pub fn bipyramid(n: usize, r: f64, top: f64, bottom: f64, rot: &[V3; 3], c: V3) -> ClosedMesh {
+    let mut pos: Vec<[f32; 3]> = Vec::new();
+    let put = |x: V3, pos: &mut Vec<[f32; 3]>| {
+        pos.push(add(apply(rot, x), c).map(|v| v as f32));
+        (pos.len() - 1) as u32
+    };
+    let ring: Vec<u32> = (0..n)
+        .map(|i| {
+            let t = 2.0 * std::f64::consts::PI * i as f64 / n as f64;
+            put([r * t.cos(), r * t.sin(), 0.0], &mut pos)
+        })
+        .collect();
+    let a = put([0.0, 0.0, top], &mut pos);
+    let b = put([0.0, 0.0, -bottom], &mut pos);
+    let mut tris = Vec::new();
+    for i in 0..n {
+        let (p, q) = (ring[i], ring[(i + 1) % n]);
+        tris.push([a, p, q]);
+        tris.push([b, q, p]);
+    }
+    ClosedMesh::new("bipyramid", pos, tris).unwrap()
+}
+
+/// The tetrahedron of four points.
+pub fn tetrahedron(p: [V3; 4]) -> ClosedMesh {
+    let pos = p.iter().map(|x| x.map(|v| v as f32)).collect();
+    ClosedMesh::new(
+        "tetrahedron",
+        pos,
+        vec![[0, 1, 2], [0, 3, 1], [1, 3, 2], [0, 2, 3]],
+    )
+    .unwrap()
+}
+
+/// Every cell's volume and every face's area of `f` against the half-space clipping of `conv`;
+/// returns the largest difference (fractions).
+pub fn max_difference_from_convex(f: &SurfaceFractions, conv: &Convex) -> f64 {
+    let cells = *f.cells();
+    let [nx, ny, nz] = cells.dims;
+    let h = cells.spacing_m;
+    let corner = |i: usize, j: usize, k: usize| -> V3 {
+        std::array::from_fn(|a| cells.origin_m[a] + [i, j, k][a] as f64 * h)
+    };
+    let mut worst: f64 = 0.0;
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let lo = corner(i, j, k);
+                let e = conv.box_volume(lo, lo.map(|x| x + h)) / (h * h * h);
+                let d = (e - f.volume_fractions()[cells.index(i, j, k)]).abs();
+                assert!(
+                    d < 1e-9,
+                    "cell {i},{j},{k}: {e} exact, {} computed",
+                    f.volume_fractions()[cells.index(i, j, k)]
+                );
+                worst = worst.max(d);
+            }
+        }
+    }
+    for axis in 0..3 {
+        let mut d = cells.dims;
+        d[axis] += 1;
+        let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
+        for k in 0..d[2] {
+            for j in 0..d[1] {
+                for i in 0..d[0] {
+                    let o = corner(i, j, k);
+                    let mut eb = [0.0; 3];
+                    eb[b] = h;
+                    let mut ec = [0.0; 3];
+                    ec[c] = h;
+                    let square = [o, add(o, eb), add(add(o, eb), ec), add(o, ec)];
+                    let e = conv.polygon_area(&square) / (h * h);
+                    let got = f.face_fractions(axis)[i + d[0] * (j + d[1] * k)];
+                    let diff = (e - got).abs();
+                    assert!(
+                        diff < 1e-9,
+                        "face {axis} {i},{j},{k}: {e} exact, {got} computed"
+                    );
+                    worst = worst.max(diff);
+                }
+            }
+        }
+    }
+    worst
+}
