@@ -475,3 +475,38 @@ pub fn max_difference_from_convex(f: &SurfaceFractions, conv: &Convex) -> f64 {
     }
     worst
 }
+
+/// The built-in default scene on cells of `voxel_mm` with its atlas from the shared test cache
+/// `target/hil-atlas` (built there, under its lock file, if missing: minutes).
+pub fn default_scene(voxel_mm: f64) -> hydrometra_sim::scene::Scene {
+    use hydrometra_sim::scene::{prepare, Scene, SceneDesc};
+    let exe = std::env::current_exe().expect("current_exe");
+    // target/<profile>/deps/<test> -> target/hil-atlas
+    let dir = exe
+        .ancestors()
+        .nth(3)
+        .expect("target/<profile>/deps")
+        .join("hil-atlas");
+    std::fs::create_dir_all(&dir).expect("atlas cache dir");
+    let mut desc = SceneDesc::builtin("default").expect("the default scene");
+    desc.fluid.voxel_mm = voxel_mm;
+    let lock = std::fs::File::create(dir.join(".lock")).expect("atlas cache lock file");
+    lock.lock().expect("lock the atlas cache");
+    let (assets, _) =
+        prepare::load_or_build(&desc, Some(&dir), &mut |_, _, _, _| {}).expect("the default atlas");
+    drop(lock);
+    Scene::new(desc, assets).expect("the default scene")
+}
+
+/// The cavity surface's layer (normals into the fluid) for a [`hydrometra_sim::cutcell::CutCells`].
+pub fn cavity_layer(
+    s: &hydrometra_sim::scene::surface::CavitySurface,
+) -> hydrometra_sim::cutcell::Layer {
+    hydrometra_sim::cutcell::Layer {
+        name: "cavity".into(),
+        triangles: s.triangles().to_vec(),
+        vertex_count: s.vertex_count(),
+        orientation: Orientation::Inward,
+        inside: hydrometra_sim::cutcell::Phase::Fluid,
+    }
+}
