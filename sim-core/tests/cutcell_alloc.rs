@@ -1,3 +1,5 @@
+// Per-axis loops index several arrays at once.
+#![allow(clippy::needless_range_loop)]
 //! Cut-cell updates allocate nothing on the heap once built: the default cavity stepping between
 //! pressures at 1.2 mm, and a breathing ellipsoid with a moving sheath through it (two layers and
 //! the small-cell rule). The first cycle may grow buffers; the second must not.

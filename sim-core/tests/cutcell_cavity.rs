@@ -1,3 +1,5 @@
+// Per-axis loops index several arrays at once.
+#![allow(clippy::needless_range_loop)]
 //! The default scene's cavity surface (its atlas from the shared test cache `target/hil-atlas`)
 //! on the scene's own box at 1.2 and 0.6 mm: over a pressure sweep the fluid volume of the cut
 //! cells (sum of fractions x h^3) equals the volume the surface encloses within 1e-9 relative

@@ -1,3 +1,5 @@
+// Per-axis loops index several arrays at once.
+#![allow(clippy::needless_range_loop)]
 //! Incremental cut cells equal a full recomputation bit for bit after any sequence of vertex
 //! moves (random moves, jumps, vertices snapped onto grid planes, thresholds), for one surface and
 //! for layers combined with the small-cell rule; the rows reported changed are the only ones that

@@ -1,3 +1,5 @@
+// Per-axis loops index several arrays at once.
+#![allow(clippy::needless_range_loop)]
 //! Shapes for fluid case files: the sphere and cylinder builders (volumes exact by construction,
 //! any axis, closed and outward), and the STL (binary, ASCII) and OBJ readers, with errors that
 //! name the file, the line or byte offset and what is wrong.

@@ -284,8 +284,8 @@ impl CutCells {
         }
         self.check(positions_m)?;
         let mut stats = CutCellStats::default();
-        for l in 0..self.layers.len() {
-            let s = self.layers[l].0.update(positions_m[l], threshold_m)?;
+        for (l, p) in positions_m.iter().enumerate() {
+            let s = self.layers[l].0.update(p, threshold_m)?;
             add(&mut stats.layers, s);
             let f = &self.layers[l].0;
             for &r in f.changed_rows() {

@@ -401,8 +401,8 @@ impl SurfaceFractions {
             ),
         ] {
             list.clear();
-            for u in 0..units {
-                flags[u] = true;
+            for (u, f) in flags.iter_mut().enumerate().take(units) {
+                *f = true;
                 list.push(u as u32);
             }
         }

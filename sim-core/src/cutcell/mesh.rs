@@ -117,7 +117,7 @@ impl ClosedMesh {
             what: p.what,
         })?;
         let volume = signed_volume_m3(&positions_m, &triangles);
-        if !(volume.abs() > 0.0) {
+        if volume.is_nan() || volume == 0.0 {
             return Err(MeshError::Whole {
                 origin: origin.to_string(),
                 what: format!("encloses no volume ({volume} m^3)"),

@@ -75,7 +75,7 @@ pub fn sphere(centre_m: [f64; 3], radius_m: f64, t: Tessellation) -> Result<Clos
     check_positive(ORIGIN, "max_edge_m", t.max_edge_m)?;
     // A cube face spans a quarter of a great circle.
     let m = (0.5 * PI * radius_m / t.max_edge_m).ceil().max(2.0);
-    if !(12.0 * m * m <= MAX_TRIANGLES as f64) {
+    if 12.0 * m * m > MAX_TRIANGLES as f64 {
         return Err(bad(
             ORIGIN,
             format!(
@@ -164,7 +164,7 @@ pub fn cylinder(
     let a = axis.map(|x| x / norm);
     let n = (2.0 * PI * radius_m / t.max_edge_m).ceil().max(12.0);
     let rings = (length_m / (8.0 * t.max_edge_m)).ceil().max(1.0);
-    if !(n * (2.0 * rings + 2.0) <= MAX_TRIANGLES as f64) {
+    if n * (2.0 * rings + 2.0) > MAX_TRIANGLES as f64 {
         return Err(bad(
             ORIGIN,
             format!(
