@@ -9,20 +9,12 @@ mod cutcell_common;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use hydrometra_sim::cutcell::{CutCells, Phase, SmallCellParams};
-use hydrometra_sim::units::mmhg_to_pa;
 
 fn cut_cells(c: &mut Criterion) {
     for voxel_mm in [1.2, 0.6] {
         let scene = cutcell_common::default_scene(voxel_mm);
-        let mut surface = scene.cavity_surface().clone();
-        let compact = surface.compact_atlas(scene.atlas()).expect("compact atlas");
-        let mut at = |mmhg: f64| {
-            surface
-                .replay_compact(&compact, mmhg_to_pa(mmhg))
-                .expect("replay");
-            surface.positions_m().to_vec()
-        };
-        let (p0, p1) = (at(40.0), at(41.0));
+        let frames = cutcell_common::replayed(&scene, &[40.0, 41.0]);
+        let (p0, p1) = (&frames[0], &frames[1]);
         let layers = vec![cutcell_common::cavity_layer(scene.cavity_surface())];
         let cells = *scene.cells();
         let new = || {
@@ -37,18 +29,18 @@ fn cut_cells(c: &mut Criterion) {
         let mut g = c.benchmark_group(format!("cutcell_default_{voxel_mm}mm"));
         g.sample_size(30);
         let mut cut = new();
-        g.bench_function("full", |b| b.iter(|| cut.full(&[&p0]).expect("full")));
+        g.bench_function("full", |b| b.iter(|| cut.full(&[p0]).expect("full")));
         for (name, threshold_m) in [
             ("update_1mmHg_all_vertices", 0.0),
             ("update_1mmHg_threshold_0.1_cell", 0.1 * cells.spacing_m),
         ] {
             let mut cut = new();
-            cut.full(&[&p0]).expect("full");
+            cut.full(&[p0]).expect("full");
             let mut flip = false;
             g.bench_function(name, |b| {
                 b.iter(|| {
                     flip = !flip;
-                    let p = if flip { &p1 } else { &p0 };
+                    let p = if flip { p1 } else { p0 };
                     cut.update(&[p], threshold_m).expect("update")
                 })
             });

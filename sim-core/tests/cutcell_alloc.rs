@@ -11,27 +11,18 @@ mod cutcell_common;
 use common::alloc::ALLOCS;
 use cutcell_common::*;
 use hydrometra_sim::cutcell::shapes::{self, Tessellation};
-use hydrometra_sim::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
+use hydrometra_sim::cutcell::{CutCells, Orientation, Phase, SmallCellParams};
 use hydrometra_sim::scene::voxelize::VoxelBox;
-use hydrometra_sim::units::mmhg_to_pa;
 
 #[test]
 fn updates_do_not_allocate() {
     // The default cavity: a cycle of pressures, positions replayed beforehand.
     let scene = default_scene(1.2);
-    let mut surface = scene.cavity_surface().clone();
-    let compact = surface.compact_atlas(scene.atlas()).unwrap();
-    let frames: Vec<Vec<[f32; 3]>> = [40.0, 41.0, 43.0, 45.0, 42.0, 38.0, 30.0, 35.0]
-        .iter()
-        .map(|&p| {
-            surface.replay_compact(&compact, mmhg_to_pa(p)).unwrap();
-            surface.positions_m().to_vec()
-        })
-        .collect();
+    let frames = replayed(&scene, &[40.0, 41.0, 43.0, 45.0, 42.0, 38.0, 30.0, 35.0]);
     let mut cavity = CutCells::new(
         *scene.cells(),
         Phase::Solid,
-        vec![cavity_layer(&surface)],
+        vec![cavity_layer(scene.cavity_surface())],
         SmallCellParams::default(),
     )
     .unwrap();
@@ -52,20 +43,8 @@ fn updates_do_not_allocate() {
         spacing_m: 0.001,
     };
     let layers = vec![
-        Layer {
-            name: "ellipsoid".into(),
-            triangles: unit.triangles().to_vec(),
-            vertex_count: unit.positions_m().len(),
-            orientation: Orientation::Outward,
-            inside: Phase::Fluid,
-        },
-        Layer {
-            name: "sheath".into(),
-            triangles: sheath.triangles().to_vec(),
-            vertex_count: sheath.positions_m().len(),
-            orientation: Orientation::Outward,
-            inside: Phase::Solid,
-        },
+        layer("ellipsoid", &unit, Orientation::Outward, Phase::Fluid),
+        layer("sheath", &sheath, Orientation::Outward, Phase::Solid),
     ];
     let mut pair = CutCells::new(cells, Phase::Solid, layers, SmallCellParams::default()).unwrap();
     let pair_frames: Vec<[Vec<[f32; 3]>; 2]> = (0..8)

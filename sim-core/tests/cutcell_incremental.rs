@@ -44,26 +44,9 @@ fn scene() -> (VoxelBox, Vec<Vec<[f32; 3]>>, Vec<Layer>) {
         spacing_m: 0.001,
     };
     // The cavity with its normals turned inwards.
-    let inward: Vec<[u32; 3]> = cavity
-        .triangles()
-        .iter()
-        .map(|t| [t[0], t[2], t[1]])
-        .collect();
     let layers = vec![
-        Layer {
-            name: "cavity".into(),
-            triangles: inward,
-            vertex_count: cavity.positions_m().len(),
-            orientation: Orientation::Inward,
-            inside: Phase::Fluid,
-        },
-        Layer {
-            name: "sheath".into(),
-            triangles: sheath.triangles().to_vec(),
-            vertex_count: sheath.positions_m().len(),
-            orientation: Orientation::Outward,
-            inside: Phase::Solid,
-        },
+        layer("cavity", &cavity, Orientation::Inward, Phase::Fluid),
+        layer("sheath", &sheath, Orientation::Outward, Phase::Solid),
     ];
     (
         cells,

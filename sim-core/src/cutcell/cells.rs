@@ -121,10 +121,9 @@ pub struct CutCells {
     row_flags: Vec<u8>,
     stage_rows: [Vec<u32>; 4],
     changed_rows: Vec<u32>,
-    ystrip_flags: Vec<bool>,
-    zstrip_flags: Vec<bool>,
-    ystrips: Vec<u32>,
-    zstrips: Vec<u32>,
+    /// Strips to combine: `[y-strips, z-strips]`.
+    strip_flags: [Vec<bool>; 2],
+    strips: [Vec<u32>; 2],
     initialised: bool,
 }
 
@@ -185,10 +184,11 @@ impl CutCells {
             row_flags: vec![0; rows],
             stage_rows: std::array::from_fn(|_| Vec::with_capacity(rows)),
             changed_rows: Vec::with_capacity(rows),
-            ystrip_flags: vec![false; (ny + 1) * nz],
-            zstrip_flags: vec![false; ny * (nz + 1)],
-            ystrips: Vec::with_capacity((ny + 1) * nz),
-            zstrips: Vec::with_capacity(ny * (nz + 1)),
+            strip_flags: [vec![false; (ny + 1) * nz], vec![false; ny * (nz + 1)]],
+            strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
             initialised: false,
         })
     }
@@ -260,11 +260,10 @@ impl CutCells {
         for r in 0..ny * nz {
             self.flag_row(r, COMBINE | INTERFACE);
         }
-        for u in 0..(ny + 1) * nz {
-            mark(u, &mut self.ystrip_flags, &mut self.ystrips);
-        }
-        for u in 0..ny * (nz + 1) {
-            mark(u, &mut self.zstrip_flags, &mut self.zstrips);
+        for s in 0..2 {
+            for u in 0..self.strip_flags[s].len() {
+                mark(u, &mut self.strip_flags[s], &mut self.strips[s]);
+            }
         }
         self.finish(&mut stats);
         Ok(stats)
@@ -296,11 +295,13 @@ impl CutCells {
                     COMBINE | INTERFACE,
                 );
             }
-            for &u in f.changed_ystrips() {
-                mark(u as usize, &mut self.ystrip_flags, &mut self.ystrips);
-            }
-            for &u in f.changed_zstrips() {
-                mark(u as usize, &mut self.zstrip_flags, &mut self.zstrips);
+            for (s, changed) in [f.changed_ystrips(), f.changed_zstrips()]
+                .into_iter()
+                .enumerate()
+            {
+                for &u in changed {
+                    mark(u as usize, &mut self.strip_flags[s], &mut self.strips[s]);
+                }
             }
         }
         self.finish(&mut stats);
@@ -330,36 +331,28 @@ impl CutCells {
         let [nx, ny, nz] = self.cells.dims;
         self.changed_rows.clear();
         // Strips: their faces, and the interfaces of the rows on both sides.
-        let ystrips = std::mem::take(&mut self.ystrips);
-        for &u in &ystrips {
-            self.ystrip_flags[u as usize] = false;
-            let (j, k) = (u as usize % (ny + 1), u as usize / (ny + 1));
-            let base = nx * (j + (ny + 1) * k);
-            if self.combine_faces(1, base) {
-                for jj in [j.wrapping_sub(1), j] {
-                    if jj < ny {
-                        self.flag_row(jj + ny * k, INTERFACE | CHANGED);
+        for axis in [1, 2] {
+            let strips = std::mem::take(&mut self.strips[axis - 1]);
+            // y-strip `j + (ny + 1) k`, z-strip `j + ny k`: the rows `row - step` and `row`
+            // lie on the two sides of the strip's plane.
+            let (width, step) = if axis == 1 { (ny + 1, 1) } else { (ny, ny) };
+            for &u in &strips {
+                self.strip_flags[axis - 1][u as usize] = false;
+                let (j, k) = (u as usize % width, u as usize / width);
+                if self.combine_faces(axis, nx * u as usize) {
+                    let (plane, extent) = if axis == 1 { (j, ny) } else { (k, nz) };
+                    let row = j + ny * k;
+                    if plane > 0 {
+                        self.flag_row(row - step, INTERFACE | CHANGED);
+                    }
+                    if plane < extent {
+                        self.flag_row(row, INTERFACE | CHANGED);
                     }
                 }
             }
+            self.strips[axis - 1] = strips;
+            self.strips[axis - 1].clear();
         }
-        self.ystrips = ystrips;
-        self.ystrips.clear();
-        let zstrips = std::mem::take(&mut self.zstrips);
-        for &u in &zstrips {
-            self.zstrip_flags[u as usize] = false;
-            let (j, k) = (u as usize % ny, u as usize / ny);
-            let base = nx * (j + ny * k);
-            if self.combine_faces(2, base) {
-                for kk in [k.wrapping_sub(1), k] {
-                    if kk < nz {
-                        self.flag_row(j + ny * kk, INTERFACE | CHANGED);
-                    }
-                }
-            }
-        }
-        self.zstrips = zstrips;
-        self.zstrips.clear();
         // Rows: volumes and x-faces.
         let rows = std::mem::take(&mut self.stage_rows[0]);
         for &r in &rows {

@@ -95,14 +95,14 @@ pub(crate) fn cell_of(x: f64) -> f64 {
     x.ceil() - 1.0
 }
 
-/// The point where segment `p q` meets plane `axis = m`, computed from the endpoint with the
-/// smaller coordinate along `axis` (so both polygons that share the edge get the same point),
-/// with its `axis` coordinate set to `m` exactly. Requires the endpoints on opposite sides.
+/// The point at which the segment from `a` towards `b` meets plane `axis = m` (the endpoints on
+/// opposite sides or on it), interpolated from `a`, with its `axis` coordinate set to `m`
+/// exactly. Callers choose `a` canonically (the smaller coordinate, or the smaller vertex index)
+/// so that every polygon or section sharing the segment gets the same point, bit for bit.
 #[inline]
-fn on_plane(p: &P3, q: &P3, axis: usize, m: f64) -> P3 {
-    let (a, b) = if p[axis] <= q[axis] { (p, q) } else { (q, p) };
+fn towards(a: &P3, b: &P3, axis: usize, m: f64) -> P3 {
     let d = b[axis] - a[axis];
-    let t = if d > 0.0 {
+    let t = if d != 0.0 {
         ((m - a[axis]) / d).clamp(0.0, 1.0)
     } else {
         0.0
@@ -114,6 +114,16 @@ fn on_plane(p: &P3, q: &P3, axis: usize, m: f64) -> P3 {
     ];
     x[axis] = m;
     x
+}
+
+/// [`towards`] from the endpoint with the smaller coordinate along `axis`.
+#[inline]
+fn on_plane(p: &P3, q: &P3, axis: usize, m: f64) -> P3 {
+    if p[axis] <= q[axis] {
+        towards(p, q, axis, m)
+    } else {
+        towards(q, p, axis, m)
+    }
 }
 
 /// Splits `src` at plane `axis = m` into the part below (`<= m`, into `below`) and the part
@@ -206,25 +216,15 @@ pub(crate) fn plane_section(ids: &[u32; 3], v: &[P3; 3], axis: usize, m: f64) ->
     }
 }
 
-/// The point where edge `(ia, a) - (ib, b)` meets plane `axis = m`, computed from the endpoint
-/// with the smaller vertex index: the two triangles sharing the edge get the same point, bit for
-/// bit, so the cross-section polylines close exactly.
+/// [`towards`] from the endpoint with the smaller vertex index: the two triangles sharing the
+/// edge get the same point, bit for bit, so the cross-section polylines close exactly.
 #[inline]
 fn edge_point(ia: u32, a: &P3, ib: u32, b: &P3, axis: usize, m: f64) -> P3 {
-    let (a, b) = if ia <= ib { (a, b) } else { (b, a) };
-    let d = b[axis] - a[axis];
-    let t = if d != 0.0 {
-        ((m - a[axis]) / d).clamp(0.0, 1.0)
+    if ia <= ib {
+        towards(a, b, axis, m)
     } else {
-        0.0
-    };
-    let mut x = [
-        a[0] + t * (b[0] - a[0]),
-        a[1] + t * (b[1] - a[1]),
-        a[2] + t * (b[2] - a[2]),
-    ];
-    x[axis] = m;
-    x
+        towards(b, a, axis, m)
+    }
 }
 
 /// The part of `s` with `lo < coordinate <= hi` along `axis`, direction kept.
@@ -238,21 +238,7 @@ pub(crate) fn clip_segment(s: &Segment, axis: usize, lo: f64, hi: f64) -> Option
     if b[axis] <= lo || a[axis] > hi {
         return None;
     }
-    let d = b[axis] - a[axis];
-    let at = |m: f64| {
-        let t = if d > 0.0 {
-            ((m - a[axis]) / d).clamp(0.0, 1.0)
-        } else {
-            0.0
-        };
-        let mut x = [
-            a[0] + t * (b[0] - a[0]),
-            a[1] + t * (b[1] - a[1]),
-            a[2] + t * (b[2] - a[2]),
-        ];
-        x[axis] = m;
-        x
-    };
+    let at = |m: f64| towards(&a, &b, axis, m);
     let start = if a[axis] > lo { a } else { at(lo) };
     let end = if b[axis] <= hi { b } else { at(hi) };
     Some(if flipped {

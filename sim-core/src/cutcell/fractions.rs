@@ -84,14 +84,12 @@ pub struct SurfaceFractions {
     interface: Vec<[f64; 3]>,
     faces: [Vec<f64>; 3],
     row_dirty: Vec<bool>,
-    ystrip_dirty: Vec<bool>,
-    zstrip_dirty: Vec<bool>,
     dirty_rows: Vec<u32>,
-    dirty_ystrips: Vec<u32>,
-    dirty_zstrips: Vec<u32>,
     changed_rows: Vec<u32>,
-    changed_ystrips: Vec<u32>,
-    changed_zstrips: Vec<u32>,
+    /// The same for the strips: `[y-strips, z-strips]`.
+    strip_dirty: [Vec<bool>; 2],
+    dirty_strips: [Vec<u32>; 2],
+    changed_strips: [Vec<u32>; 2],
     // Scratch, reused.
     moved: Vec<bool>,
     candidates: Vec<u32>,
@@ -165,14 +163,17 @@ impl SurfaceFractions {
                 vec![0.0; nx * ny * (nz + 1)],
             ],
             row_dirty: vec![false; ny * nz],
-            ystrip_dirty: vec![false; (ny + 1) * nz],
-            zstrip_dirty: vec![false; ny * (nz + 1)],
             dirty_rows: Vec::with_capacity(ny * nz),
-            dirty_ystrips: Vec::with_capacity((ny + 1) * nz),
-            dirty_zstrips: Vec::with_capacity(ny * (nz + 1)),
             changed_rows: Vec::with_capacity(ny * nz),
-            changed_ystrips: Vec::with_capacity((ny + 1) * nz),
-            changed_zstrips: Vec::with_capacity(ny * (nz + 1)),
+            strip_dirty: [vec![false; (ny + 1) * nz], vec![false; ny * (nz + 1)]],
+            dirty_strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
+            changed_strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
             moved: vec![false; vertex_count],
             candidates: Vec::with_capacity(t),
             acc_moment: vec![0.0; nx],
@@ -219,11 +220,11 @@ impl SurfaceFractions {
     }
     /// The y-strips `j + (ny + 1) k` (y-faces `(., j, k)`) the last call changed.
     pub fn changed_ystrips(&self) -> &[u32] {
-        &self.changed_ystrips
+        &self.changed_strips[0]
     }
     /// The z-strips `j + ny k` (z-faces `(., j, k)`) the last call changed.
     pub fn changed_zstrips(&self) -> &[u32] {
-        &self.changed_zstrips
+        &self.changed_strips[1]
     }
 
     fn to_cells(&self, p: [f32; 3]) -> P3 {
@@ -350,8 +351,8 @@ impl SurfaceFractions {
             for j in planes_j.0..=planes_j.1 {
                 mark_unit(
                     j as usize + (ny + 1) * k as usize,
-                    &mut self.ystrip_dirty,
-                    &mut self.dirty_ystrips,
+                    &mut self.strip_dirty[0],
+                    &mut self.dirty_strips[0],
                 );
             }
         }
@@ -359,8 +360,8 @@ impl SurfaceFractions {
             for j in rows_j.0..=rows_j.1 {
                 mark_unit(
                     j as usize + ny * k as usize,
-                    &mut self.zstrip_dirty,
-                    &mut self.dirty_zstrips,
+                    &mut self.strip_dirty[1],
+                    &mut self.dirty_strips[1],
                 );
             }
         }
@@ -386,20 +387,14 @@ impl SurfaceFractions {
             bin.reserve(more);
         }
         self.initialised = true;
-        let [_, ny, nz] = self.cells.dims;
-        for (units, flags, list) in [
-            (ny * nz, &mut self.row_dirty, &mut self.dirty_rows),
-            (
-                (ny + 1) * nz,
-                &mut self.ystrip_dirty,
-                &mut self.dirty_ystrips,
-            ),
-            (
-                ny * (nz + 1),
-                &mut self.zstrip_dirty,
-                &mut self.dirty_zstrips,
-            ),
+        let [ystrips, zstrips] = &mut self.strip_dirty;
+        let [ylist, zlist] = &mut self.dirty_strips;
+        for (flags, list) in [
+            (&mut self.row_dirty, &mut self.dirty_rows),
+            (ystrips, ylist),
+            (zstrips, zlist),
         ] {
+            let units = flags.len();
             list.clear();
             for (u, f) in flags.iter_mut().enumerate().take(units) {
                 *f = true;
@@ -435,8 +430,7 @@ impl SurfaceFractions {
             moved_vertices += m as usize;
         }
         self.changed_rows.clear();
-        self.changed_ystrips.clear();
-        self.changed_zstrips.clear();
+        self.changed_strips.iter_mut().for_each(Vec::clear);
         if moved_vertices == 0 {
             return Ok(FractionStats::default());
         }
@@ -472,8 +466,6 @@ impl SurfaceFractions {
     fn process(&mut self) -> FractionStats {
         let mut stats = FractionStats::default();
         self.changed_rows.clear();
-        self.changed_ystrips.clear();
-        self.changed_zstrips.clear();
         let [_, ny, _] = self.cells.dims;
         let rows = std::mem::take(&mut self.dirty_rows);
         for &u in &rows {
@@ -488,30 +480,23 @@ impl SurfaceFractions {
         stats.rows = rows.len();
         self.dirty_rows = rows;
         self.dirty_rows.clear();
-        let strips = std::mem::take(&mut self.dirty_ystrips);
-        for &u in &strips {
-            self.ystrip_dirty[u as usize] = false;
-            let faces = self.process_strip(1, u as usize % (ny + 1), u as usize / (ny + 1));
-            if faces > 0 {
-                self.changed_ystrips.push(u);
+        // y-strips (`j + (ny + 1) k`), then z-strips (`j + ny k`).
+        for s in 0..2 {
+            self.changed_strips[s].clear();
+            let width = if s == 0 { ny + 1 } else { ny };
+            let strips = std::mem::take(&mut self.dirty_strips[s]);
+            for &u in &strips {
+                self.strip_dirty[s][u as usize] = false;
+                let faces = self.process_strip(s + 1, u as usize % width, u as usize / width);
+                if faces > 0 {
+                    self.changed_strips[s].push(u);
+                }
+                stats.changed_faces += faces;
             }
-            stats.changed_faces += faces;
+            stats.strips += strips.len();
+            self.dirty_strips[s] = strips;
+            self.dirty_strips[s].clear();
         }
-        stats.strips = strips.len();
-        self.dirty_ystrips = strips;
-        self.dirty_ystrips.clear();
-        let strips = std::mem::take(&mut self.dirty_zstrips);
-        for &u in &strips {
-            self.zstrip_dirty[u as usize] = false;
-            let faces = self.process_strip(2, u as usize % ny, u as usize / ny);
-            if faces > 0 {
-                self.changed_zstrips.push(u);
-            }
-            stats.changed_faces += faces;
-        }
-        stats.strips += strips.len();
-        self.dirty_zstrips = strips;
-        self.dirty_zstrips.clear();
         stats
     }
 

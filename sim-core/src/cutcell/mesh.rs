@@ -152,16 +152,10 @@ impl ClosedMesh {
     }
 }
 
-/// `sum a . (b x c) / 6` over the triangles: the enclosed volume for outward normals.
+/// The enclosed volume for outward normals (the cavity's formula, whose normals point inwards,
+/// with the sign turned).
 pub(crate) fn signed_volume_m3(positions_m: &[[f32; 3]], triangles: &[[u32; 3]]) -> f64 {
-    let p = |i: u32| positions_m[i as usize].map(f64::from);
-    let mut six_v = 0.0;
-    for t in triangles {
-        let [a, b, c] = t.map(p);
-        six_v += a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-            + a[2] * (b[0] * c[1] - b[1] * c[0]);
-    }
-    six_v / 6.0
+    -crate::scene::surface::enclosed_volume_m3(positions_m, triangles)
 }
 
 /// [`check_closed_detailed`] as a message.

@@ -48,6 +48,33 @@ fn scaled(origin: &str, where_: Location, p: [f32; 3], scale: f64) -> Result<[f3
     }
 }
 
+/// Three coordinates after `keyword` on text line `line`.
+fn point<'a>(
+    tok: &mut impl Iterator<Item = &'a str>,
+    keyword: &str,
+    origin: &str,
+    line: usize,
+) -> Result<[f32; 3], MeshError> {
+    let mut p = [0.0f32; 3];
+    for (a, slot) in p.iter_mut().enumerate() {
+        let s = tok.next().ok_or_else(|| {
+            at(
+                origin,
+                Location::Line(line),
+                format!("`{keyword}` needs 3 coordinates, found {a}"),
+            )
+        })?;
+        *slot = s.parse::<f32>().map_err(|_| {
+            at(
+                origin,
+                Location::Line(line),
+                format!("`{s}` is not a number"),
+            )
+        })?;
+    }
+    Ok(p)
+}
+
 impl ClosedMesh {
     /// Reads an STL (`.stl`) or OBJ (`.obj`) file by its extension, any case.
     pub fn read(path: &Path, scale_m_per_unit: f64) -> Result<Self, MeshError> {
@@ -148,23 +175,7 @@ impl ClosedMesh {
             };
             match keyword {
                 "v" => {
-                    let mut p = [0.0f32; 3];
-                    for (a, slot) in p.iter_mut().enumerate() {
-                        let s = tok.next().ok_or_else(|| {
-                            at(
-                                origin,
-                                Location::Line(line),
-                                format!("`v` needs 3 coordinates, found {a}"),
-                            )
-                        })?;
-                        *slot = s.parse::<f32>().map_err(|_| {
-                            at(
-                                origin,
-                                Location::Line(line),
-                                format!("`{s}` is not a number"),
-                            )
-                        })?;
-                    }
+                    let p = point(&mut tok, "v", origin, line)?;
                     let p = scaled(origin, Location::Line(line), p, scale_m_per_unit)?;
                     obj_vertex.push(welder.index(p));
                 }
@@ -308,23 +319,7 @@ fn parse_ascii_stl(text: &str, origin: &str, scale: f64) -> Result<ClosedMesh, M
             (Expect::OuterLoop, "outer") => Expect::Vertex(0),
             (Expect::OuterLoop, _) => return Err(wrong("`outer loop`")),
             (Expect::Vertex(c), "vertex") => {
-                let mut p = [0.0f32; 3];
-                for (a, slot) in p.iter_mut().enumerate() {
-                    let s = tok.next().ok_or_else(|| {
-                        at(
-                            origin,
-                            Location::Line(line),
-                            format!("`vertex` needs 3 coordinates, found {a}"),
-                        )
-                    })?;
-                    *slot = s.parse::<f32>().map_err(|_| {
-                        at(
-                            origin,
-                            Location::Line(line),
-                            format!("`{s}` is not a number"),
-                        )
-                    })?;
-                }
+                let p = point(&mut tok, "vertex", origin, line)?;
                 tri[c] = welder.index(scaled(origin, Location::Line(line), p, scale)?);
                 if c == 2 {
                     Expect::EndLoop

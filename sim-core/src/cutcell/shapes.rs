@@ -11,6 +11,7 @@
 //! triangle's box stays small.
 
 use super::mesh::{ClosedMesh, Location, MeshError};
+use crate::mesh::{cross, dot, sub};
 use std::collections::HashMap;
 use std::f64::consts::PI;
 
@@ -223,19 +224,6 @@ pub fn cylinder(
     ClosedMesh::from_parts(ORIGIN, positions, triangles, &Location::Triangle)
 }
 
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
 fn volume(p: &[[f64; 3]], triangles: &[[u32; 3]]) -> f64 {
     triangles
         .iter()

@@ -510,3 +510,41 @@ pub fn cavity_layer(
         inside: hydrometra_sim::cutcell::Phase::Fluid,
     }
 }
+
+/// A layer of a mesh's triangles (flipped for `Inward`).
+pub fn layer(
+    name: &str,
+    mesh: &ClosedMesh,
+    orientation: Orientation,
+    inside: hydrometra_sim::cutcell::Phase,
+) -> hydrometra_sim::cutcell::Layer {
+    let triangles = match orientation {
+        Orientation::Outward => mesh.triangles().to_vec(),
+        Orientation::Inward => mesh
+            .triangles()
+            .iter()
+            .map(|t| [t[0], t[2], t[1]])
+            .collect(),
+    };
+    hydrometra_sim::cutcell::Layer {
+        name: name.into(),
+        triangles,
+        vertex_count: mesh.positions_m().len(),
+        orientation,
+        inside,
+    }
+}
+
+/// The cavity surface of `scene` replayed at each of `mmhg`, its positions.
+pub fn replayed(scene: &hydrometra_sim::scene::Scene, mmhg: &[f64]) -> Vec<Vec<[f32; 3]>> {
+    let mut surface = scene.cavity_surface().clone();
+    let compact = surface.compact_atlas(scene.atlas()).expect("compact atlas");
+    mmhg.iter()
+        .map(|&p| {
+            surface
+                .replay_compact(&compact, hydrometra_sim::units::mmhg_to_pa(p))
+                .expect("replay");
+            surface.positions_m().to_vec()
+        })
+        .collect()
+}
