@@ -205,9 +205,14 @@ fn small_cells_merge_into_their_largest_open_neighbour_and_conserve_volume() {
         let v = c.volume_fractions();
         let (exact, stabilised): (f64, f64) =
             (v.iter().sum(), c.stabilised_volume_fractions().iter().sum());
+        // Conserved but for the rounding dust the rule drops (at most round_off per cell).
+        let dust: f64 = v
+            .iter()
+            .filter(|&&x| x > 0.0 && x <= params.round_off_fraction)
+            .sum();
         assert!(
-            (exact - stabilised).abs() <= 1e-12 * exact,
-            "theta {theta}: {exact} vs {stabilised}"
+            (exact - dust - stabilised).abs() <= 1e-12 * exact,
+            "theta {theta}: {exact} - {dust} vs {stabilised}"
         );
         let [nx, ny, nz] = cells.dims;
         let (mut merged, mut unmerged) = (0, 0);
@@ -215,7 +220,7 @@ fn small_cells_merge_into_their_largest_open_neighbour_and_conserve_volume() {
             for j in 0..ny {
                 for i in 0..nx {
                     let n = cells.index(i, j, k);
-                    let small = v[n] > 0.0 && v[n] < theta;
+                    let small = v[n] > params.round_off_fraction && v[n] < theta;
                     // The neighbours, their shared faces.
                     let mut best: Option<(f64, usize)> = None;
                     let nb = [
@@ -235,7 +240,10 @@ fn small_cells_merge_into_their_largest_open_neighbour_and_conserve_volume() {
                         }),
                     ];
                     for (m, a) in nb.into_iter().flatten() {
-                        if v[m] >= theta && a > 0.0 && best.is_none_or(|b| a > b.0) {
+                        if v[m] >= theta
+                            && a > params.round_off_fraction
+                            && best.is_none_or(|b| a > b.0)
+                        {
                             best = Some((a, m));
                         }
                     }
@@ -258,7 +266,11 @@ fn small_cells_merge_into_their_largest_open_neighbour_and_conserve_volume() {
                         .filter(|(m, _)| c.merge_targets()[*m] == n as u32)
                         .map(|(m, _)| v[*m])
                         .sum();
-                    let own = if t == u32::MAX { v[n] } else { 0.0 };
+                    let own = if t == u32::MAX && v[n] > params.round_off_fraction {
+                        v[n]
+                    } else {
+                        0.0
+                    };
                     assert!((c.stabilised_volume_fractions()[n] - own - into).abs() < 1e-15);
                     if t == u32::MAX && v[n] >= theta {
                         assert!(c.stabilised_volume_fractions()[n] >= theta);

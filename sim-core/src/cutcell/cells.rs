@@ -46,16 +46,18 @@ pub struct SmallCellParams {
     /// Cells with a fluid volume fraction in `(0, this)` are merged into a neighbour
     /// ([`super::small`]).
     pub min_volume_fraction: f64,
-    /// Stabilised face fractions below this are 0, above `1 - this` are 1 (rounding on a face
-    /// the surface lies in).
-    pub face_round_off: f64,
+    /// Fractions within this of 0 or 1 are rounding (the exact fractions carry about 1e-16 of it
+    /// where a surface passes a cell's corner or lies in a face): in the stabilised output such
+    /// faces are 0 or 1, and such cells empty (their dust of volume, at most this much per cell,
+    /// is dropped rather than merged).
+    pub round_off_fraction: f64,
 }
 
 impl Default for SmallCellParams {
     fn default() -> Self {
         Self {
             min_volume_fraction: 0.1,
-            face_round_off: 1e-12,
+            round_off_fraction: 1e-12,
         }
     }
 }
@@ -143,10 +145,10 @@ impl CutCells {
                 params.min_volume_fraction
             )));
         }
-        if !(params.face_round_off >= 0.0 && params.face_round_off < 0.5) {
+        if !(params.round_off_fraction >= 0.0 && params.round_off_fraction < 0.5) {
             return Err(CutCellError::Box(format!(
-                "face_round_off = {}: expected a value in [0, 0.5)",
-                params.face_round_off
+                "round_off_fraction = {}: expected a value in [0, 0.5)",
+                params.round_off_fraction
             )));
         }
         let layers = layers
@@ -233,13 +235,14 @@ impl CutCells {
     pub fn merge_targets(&self) -> &[u32] {
         &self.targets
     }
-    /// Per cell, the fluid volume fraction after the small-cell rule: 0 for a merged cell, its
-    /// own plus what merged into it otherwise (may exceed 1). Sums to the exact fractions' sum.
+    /// Per cell, the fluid volume fraction after the small-cell rule: 0 for a merged cell or one
+    /// holding only rounding (at most `round_off_fraction`), its own plus what merged into it
+    /// otherwise (may exceed 1). Sums to the exact fractions' sum less that rounding.
     pub fn stabilised_volume_fractions(&self) -> &[f64] {
         &self.stabilised_volume
     }
-    /// The face fractions with rounding removed (below `face_round_off` 0, above `1 -
-    /// face_round_off` 1).
+    /// The face fractions with rounding removed (below `round_off_fraction` 0, above `1 -
+    /// round_off_fraction` 1).
     pub fn stabilised_face_fractions(&self, axis: usize) -> &[f64] {
         &self.stabilised_faces[axis]
     }
@@ -432,7 +435,7 @@ impl CutCells {
     /// Combines the `nx` faces normal to `axis` from `base`; whether any changed.
     fn combine_faces(&mut self, axis: usize, base: usize) -> bool {
         let nx = self.cells.dims[0];
-        let eps = self.params.face_round_off;
+        let eps = self.params.round_off_fraction;
         let mut changed = false;
         for f in base..base + nx {
             let (v, _) = self.combined(|l| l.face_fractions(axis)[f]);
@@ -452,7 +455,7 @@ impl CutCells {
         changed |= store(&mut self.faces[0][last], v);
         changed |= store(
             &mut self.stabilised_faces[0][last],
-            round_off(v, self.params.face_round_off),
+            round_off(v, self.params.round_off_fraction),
         );
         for n in nx * r..nx * (r + 1) {
             let (v, approx) = self.combined(|l| l.volume_fractions()[n]);
@@ -516,14 +519,22 @@ impl CutCells {
         let [nx, ny, _] = self.cells.dims;
         let (j, k) = (r % ny, r / ny);
         let theta = self.params.min_volume_fraction;
+        let dust = self.params.round_off_fraction;
         let mut changed = false;
         for i in 0..nx {
             let n = nx * r + i;
-            let t = small::target(&self.cells, &self.volume, &self.faces, theta, (i, j, k));
+            let t = small::target(
+                &self.cells,
+                &self.volume,
+                &self.faces,
+                theta,
+                dust,
+                (i, j, k),
+            );
             changed |= t != self.targets[n];
             self.targets[n] = t;
             let v = self.volume[n];
-            let state = if !(v > 0.0 && v < theta) {
+            let state = if !(v > dust && v < theta) {
                 NOT_SMALL
             } else if t == NO_TARGET {
                 UNMERGED
@@ -553,7 +564,13 @@ impl CutCells {
         let (j, k) = (r % ny, r / ny);
         let mut changed = false;
         for i in 0..nx {
-            let v = small::stabilised(&self.cells, &self.volume, &self.targets, (i, j, k));
+            let v = small::stabilised(
+                &self.cells,
+                &self.volume,
+                &self.targets,
+                self.params.round_off_fraction,
+                (i, j, k),
+            );
             changed |= store(&mut self.stabilised_volume[nx * r + i], v);
         }
         changed

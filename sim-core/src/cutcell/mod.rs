@@ -52,7 +52,9 @@
 //! at least that fraction with which it shares the largest open face; its volume moves there
 //! ([`CutCells::stabilised_volume_fractions`], which sum to the exact fractions; a merged cell
 //! reads 0, its target may exceed 1). A small cell without such a neighbour is left unmerged and
-//! counted. Stabilised faces drop rounding (below `face_round_off`, default 1e-12, to 0).
+//! counted. The stabilised fractions drop rounding: faces within
+//! [`SmallCellParams::round_off_fraction`] (default 1e-12) of 0 or 1 read 0 or 1, and a cell
+//! holding no more than that (dust where a surface passes a cell's corner) reads 0.
 //!
 //! Errors ([`CutCellError`], [`mesh::MeshError`]): a box without cells, a surface that is not
 //! closed or consistently oriented (naming the edge and triangles), positions that are too few or

@@ -1,8 +1,10 @@
-//! The small-cell rule: a cell with a fluid volume fraction in `(0, min_volume_fraction)` is merged
-//! into the face neighbour, among those with at least `min_volume_fraction`, with which it shares
-//! the largest open face (ties: the first of -x, +x, -y, +y, -z, +z); its volume moves there,
-//! so the stabilised volumes sum to the exact ones. A small cell with no such neighbour (a slit
-//! thinner than the threshold everywhere around it) stays as it is, unmerged.
+//! The small-cell rule: a cell with a fluid volume fraction in `(round_off, min_volume_fraction)`
+//! is merged into the face neighbour, among those with at least `min_volume_fraction`, with which
+//! it shares the largest open face (ties: the first of -x, +x, -y, +y, -z, +z); its volume moves
+//! there, so the stabilised volumes sum to the exact ones. A small cell with no such neighbour (a
+//! slit thinner than the threshold everywhere around it) stays as it is, unmerged. A cell holding
+//! no more than `round_off` (rounding where a surface passes a corner or lies in a face) is empty
+//! in the stabilised output, its dust dropped.
 
 use crate::scene::voxelize::VoxelBox;
 
@@ -41,14 +43,16 @@ pub(crate) fn target(
     volume: &[f64],
     faces: &[Vec<f64>; 3],
     min_volume_fraction: f64,
+    round_off: f64,
     (i, j, k): (usize, usize, usize),
 ) -> u32 {
     let v = volume[cells.index(i, j, k)];
-    if !(v > 0.0 && v < min_volume_fraction) {
+    if !(v > round_off && v < min_volume_fraction) {
         return NO_TARGET;
     }
     let mut best = NO_TARGET;
-    let mut best_area = 0.0;
+    // A face open by rounding alone does not connect.
+    let mut best_area = round_off;
     for (axis, m, f) in neighbours(cells, i, j, k).into_iter().flatten() {
         let a = faces[axis][f];
         if volume[m] >= min_volume_fraction && a > best_area {
@@ -59,18 +63,20 @@ pub(crate) fn target(
     best
 }
 
-/// The stabilised volume of cell `(i, j, k)`: its own unless merged away, plus that of every
-/// neighbour merged into it, in the rule's neighbour order.
+/// The stabilised volume of cell `(i, j, k)`: its own unless merged away or rounding, plus that
+/// of every neighbour merged into it, in the rule's neighbour order.
 #[inline]
 pub(crate) fn stabilised(
     cells: &VoxelBox,
     volume: &[f64],
     targets: &[u32],
+    round_off: f64,
     (i, j, k): (usize, usize, usize),
 ) -> f64 {
     let n = cells.index(i, j, k);
-    let mut v = if targets[n] == NO_TARGET {
-        volume[n]
+    let own = volume[n];
+    let mut v = if targets[n] == NO_TARGET && own > round_off {
+        own
     } else {
         0.0
     };
