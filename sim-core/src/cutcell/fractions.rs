@@ -339,7 +339,7 @@ impl SurfaceFractions {
         let rows_k = (r.lo[2].max(0), r.hi[2].min(nz - 1));
         let planes_j = ((r.lo[1] + 1).max(0), r.hi[1].min(ny));
         let planes_k = ((r.lo[2] + 1).max(0), r.hi[2].min(nz));
-        let (ny, _) = (ny as usize, nz as usize);
+        let ny = ny as usize;
         for k in rows_k.0..=rows_k.1 {
             for j in rows_j.0..=rows_j.1 {
                 mark_unit(
@@ -587,17 +587,17 @@ impl SurfaceFractions {
         (cells, faces)
     }
 
-    /// Recomputes the strip on plane `axis = p` (axis 1: y-strip `(p, q)`, across z in
-    /// `(q, q+1]`; axis 2: z-strip `(q, p)`, across y in `(q, q+1]`); returns how many faces
-    /// changed.
+    /// Recomputes the strip `(a, b)` normal to `axis`: for axis 1 the y-strip on plane `y = a`
+    /// across `z in (b, b+1]`, for axis 2 the z-strip on plane `z = b` across `y in (a, a+1]`;
+    /// returns how many faces changed.
     fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> usize {
         let [nx, ny, _] = self.cells.dims;
         let nxi = nx as i32;
         // (plane, the strip's row index across it, the axis across).
         let (plane, across, across_axis) = if axis == 1 { (a, b, 2) } else { (b, a, 1) };
         let (pi, ci) = (plane as i32, across as i32);
-        let (j, k) = (a, b);
-        self.gather(j, k, |r| {
+        // The bin of the unit's (j, k).
+        self.gather(a, b, |r| {
             r.lo[axis] < pi
                 && pi <= r.hi[axis]
                 && r.lo[across_axis] <= ci
