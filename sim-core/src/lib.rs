@@ -6,6 +6,7 @@
 
 pub mod anatomy;
 pub mod atlas;
+pub mod cutcell;
 pub mod fem;
 pub mod fluid;
 mod fork_join;
