@@ -84,10 +84,10 @@ fn parse() -> Args {
             other => usage(&format!("unknown flag {other}")),
         }
     }
-    if !(a.hours > 0.0) || a.out.as_os_str().is_empty() {
+    if a.hours.is_nan() || a.hours <= 0.0 || a.out.as_os_str().is_empty() {
         usage("--hours (> 0) and --out are required");
     }
-    if !(a.sample_s >= 1.0) {
+    if a.sample_s.is_nan() || a.sample_s < 1.0 {
         usage("--sample-s must be at least 1");
     }
     a
@@ -281,7 +281,9 @@ fn judge(args: &Args, rows: &[Row], status: Option<hydrometra_ipc::Status>, reco
             (f64::NAN, f64::NAN, f64::NAN)
         }
     };
-    if !((deficit_m3 - balance_m3).abs() <= 1e-9 * fluid_in_m3.max(1e-6)) {
+    // NaN (no record) fails as well.
+    let deficit_error_m3 = (deficit_m3 - balance_m3).abs();
+    if deficit_error_m3.is_nan() || deficit_error_m3 > 1e-9 * fluid_in_m3.max(1e-6) {
         failures.push(format!(
             "deficit {deficit_m3:e} m^3 against its balance {balance_m3:e} m^3"
         ));
