@@ -1,5 +1,6 @@
 //! The vortex and particle stages inside a scene (coarse anatomy: 8000 tets, 6 atlas levels).
 
+use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneDesc, SceneInputs, ScopePose, Stage, VoxelKind,
 };
@@ -32,9 +33,12 @@ rate_ml_min = 2.0
     let (assets, _) = prepare::load_or_build(&desc, None, &mut |_, _, _, _| {}).unwrap();
     let mut scene = Scene::new(desc, assets).unwrap();
     let mut rig = RigInputs {
-        valve_in_opening: 1.0,
-        valve_out_opening: 1.0,
-        pump_set_pressure_pa: 12_000.0,
+        hydraulic: HydraulicInputs {
+            valve_in_opening: 1.0,
+            valve_out_opening: 1.0,
+            pump_set_pressure_pa: 12_000.0,
+            perforation: false,
+        },
         ..RigInputs::default()
     };
     let dt = 1.0 / 60.0;

@@ -10,6 +10,7 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::harness::fork_join::set_guard;
+use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneError, SceneInputs,
@@ -195,15 +196,17 @@ fn rig_inputs(
     perforation: bool,
 ) -> RigInputs {
     RigInputs {
-        valve_in_opening: s.valve_in,
-        valve_out_opening: s.valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(s.pump_mmhg),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: s.valve_in,
+            valve_out_opening: s.valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(s.pump_mmhg),
+            perforation,
+        },
         scope: ScopePose {
             tip_position_m: s.tip_mm.map(|v| v * 1e-3),
             view_direction: s.view_dir,
             valid: s.pose_valid,
         },
-        perforation,
     }
 }
 
@@ -593,16 +596,18 @@ fn operating_point(f: usize, dt: f64, pump_mmhg: f64, valve_out: f64) -> RigInpu
     let t = f as f64 * dt;
     let sway = 1.5e-3 * (0.7 * t).sin();
     RigInputs {
-        valve_in_opening: 1.0,
-        valve_out_opening: valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: 1.0,
+            valve_out_opening: valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+            perforation: false,
+        },
         scope: ScopePose {
             // In the corpus of the default uterus (drivers/scenarios/default.toml, t = 45 s).
             tip_position_m: [sway, 0.0129, 0.0426],
             view_direction: [0.0, 0.5, 0.866],
             valid: true,
         },
-        perforation: false,
     }
 }
 

@@ -20,8 +20,8 @@
 //! let (assets, _) = prepare::load_or_build(&desc, None, &mut |_, _, _, _| {})?;
 //! let mut scene = Scene::new(desc, assets)?;
 //! let mut rig = RigInputs::default();
-//! rig.valve_in_opening = 1.0;
-//! rig.pump_set_pressure_pa = 12_000.0;
+//! rig.hydraulic.valve_in_opening = 1.0;
+//! rig.hydraulic.pump_set_pressure_pa = 12_000.0;
 //! for _ in 0..60 {
 //!     let report = scene.step(&SceneInputs { rig, hydraulics: HydraulicsInput::Own }, 1.0 / 60.0)?;
 //!     println!("{:.1} Pa, {} fluid cells", report.cavity_pressure_pa, report.fluid_cells);
@@ -33,11 +33,13 @@ pub mod clarity;
 pub mod counters;
 pub mod desc;
 pub mod dispersion;
+mod error;
 pub mod particles;
 mod ports;
 pub mod prepare;
 mod random;
 pub mod surface;
+mod types;
 mod vortex_potential;
 pub mod vortices;
 pub mod voxelize;
@@ -46,225 +48,24 @@ use std::time::Instant;
 
 pub use counters::{Counters, Stage, StageCounters};
 pub use desc::SceneDesc;
+pub use error::SceneError;
 pub use ports::{ScopeGeometry, ScopePart};
 pub use prepare::SceneAssets;
 pub use surface::CavitySurface;
+pub use types::{
+    CavityView, FluxBalance, HydraulicsInput, RigInputs, SceneInputs, ScopePose, StepReport,
+    VoxelKind, WholeBoxCheck,
+};
 pub use voxelize::{VoxelBox, Voxelizer};
 
-use crate::atlas::{Atlas, AtlasError};
+use crate::atlas::Atlas;
 use crate::fluid::{
-    range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, StepStats,
+    range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver,
 };
-use crate::hydraulics::{HydraulicInputs, HydraulicModel, HydraulicState, ParamsError};
+use crate::hydraulics::{HydraulicModel, HydraulicState};
 use ports::{unit, FACE_NORMALS};
+use types::BoundaryCell;
 use voxelize::{state, NO_TRIANGLE};
-
-/// Errors of the scene: every one names what failed and where.
-#[derive(Debug, thiserror::Error)]
-pub enum SceneError {
-    /// A scene file cannot be read.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The cause.
-        source: std::io::Error,
-    },
-    /// A scene description is invalid.
-    #[error("{origin}: {message}")]
-    Description {
-        /// The file or built-in name.
-        origin: String,
-        /// What is wrong, naming the key.
-        message: String,
-    },
-    /// No built-in scene of that name.
-    #[error("no built-in scene `{name}` (built-in: {}); a scene file path must exist, contain a `/` or end in .toml", known.join(", "))]
-    UnknownScene {
-        /// The name asked for.
-        name: String,
-        /// The built-in names.
-        known: Vec<&'static str>,
-    },
-    /// An atlas that does not belong to the scene's mesh.
-    #[error("{origin}: atlas does not match the scene: {message}")]
-    AtlasMismatch {
-        /// The atlas file.
-        origin: String,
-        /// What differs.
-        message: String,
-    },
-    /// An atlas error (corrupt file, bad argument).
-    #[error(transparent)]
-    Atlas(#[from] AtlasError),
-    /// Preparing the mesh or the atlas failed.
-    #[error("{0}")]
-    Prepare(String),
-    /// The hydraulic parameters are invalid.
-    #[error(transparent)]
-    Hydraulics(#[from] ParamsError),
-    /// The fluid solver refused its grid or parameters.
-    #[error(transparent)]
-    Fluid(#[from] FluidError),
-}
-
-/// The scope pose in the organ frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ScopePose {
-    /// Tip position, m.
-    pub tip_position_m: [f64; 3],
-    /// View direction (need not be unit; a zero or non-finite one keeps the last).
-    pub view_direction: [f64; 3],
-    /// False when the pose is unknown (the scope is then left where it was).
-    pub valid: bool,
-}
-
-impl Default for ScopePose {
-    fn default() -> Self {
-        Self {
-            tip_position_m: [0.0; 3],
-            view_direction: [0.0, 0.0, 1.0],
-            valid: false,
-        }
-    }
-}
-
-/// What the rig says, in SI units.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct RigInputs {
-    /// Inflow valve opening in [0, 1].
-    pub valve_in_opening: f64,
-    /// Outflow valve opening in [0, 1].
-    pub valve_out_opening: f64,
-    /// Pump set pressure, Pa.
-    pub pump_set_pressure_pa: f64,
-    /// The scope.
-    pub scope: ScopePose,
-    /// The case's perforation event.
-    pub perforation: bool,
-}
-
-/// Where the hydraulic state comes from.
-#[derive(Debug, Clone, Copy)]
-pub enum HydraulicsInput<'a> {
-    /// The scene steps its own model with the rig inputs (offline runner, tests).
-    Own,
-    /// Another loop steps the model; the scene follows this, its newest state.
-    External(&'a HydraulicState),
-}
-
-/// The inputs of one step.
-#[derive(Debug, Clone, Copy)]
-pub struct SceneInputs<'a> {
-    /// The rig.
-    pub rig: RigInputs,
-    /// The hydraulics.
-    pub hydraulics: HydraulicsInput<'a>,
-}
-
-/// What a voxel is, as published (the daemon maps it to the renderer contract).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-#[repr(u8)]
-pub enum VoxelKind {
-    /// Tissue or outside the cavity.
-    #[default]
-    Solid = 0,
-    /// Fluid.
-    Fluid = 1,
-    /// The inflow port at the scope tip.
-    Inflow = 2,
-    /// The outflow holes of the sheath.
-    Outflow = 3,
-    /// The scope's sheath.
-    Scope = 4,
-    /// The cavity wall (a moving solid: its velocity is the wall's).
-    Wall = 5,
-    /// The open external os (fluid leaks out or in freely, pressure 0).
-    Open = 6,
-}
-
-/// Volume fluxes over the last frame, m^3/s; positive into the cavity.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct FluxBalance {
-    /// The hydraulics' frame-mean inflow.
-    pub hydraulic_inflow_m3_per_s: f64,
-    /// The hydraulics' frame-mean outflow (positive out).
-    pub hydraulic_outflow_m3_per_s: f64,
-    /// The hydraulics' frame-mean losses: leak, absorption, perforation (positive out).
-    pub hydraulic_losses_m3_per_s: f64,
-    /// The hydraulics' cavity volume change over the frame, m^3/s.
-    pub hydraulic_dvdt_m3_per_s: f64,
-    /// Measured on the fluid's faces after the step: into the fluid through the inflow port.
-    pub fluid_inflow_m3_per_s: f64,
-    /// Measured: out of the fluid through the outflow holes (positive out).
-    pub fluid_outflow_m3_per_s: f64,
-    /// Measured: out of the fluid into the moving walls (positive out; equals dV/dt).
-    pub fluid_wall_m3_per_s: f64,
-    /// Measured: out through the open external os (positive out; carries the losses).
-    pub fluid_open_m3_per_s: f64,
-    /// Incompatible flux the projection removed from closed fluid regions (m^3/s).
-    pub closed_region_mismatch_m3_per_s: f64,
-    /// The wall velocities from the atlas (`dx/dp dp/dt`) were scaled by this to carry dV/dt
-    /// exactly over the staircase wall (1 when exact; 0 when no wall moved).
-    pub wall_flux_scale: f64,
-    /// The inflow could not enter the fluid (tip in tissue, or not in the grid).
-    pub inflow_blocked: bool,
-    /// Fraction of the inflow channel's area that opens on fluid on the grid, in [0, 1]: 1 when
-    /// the tip is clear of tissue (the port's area is the channel's, the jet leaves at
-    /// `Q_in / channel area`), less when tissue covers part of the tip (the cervical canal: the
-    /// jet leaves faster, at `Q_in / (fraction x channel area)`), 0 when nothing opens on fluid.
-    pub inflow_open_fraction: f64,
-    /// The jet speed the inflow port imposes, m/s: `Q_in / (inflow_open_fraction x channel
-    /// area)` (0 when blocked).
-    pub inflow_jet_speed_m_per_s: f64,
-    /// The outflow holes have no fluid around them.
-    pub outflow_blocked: bool,
-}
-
-/// The report of one step.
-#[derive(Debug, Clone, Default)]
-pub struct StepReport {
-    /// Steps so far.
-    pub frame: u64,
-    /// Scene time, s.
-    pub time_s: f64,
-    /// Cavity pressure the surface was replayed at, Pa.
-    pub cavity_pressure_pa: f64,
-    /// The hydraulics' cavity volume, m^3.
-    pub cavity_volume_m3: f64,
-    /// Volume enclosed by the replayed surface, m^3.
-    pub surface_volume_m3: f64,
-    /// Fluid cells now.
-    pub fluid_cells: usize,
-    /// Volume of the fluid cells, m^3 (the conservative voxelization's volume).
-    pub grid_fluid_volume_m3: f64,
-    /// Whether the fluid stage idled for too few fluid cells.
-    pub fluid_idle: bool,
-    /// Cells whose label changed in this step.
-    pub relabelled_cells: usize,
-    /// The fluid step's own counters (when it ran).
-    pub fluid: Option<StepStats>,
-    /// The fluxes.
-    pub flux: FluxBalance,
-    /// Per-stage counters (cumulative).
-    pub counters: Counters,
-}
-
-/// The cavity surface as published: closed (the first `cap_triangles` close the external os),
-/// normals into the fluid.
-#[derive(Debug, Clone, Copy)]
-pub struct CavityView<'a> {
-    /// Triangles (three vertex indices each).
-    pub triangles: &'a [[u32; 3]],
-    /// Vertex positions, m.
-    pub positions_m: &'a [[f32; 3]],
-    /// Changes when the triangles change.
-    pub topology_revision: u64,
-    /// The first `cap_triangles` close the external os.
-    pub cap_triangles: usize,
-    /// The pressure the positions belong to, Pa.
-    pub pressure_pa: f64,
-}
 
 /// The flow field on the voxel grid.
 pub struct FlowField<'a> {
@@ -348,16 +149,6 @@ fn mark(h: &HydraulicState) -> HydraulicMark {
     }
 }
 
-/// One port or wall cell and its faces on fluid.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct BoundaryCell {
-    cell: u32,
-    /// Its `(i, j, k)` (what the solver's setters take), kept to spare a division per use.
-    at: [u32; 3],
-    /// Bit f set: face f (0..6) borders fluid.
-    faces: u8,
-}
-
 /// Replaces the entries of `list` (by cell index) in the rows `rows` (sorted) with `fresh` (the
 /// rows' new entries, by cell index), through the scratch `next`: the rows' runs are found by
 /// bisection and the rest is copied in runs.
@@ -381,27 +172,6 @@ fn splice_rows(
     }
     next.extend_from_slice(&list[from..]);
     std::mem::swap(list, next);
-}
-
-/// What [`Scene::relabel_whole_box`] changed: nothing (all zero, all false) when the row-
-/// incremental compositions before it were complete.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct WholeBoxCheck {
-    /// Solver labels the whole-box pass changed.
-    pub labels_changed: usize,
-    /// Published kinds it changed.
-    pub kinds_changed: usize,
-    /// Whether it changed the port or wall cell lists, their fluid faces or the inflow rim.
-    pub lists_changed: bool,
-    /// Whether it changed the count of fluid cells.
-    pub fluid_cells_changed: bool,
-}
-
-impl WholeBoxCheck {
-    /// Nothing changed.
-    pub fn is_clean(&self) -> bool {
-        *self == Self::default()
-    }
 }
 
 /// Adds `row` to `rows` unless `marks` says it is there already.
@@ -690,17 +460,11 @@ impl Scene {
         let t = Instant::now();
         match inputs.hydraulics {
             HydraulicsInput::Own => {
-                let rig = &inputs.rig;
-                let hin = HydraulicInputs {
-                    valve_in_opening: rig.valve_in_opening,
-                    valve_out_opening: rig.valve_out_opening,
-                    pump_set_pressure_pa: rig.pump_set_pressure_pa,
-                    perforation: rig.perforation,
-                };
+                let hin = &inputs.rig.hydraulic;
                 // The daemon's 1 kHz tick: the same substeps offline.
                 let n = (dt_s / 1e-3).ceil().max(1.0) as usize;
                 for _ in 0..n {
-                    self.hydraulics.step(&hin, dt_s / n as f64);
+                    self.hydraulics.step(hin, dt_s / n as f64);
                 }
                 self.hydraulic_state = *self.hydraulics.state();
                 let c = self.report.counters.get_mut(Stage::Hydraulics);

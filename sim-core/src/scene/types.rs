@@ -1,0 +1,211 @@
+//! The records the scene's stages pass each other and report: the rig's inputs, the voxel kinds,
+//! the flux balance, the step report and the published cavity. A leaf: it imports no stage, so
+//! every stage (and [`super::Scene`]) can use it.
+
+use super::counters::Counters;
+use crate::fluid::StepStats;
+use crate::hydraulics::{HydraulicInputs, HydraulicState};
+
+/// The scope pose in the organ frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScopePose {
+    /// Tip position, m.
+    pub tip_position_m: [f64; 3],
+    /// View direction (need not be unit; a zero or non-finite one keeps the last).
+    pub view_direction: [f64; 3],
+    /// False when the pose is unknown (the scope is then left where it was).
+    pub valid: bool,
+}
+
+impl Default for ScopePose {
+    fn default() -> Self {
+        Self {
+            tip_position_m: [0.0; 3],
+            view_direction: [0.0, 0.0, 1.0],
+            valid: false,
+        }
+    }
+}
+
+/// What the rig says, in SI units: the one record from the driver to the scene. The valves, the
+/// pump and the case's perforation are the hydraulics' own inputs ([`HydraulicInputs`], the record
+/// the hydraulic model steps on), the scope's pose is the scene's.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RigInputs {
+    /// Valves, pump and the perforation event.
+    pub hydraulic: HydraulicInputs,
+    /// The scope.
+    pub scope: ScopePose,
+}
+
+/// Where the hydraulic state comes from.
+#[derive(Debug, Clone, Copy)]
+pub enum HydraulicsInput<'a> {
+    /// The scene steps its own model with the rig inputs (offline runner, tests).
+    Own,
+    /// Another loop steps the model; the scene follows this, its newest state.
+    External(&'a HydraulicState),
+}
+
+/// The inputs of one step.
+#[derive(Debug, Clone, Copy)]
+pub struct SceneInputs<'a> {
+    /// The rig.
+    pub rig: RigInputs,
+    /// The hydraulics.
+    pub hydraulics: HydraulicsInput<'a>,
+}
+
+/// What a voxel is, as published (the daemon maps it to the renderer contract).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[repr(u8)]
+pub enum VoxelKind {
+    /// Tissue or outside the cavity.
+    #[default]
+    Solid = 0,
+    /// Fluid.
+    Fluid = 1,
+    /// The inflow port at the scope tip.
+    Inflow = 2,
+    /// The outflow holes of the sheath.
+    Outflow = 3,
+    /// The scope's sheath.
+    Scope = 4,
+    /// The cavity wall (a moving solid: its velocity is the wall's).
+    Wall = 5,
+    /// The open external os (fluid leaks out or in freely, pressure 0).
+    Open = 6,
+}
+
+/// Volume fluxes over the last frame, m^3/s; positive into the cavity.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FluxBalance {
+    /// The hydraulics' frame-mean inflow.
+    pub hydraulic_inflow_m3_per_s: f64,
+    /// The hydraulics' frame-mean outflow (positive out).
+    pub hydraulic_outflow_m3_per_s: f64,
+    /// The hydraulics' frame-mean losses: leak, absorption, perforation (positive out).
+    pub hydraulic_losses_m3_per_s: f64,
+    /// The hydraulics' cavity volume change over the frame, m^3/s.
+    pub hydraulic_dvdt_m3_per_s: f64,
+    /// Measured on the fluid's faces after the step: into the fluid through the inflow port.
+    pub fluid_inflow_m3_per_s: f64,
+    /// Measured: out of the fluid through the outflow holes (positive out).
+    pub fluid_outflow_m3_per_s: f64,
+    /// Measured: out of the fluid into the moving walls (positive out; equals dV/dt).
+    pub fluid_wall_m3_per_s: f64,
+    /// Measured: out through the open external os (positive out; carries the losses).
+    pub fluid_open_m3_per_s: f64,
+    /// Incompatible flux the projection removed from closed fluid regions (m^3/s).
+    pub closed_region_mismatch_m3_per_s: f64,
+    /// The wall velocities from the atlas (`dx/dp dp/dt`) were scaled by this to carry dV/dt
+    /// exactly over the staircase wall (1 when exact; 0 when no wall moved).
+    pub wall_flux_scale: f64,
+    /// The inflow could not enter the fluid (tip in tissue, or not in the grid).
+    pub inflow_blocked: bool,
+    /// Fraction of the inflow channel's area that opens on fluid on the grid, in [0, 1]: 1 when
+    /// the tip is clear of tissue (the port's area is the channel's, the jet leaves at
+    /// `Q_in / channel area`), less when tissue covers part of the tip (the cervical canal: the
+    /// jet leaves faster, at `Q_in / (fraction x channel area)`), 0 when nothing opens on fluid.
+    pub inflow_open_fraction: f64,
+    /// The jet speed the inflow port imposes, m/s: `Q_in / (inflow_open_fraction x channel
+    /// area)` (0 when blocked).
+    pub inflow_jet_speed_m_per_s: f64,
+    /// The outflow holes have no fluid around them.
+    pub outflow_blocked: bool,
+}
+
+/// The report of one step.
+#[derive(Debug, Clone, Default)]
+pub struct StepReport {
+    /// Steps so far.
+    pub frame: u64,
+    /// Scene time, s.
+    pub time_s: f64,
+    /// Cavity pressure the surface was replayed at, Pa.
+    pub cavity_pressure_pa: f64,
+    /// The hydraulics' cavity volume, m^3.
+    pub cavity_volume_m3: f64,
+    /// Volume enclosed by the replayed surface, m^3.
+    pub surface_volume_m3: f64,
+    /// Fluid cells now.
+    pub fluid_cells: usize,
+    /// Volume of the fluid cells, m^3 (the conservative voxelization's volume).
+    pub grid_fluid_volume_m3: f64,
+    /// Whether the fluid stage idled for too few fluid cells.
+    pub fluid_idle: bool,
+    /// Cells whose label changed in this step.
+    pub relabelled_cells: usize,
+    /// The fluid step's own counters (when it ran).
+    pub fluid: Option<StepStats>,
+    /// The fluxes.
+    pub flux: FluxBalance,
+    /// Per-stage counters (cumulative).
+    pub counters: Counters,
+}
+
+/// The cavity surface as published: closed (the first `cap_triangles` close the external os),
+/// normals into the fluid.
+#[derive(Debug, Clone, Copy)]
+pub struct CavityView<'a> {
+    /// Triangles (three vertex indices each).
+    pub triangles: &'a [[u32; 3]],
+    /// Vertex positions, m.
+    pub positions_m: &'a [[f32; 3]],
+    /// Changes when the triangles change.
+    pub topology_revision: u64,
+    /// The first `cap_triangles` close the external os.
+    pub cap_triangles: usize,
+    /// The pressure the positions belong to, Pa.
+    pub pressure_pa: f64,
+}
+
+/// One port or wall cell and its faces on fluid.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BoundaryCell {
+    /// Its linear index (x fastest).
+    pub cell: u32,
+    /// Its `(i, j, k)` (what the solver's setters take), kept to spare a division per use.
+    pub at: [u32; 3],
+    /// Bit f set: face f (0..6) borders fluid.
+    pub faces: u8,
+}
+
+/// What [`super::Scene::relabel_whole_box`] changed: nothing (all zero, all false) when the row-
+/// incremental compositions before it were complete.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct WholeBoxCheck {
+    /// Solver labels the whole-box pass changed.
+    pub labels_changed: usize,
+    /// Published kinds it changed.
+    pub kinds_changed: usize,
+    /// Whether it changed the port or wall cell lists, their fluid faces or the inflow rim.
+    pub lists_changed: bool,
+    /// Whether it changed the count of fluid cells.
+    pub fluid_cells_changed: bool,
+}
+
+impl WholeBoxCheck {
+    /// Nothing changed.
+    pub fn is_clean(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
+/// The hydraulics' flows over the last frame (frame means from the cumulative totals): what the
+/// fluid's ports and moving walls must carry.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct FrameFlows {
+    /// Inflow through the scope's channel, m^3/s.
+    pub inflow_m3_per_s: f64,
+    /// Outflow through the sheath's holes (positive out), m^3/s.
+    pub outflow_m3_per_s: f64,
+    /// Leak, absorption and perforation (positive out), m^3/s.
+    pub losses_m3_per_s: f64,
+    /// The cavity volume's change, m^3/s.
+    pub dvdt_m3_per_s: f64,
+    /// The cavity pressure's change, Pa/s (the wall velocity is `dx/dp` times it).
+    pub dpdt_pa_per_s: f64,
+    /// The cavity volume at the frame's end, m^3.
+    pub volume_m3: f64,
+}
