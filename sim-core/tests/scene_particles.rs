@@ -117,8 +117,7 @@ rate_ml_min = 2.0
     assert!(p
         .vtp_string()
         .contains(&format!("NumberOfPoints=\"{}\"", counts.alive)));
-    let t =
-        hydrometra_sim::scene::particles::Particles::time_to_traverse(&scene, 1e-3, 2.0).unwrap();
+    let t = scene.flow().unwrap().time_to_traverse(1e-3, 2.0);
     // A 4 x 4 sub-grid on each of the port's fluid faces.
     let per_face = hydrometra_sim::scene::particles::TRAVERSE_SUBGRID.pow(2);
     assert!(

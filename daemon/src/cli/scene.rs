@@ -836,7 +836,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
                 dt,
             )?;
         }
-        if let Some(t) = Particles::time_to_traverse(&run.scene, 1e-3, a.traverse_max_s) {
+        if let Some(t) = (run.scene.flow()).map(|f| f.time_to_traverse(1e-3, a.traverse_max_s)) {
             row.traverse_released = t.released;
             row.traverse_reached = t.reached;
             row.traverse_open = t.open;

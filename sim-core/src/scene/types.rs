@@ -209,3 +209,51 @@ pub struct FrameFlows {
     /// The cavity volume at the frame's end, m^3.
     pub volume_m3: f64,
 }
+
+/// A box of cubic cells: cell `(i, j, k)` spans `origin + h [i, i+1) x [j, j+1) x [k, k+1)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VoxelBox {
+    /// Cells per axis.
+    pub dims: [usize; 3],
+    /// Lower corner of cell (0, 0, 0), m.
+    pub origin_m: [f64; 3],
+    /// Cell edge, m.
+    pub spacing_m: f64,
+}
+
+impl VoxelBox {
+    /// Number of cells.
+    pub fn cell_count(&self) -> usize {
+        self.dims[0] * self.dims[1] * self.dims[2]
+    }
+    /// Linear index, x fastest.
+    #[inline]
+    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
+        i + self.dims[0] * (j + self.dims[1] * k)
+    }
+    /// Centre of a cell, m.
+    pub fn centre_m(&self, i: usize, j: usize, k: usize) -> [f64; 3] {
+        let c = [i, j, k];
+        std::array::from_fn(|a| self.origin_m[a] + (c[a] as f64 + 0.5) * self.spacing_m)
+    }
+    /// Centre of the cell with linear index `n`, m.
+    pub fn centre_m_of(&self, n: u32) -> [f64; 3] {
+        let n = n as usize;
+        let [nx, ny, _] = self.dims;
+        self.centre_m(n % nx, (n / nx) % ny, n / (nx * ny))
+    }
+}
+
+/// The inflow port as the particles see it: its cells and their faces on fluid, on the grid
+/// `cells`, with the scope's view direction (`None` before a pose) and the channel's area.
+#[derive(Debug, Clone, Copy)]
+pub struct InflowPort<'a> {
+    /// The port's cells, by cell index.
+    pub cells: &'a [BoundaryCell],
+    /// The grid they lie on.
+    pub grid: VoxelBox,
+    /// The scope's unit view direction, if it was ever placed.
+    pub direction: Option<[f64; 3]>,
+    /// The inflow channel's area, m^2.
+    pub channel_area_m2: f64,
+}

@@ -1,0 +1,164 @@
+//! Blood, bubble and fragment particles advected by the flow (`docs/particles.md`).
+//!
+//! Particles live in fixed-capacity arrays (the budget, allocated once); positions are kept in
+//! grid units (cell `(i, j, k)` spans `[i, i+1) x [j, j+1) x [k, k+1)`). Each step builds the
+//! cell-centred velocity `v = v_f (+ the vortex overlay)` once, then moves every particle with
+//! the explicit midpoint rule (RK2) in as many substeps as keep it under one cell per substep
+//! (`max_substeps` at most), plus its slip: the velocity relative to the fluid relaxes
+//! exponentially (time `tau`) to the terminal settling or rise velocity along gravity, integrated
+//! exactly over the step. A substep that ends in a non-fluid cell slides (one axis reverted) or
+//! stays; a particle entering an outflow-hole cell or the open os leaves the cavity.
+//!
+//! The files: `spec` (the `[particles]` table), `slip` (drag and settling), `system` (storage
+//! and the step), `kernel` and `sweep` (the per-particle step and its sweep over a task; `block8`
+//! its eight-lane twin, `lane` the four-lane operations), `inputs` (what the stage reads),
+//! `sources` (classes and emission),
+//! `output` (VTK), `traverse` (the time to traverse), and here the scene's stage.
+
+#[cfg(target_arch = "x86_64")]
+mod block8;
+mod inputs;
+mod kernel;
+mod lane;
+mod output;
+mod slip;
+mod sources;
+mod spec;
+mod sweep;
+mod system;
+mod traverse;
+
+use std::time::Instant;
+
+pub use inputs::ParticleInputs;
+pub use output::{particles_xml, VtkFlavour};
+pub use slip::{drag_coefficient, terminal_slip, GRAVITY_M_S2};
+pub use spec::{
+    BleedingSourceSpec, BloodSpec, BubbleSpec, FragmentSpec, GravitySpec, ParticleKind,
+    ParticleSpec,
+};
+pub use system::{kinds_from_labels, ParticleClass, ParticleCounts, ParticleSystem};
+pub use traverse::{
+    inflow_face_points, time_to_traverse, Traverse, TRAVERSE_OFFSET_VOXELS, TRAVERSE_SUBGRID,
+};
+
+use super::clarity::ClarityTracker;
+use super::counters::StageCounters;
+use super::dispersion;
+use sources::Sources;
+use system::WALK_STREAM;
+
+/// The particle stage of a scene.
+#[derive(Debug, Clone, Default)]
+pub struct Particles {
+    spec: ParticleSpec,
+    system: Option<ParticleSystem>,
+    sources: Option<Sources>,
+    clarity: Option<f64>,
+    tracker: ClarityTracker,
+}
+
+impl Particles {
+    /// The stage for a scene's `[particles]` table.
+    pub fn new(spec: ParticleSpec) -> Self {
+        let tracker = ClarityTracker::new(spec.view.clear_threshold);
+        Self {
+            spec,
+            tracker,
+            ..Self::default()
+        }
+    }
+    /// The particles, once the stage has run.
+    pub fn system(&self) -> Option<&ParticleSystem> {
+        self.system.as_ref()
+    }
+    /// The clarity of the scope's view after the last step (1 clear, 0 opaque); `None` without a
+    /// scope.
+    pub fn clarity(&self) -> Option<f64> {
+        self.clarity
+    }
+    /// The clarity's history: time obscured, time to clear after the last bleed.
+    pub fn tracker(&self) -> &ClarityTracker {
+        &self.tracker
+    }
+    /// The particles as VTK PolyData (a document with no points before the first step).
+    pub fn vtp_string(&self) -> String {
+        particles_xml(self.system.as_ref(), VtkFlavour::PolyData)
+    }
+    /// The particles as a VTK UnstructuredGrid of vertex cells (no points before the first
+    /// step); what `hydrometra scene run` writes into its ParaView series.
+    pub fn vtu_string(&self) -> String {
+        particles_xml(self.system.as_ref(), VtkFlavour::UnstructuredGrid)
+    }
+
+    /// Emits this step's particles, advances every particle by `dt_s` in the flow and takes the
+    /// clarity of the scope's view; counts a run, or a skip when the scene has no source and no
+    /// particle is alive.
+    pub fn step(&mut self, inputs: &ParticleInputs<'_>, dt_s: f64, counters: &mut StageCounters) {
+        let t = Instant::now();
+        if self.advance(inputs, dt_s) {
+            counters.ran_since(t);
+        } else {
+            counters.skipped();
+        }
+    }
+
+    /// [`Particles::step`]'s work; returns whether it ran.
+    fn advance(&mut self, inputs: &ParticleInputs<'_>, dt_s: f64) -> bool {
+        let alive = self.system.as_ref().is_some_and(|s| !s.is_empty());
+        if !self.spec.emits() && !alive {
+            return false;
+        }
+        if self.system.is_none() {
+            let Some((system, sources)) = self.init(inputs) else {
+                return false;
+            };
+            (self.system, self.sources) = (Some(system), Some(sources));
+        }
+        let (Some(sys), Some(sources)) = (self.system.as_mut(), self.sources.as_mut()) else {
+            return false;
+        };
+        let t = inputs.time_s;
+        sources.emit(&self.spec, sys, inputs, t, dt_s);
+        let view = inputs.scope.map(|sc| self.spec.view.cone(sc.tip_m, sc.dir));
+        sys.set_eddy_diffusivity(if self.spec.eddy_dispersion {
+            dispersion::jet_eddy_diffusivity_m2_s(
+                inputs.inflow_m3_per_s,
+                inputs.inflow.channel_area_m2,
+            )
+        } else {
+            0.0
+        });
+        self.clarity = sys.step(
+            inputs.solver,
+            inputs.kinds,
+            inputs.overlay,
+            dt_s,
+            view.as_ref(),
+        );
+        let bleed_end = self
+            .spec
+            .blood
+            .sources
+            .iter()
+            .map(|s| s.onset_s + s.duration_s)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if let Some(c) = self.clarity {
+            self.tracker
+                .update(t, c, bleed_end.is_finite().then_some(bleed_end));
+        }
+        true
+    }
+
+    /// The system on the solver's grid with the spec's classes, and the sources placed on the
+    /// cavity.
+    fn init(&self, inputs: &ParticleInputs<'_>) -> Option<(ParticleSystem, Sources)> {
+        let spec = &self.spec;
+        let g = spec.gravity.unit().ok()?;
+        let mut sys = ParticleSystem::new(inputs.solver.grid(), spec.budget, spec.max_substeps, g);
+        let fluid = (spec.fluid_density_kg_m3, spec.fluid_viscosity_pa_s);
+        let sources = Sources::new(spec, &mut sys, &inputs.cavity, fluid)?;
+        sys.seed_walk(spec.seed ^ WALK_STREAM);
+        Some((sys, sources))
+    }
+}
