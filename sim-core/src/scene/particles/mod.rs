@@ -32,7 +32,7 @@ use std::time::Instant;
 
 pub use inputs::ParticleInputs;
 pub use output::{particles_xml, VtkFlavour};
-pub use slip::{drag_coefficient, terminal_slip, GRAVITY_M_S2};
+pub use slip::{drag_coefficient, terminal_slip, SlipFluid, GRAVITY_M_S2};
 pub use spec::{
     BleedingSourceSpec, BloodSpec, BubbleSpec, FragmentSpec, GravitySpec, ParticleKind,
     ParticleSpec,
@@ -150,15 +150,99 @@ impl Particles {
         true
     }
 
-    /// The system on the solver's grid with the spec's classes, and the sources placed on the
-    /// cavity.
+    /// The system on the solver's grid with the spec's classes (slipping in the solver's fluid),
+    /// and the sources placed on the cavity.
     fn init(&self, inputs: &ParticleInputs<'_>) -> Option<(ParticleSystem, Sources)> {
         let spec = &self.spec;
         let g = spec.gravity.unit().ok()?;
         let mut sys = ParticleSystem::new(inputs.solver.grid(), spec.budget, spec.max_substeps, g);
-        let fluid = (spec.fluid_density_kg_m3, spec.fluid_viscosity_pa_s);
+        let fluid = SlipFluid::of(inputs.solver.params());
         let sources = Sources::new(spec, &mut sys, &inputs.cavity, fluid)?;
         sys.seed_walk(spec.seed ^ WALK_STREAM);
         Some((sys, sources))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::fluid::{FluidGrid, FluidParams, FluidSolver};
+    use crate::scene::{CavityView, InflowPort, VoxelBox, VoxelKind};
+
+    /// The particles settle in the fluid the solver simulates: every class's terminal slip and
+    /// relaxation time come from the solver's density and viscosity (kinematic times density),
+    /// whatever they are, and in the Stokes regime of the blood droplet they are Stokes's law,
+    /// `w = (rho_p - rho_f) g d^2 / (18 mu)`.
+    #[test]
+    fn particles_slip_in_the_fluid_solvers_density_and_viscosity() {
+        let grid = VoxelBox {
+            dims: [4, 4, 4],
+            origin_m: [0.0; 3],
+            spacing_m: 1e-3,
+        };
+        let kinds = vec![VoxelKind::Solid; grid.cell_count()];
+        let mut spec = ParticleSpec::default();
+        spec.bubbles.per_ml = 1.0; // a source, so the stage sets up its classes
+        let mut settling = Vec::new();
+        for (rho_f, nu) in [(1000.0, 1e-6), (1030.0, 3e-6)] {
+            let params = FluidParams {
+                density_kg_m3: rho_f,
+                viscosity_m2_s: nu,
+                ..FluidParams::default()
+            };
+            let fluid_grid = FluidGrid::new(grid.dims, grid.spacing_m, grid.origin_m, [false; 3])
+                .expect("a valid grid");
+            let solver = FluidSolver::new(fluid_grid, params).expect("valid parameters");
+            let inputs = ParticleInputs {
+                time_s: 0.01,
+                solver: &solver,
+                grid,
+                kinds: &kinds,
+                cavity: CavityView {
+                    triangles: &[],
+                    positions_m: &[],
+                    topology_revision: 1,
+                    cap_triangles: 0,
+                    pressure_pa: 0.0,
+                },
+                inflow: InflowPort {
+                    cells: &[],
+                    grid,
+                    direction: None,
+                    channel_area_m2: 1e-6,
+                },
+                scope: None,
+                overlay: None,
+                inflow_m3_per_s: 0.0,
+            };
+            let mut stage = Particles::new(spec.clone());
+            stage.step(&inputs, 0.01, &mut StageCounters::default());
+            let classes = stage.system().expect("the stage ran").classes();
+            let mu = rho_f * nu;
+            let b = &spec.blood;
+            let d = b.droplet_diameter_mm * 1e-3;
+            let blood = classes[0];
+            assert_eq!(blood.kind, ParticleKind::Blood);
+            assert_eq!(
+                (blood.settle_m_s, blood.tau_s),
+                terminal_slip(d, b.density_kg_m3, rho_f, mu)
+            );
+            let stokes = (b.density_kg_m3 - rho_f) * GRAVITY_M_S2 * d * d / (18.0 * mu);
+            assert!(
+                (blood.settle_m_s - stokes).abs() <= 1e-3 * stokes.abs(),
+                "{} vs Stokes {stokes}",
+                blood.settle_m_s
+            );
+            // The bubbles too (the first size class).
+            let bs = &spec.bubbles;
+            let d = (bs.min_diameter_mm + (bs.max_diameter_mm - bs.min_diameter_mm) / 16.0) * 1e-3;
+            assert_eq!(
+                (classes[1].settle_m_s, classes[1].tau_s),
+                terminal_slip(d, bs.density_kg_m3, rho_f, mu)
+            );
+            settling.push(blood.settle_m_s);
+        }
+        // Three times the viscosity and a denser fluid: the droplet sinks far slower.
+        assert!(settling[1] < 0.5 * settling[0], "{settling:?}");
     }
 }

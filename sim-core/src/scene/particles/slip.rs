@@ -1,8 +1,36 @@
 //! The slip of a particle relative to the fluid: a sphere's drag law and its terminal settling
 //! or rise velocity along gravity, with the time its slip relaxes in.
 
+use crate::fluid::FluidParams;
+
 /// Gravity's magnitude, m/s^2.
 pub const GRAVITY_M_S2: f64 = 9.81;
+
+/// The fluid a particle slips in: the distension fluid the solver simulates (one set of fluid
+/// properties for the flow and the particles).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SlipFluid {
+    /// Density, kg/m^3.
+    pub density_kg_m3: f64,
+    /// Dynamic viscosity, Pa s.
+    pub viscosity_pa_s: f64,
+}
+
+impl SlipFluid {
+    /// The fluid of the solver's parameters: its density, and its kinematic viscosity times
+    /// that density.
+    pub fn of(params: &FluidParams) -> Self {
+        Self {
+            density_kg_m3: params.density_kg_m3,
+            viscosity_pa_s: params.density_kg_m3 * params.viscosity_m2_s,
+        }
+    }
+
+    /// [`terminal_slip`] of a sphere of diameter `d_m` and density `rho_p` in this fluid.
+    pub fn terminal_slip(&self, d_m: f64, rho_p: f64) -> (f64, f64) {
+        terminal_slip(d_m, rho_p, self.density_kg_m3, self.viscosity_pa_s)
+    }
+}
 
 /// Drag coefficient of a sphere (Schiller-Naumann, 24/Re (1 + 0.15 Re^0.687) up to Re = 1000,
 /// 0.44 above).

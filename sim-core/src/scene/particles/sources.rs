@@ -3,7 +3,7 @@
 //! (blood from the wall, bubbles beside the inflow port, fragment releases).
 
 use super::inputs::ParticleInputs;
-use super::slip::terminal_slip;
+use super::slip::SlipFluid;
 use super::spec::{BleedingSourceSpec, ParticleKind, ParticleSpec, BUBBLE_CLASSES};
 use super::system::{ParticleClass, ParticleSystem};
 use crate::mesh::cross;
@@ -37,18 +37,17 @@ pub(super) struct Sources {
 }
 
 impl Sources {
-    /// Adds the classes of `spec` to `sys` (their slip in a fluid of density `rho_f` and dynamic
-    /// viscosity `mu`) and places the bleeding sources on the nearest vertex of the cavity's wall;
-    /// `None` when the classes do not fit.
+    /// Adds the classes of `spec` to `sys` (their slip in `fluid`) and places the bleeding sources
+    /// on the nearest vertex of the cavity's wall; `None` when the classes do not fit.
     pub fn new(
         spec: &ParticleSpec,
         sys: &mut ParticleSystem,
         cavity: &CavityView<'_>,
-        (rf, mu): (f64, f64),
+        fluid: SlipFluid,
     ) -> Option<Self> {
         let b = &spec.blood;
         let d = b.droplet_diameter_mm * 1e-3;
-        let (settle, tau) = terminal_slip(d, b.density_kg_m3, rf, mu);
+        let (settle, tau) = fluid.terminal_slip(d, b.density_kg_m3);
         let blood_class = sys.add_class(ParticleClass {
             kind: ParticleKind::Blood,
             settle_m_s: settle,
@@ -61,7 +60,7 @@ impl Sources {
         for c in 0..BUBBLE_CLASSES {
             let f = (c as f64 + 0.5) / BUBBLE_CLASSES as f64;
             let d = (bs.min_diameter_mm + f * (bs.max_diameter_mm - bs.min_diameter_mm)) * 1e-3;
-            let (settle, tau) = terminal_slip(d, bs.density_kg_m3, rf, mu);
+            let (settle, tau) = fluid.terminal_slip(d, bs.density_kg_m3);
             let idx = sys.add_class(ParticleClass {
                 kind: ParticleKind::Bubble,
                 settle_m_s: settle,
@@ -76,7 +75,7 @@ impl Sources {
         let fragment_class0 = sys.classes().len() as u8;
         for f in &spec.fragments {
             let d = f.diameter_mm * 1e-3;
-            let (settle, tau) = terminal_slip(d, f.density_kg_m3, rf, mu);
+            let (settle, tau) = fluid.terminal_slip(d, f.density_kg_m3);
             sys.add_class(ParticleClass {
                 kind: ParticleKind::Fragment,
                 settle_m_s: settle,

@@ -226,10 +226,6 @@ pub struct ParticleSpec {
     pub seed: u64,
     /// Most RK2 substeps per particle and step (each under one cell).
     pub max_substeps: usize,
-    /// Density of the distension fluid, kg/m^3.
-    pub fluid_density_kg_m3: f64,
-    /// Viscosity of the distension fluid, Pa s.
-    pub fluid_viscosity_pa_s: f64,
     /// Gravity.
     pub gravity: GravitySpec,
     /// Blood.
@@ -250,8 +246,6 @@ impl Default for ParticleSpec {
             budget: 100_000,
             seed: 7,
             max_substeps: 8,
-            fluid_density_kg_m3: 1000.0,
-            fluid_viscosity_pa_s: 1e-3,
             gravity: GravitySpec::default(),
             blood: BloodSpec::default(),
             bubbles: BubbleSpec::default(),
@@ -285,16 +279,6 @@ impl ParticleSpec {
             ));
         }
         let checks = [
-            (
-                "fluid_density_kg_m3",
-                self.fluid_density_kg_m3,
-                pos(self.fluid_density_kg_m3),
-            ),
-            (
-                "fluid_viscosity_pa_s",
-                self.fluid_viscosity_pa_s,
-                pos(self.fluid_viscosity_pa_s),
-            ),
             (
                 "blood.particle_volume_ul",
                 self.blood.particle_volume_ul,
