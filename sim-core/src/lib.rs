@@ -19,3 +19,4 @@ pub mod hydraulics;
 pub mod mesh;
 pub mod scene;
 pub mod units;
+pub mod vtk;

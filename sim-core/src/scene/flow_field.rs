@@ -5,6 +5,7 @@ use super::ports::Ports;
 use super::types::VoxelKind;
 use super::vortices::Vortices;
 use crate::fluid::FluidSolver;
+use crate::vtk::{CellType, Digits, Document};
 
 /// The flow field on the voxel grid.
 pub struct FlowField<'a> {
@@ -64,6 +65,67 @@ impl FlowField<'_> {
     /// The fluid solver (face velocities, pressure, sampling).
     pub fn solver(&self) -> &FluidSolver {
         self.solver
+    }
+
+    /// The cells in the cavity (not tissue, not the sheath) as a VTU of hexahedra on their
+    /// shared corners (m), cell data `label` (the [`VoxelKind`] value) and `velocity`
+    /// ([`FlowField::velocities_into`], m/s, five digits).
+    pub fn vtu_string(&self) -> String {
+        let [nx, ny, nz] = self.dims();
+        let h = self.spacing_m();
+        let c0 = self.first_centre_m();
+        let o = [c0[0] - 0.5 * h, c0[1] - 0.5 * h, c0[2] - 0.5 * h];
+        let kinds = self.kinds();
+        let mut vel = vec![[0.0f32; 3]; kinds.len()];
+        self.velocities_into(&mut vel);
+        let cells: Vec<usize> = (0..kinds.len())
+            .filter(|&n| !matches!(kinds[n], VoxelKind::Solid | VoxelKind::Scope))
+            .collect();
+        // Shared corner nodes, numbered in the order the cells first touch them.
+        let node = |i: usize, j: usize, k: usize| i + (nx + 1) * (j + (ny + 1) * k);
+        let mut id = vec![u32::MAX; (nx + 1) * (ny + 1) * (nz + 1)];
+        let mut points: Vec<usize> = Vec::new();
+        let mut conn: Vec<[u32; 8]> = Vec::with_capacity(cells.len());
+        for &n in &cells {
+            let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
+            // x fastest, then y, then z.
+            let corners = [
+                (0, 0, 0),
+                (0, 0, 1),
+                (0, 1, 0),
+                (0, 1, 1),
+                (1, 0, 0),
+                (1, 0, 1),
+                (1, 1, 0),
+                (1, 1, 1),
+            ];
+            conn.push(corners.map(|(dk, dj, di)| {
+                let q = node(i + di, j + dj, k + dk);
+                if id[q] == u32::MAX {
+                    id[q] = points.len() as u32;
+                    points.push(q);
+                }
+                id[q]
+            }));
+        }
+        let mut doc = Document::unstructured_grid(points.len(), cells.len());
+        doc.cell_data("label", Some("velocity"));
+        doc.array("label", cells.iter().map(|&n| [kinds[n] as u8]));
+        doc.array("velocity", cells.iter().map(|&n| vel[n].map(Digits::<5>)));
+        doc.points(points.iter().map(|&q| {
+            let (i, j, k) = (
+                q % (nx + 1),
+                (q / (nx + 1)) % (ny + 1),
+                q / ((nx + 1) * (ny + 1)),
+            );
+            [
+                (o[0] + i as f64 * h) as f32,
+                (o[1] + j as f64 * h) as f32,
+                (o[2] + k as f64 * h) as f32,
+            ]
+        }));
+        doc.cells(conn, CellType::Hexahedron);
+        doc.finish()
     }
 
     /// The paper's "time to traverse" in the current flow (frozen): a cloud of tracers spread

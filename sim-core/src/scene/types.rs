@@ -5,6 +5,7 @@
 use super::counters::Counters;
 use crate::fluid::StepStats;
 use crate::hydraulics::{HydraulicInputs, HydraulicState};
+use crate::vtk::{CellType, Document};
 
 /// The scope pose in the organ frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -189,6 +190,22 @@ impl WholeBoxCheck {
     /// Nothing changed.
     pub fn is_clean(&self) -> bool {
         *self == Self::default()
+    }
+}
+
+impl CavityView<'_> {
+    /// The closed surface as a VTU of triangles (positions in metres), cell data `cap`: 1 on the
+    /// triangles that close the external os.
+    pub fn vtu_string(&self) -> String {
+        let mut doc = Document::unstructured_grid(self.positions_m.len(), self.triangles.len());
+        doc.cell_data("cap", None);
+        doc.array(
+            "cap",
+            (0..self.triangles.len()).map(|t| [u8::from(t < self.cap_triangles)]),
+        );
+        doc.points(self.positions_m.iter().copied());
+        doc.cells(self.triangles.iter().copied(), CellType::Triangle);
+        doc.finish()
     }
 }
 

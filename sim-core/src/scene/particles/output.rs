@@ -1,10 +1,10 @@
 //! The particles as VTK XML (PolyData `.vtp` or an UnstructuredGrid of vertex cells `.vtu`),
 //! for ParaView and meshio.
 
-use std::fmt::Write as _;
 use std::path::Path;
 
 use super::system::ParticleSystem;
+use crate::vtk::{CellType, Document};
 
 impl ParticleSystem {
     /// The particles as a VTK PolyData document (`.vtp`, ASCII): points (m), one vertex cell
@@ -39,77 +39,31 @@ pub enum VtkFlavour {
 /// The particles of `sys` (none: an empty document) as VTK XML, ASCII.
 pub fn particles_xml(sys: Option<&ParticleSystem>, flavour: VtkFlavour) -> String {
     let n = sys.map_or(0, ParticleSystem::len);
-    let poly = flavour == VtkFlavour::PolyData;
-    let (root, cells_tag) = if poly {
-        ("PolyData", "Verts")
-    } else {
-        ("UnstructuredGrid", "Cells")
+    let mut doc = match flavour {
+        VtkFlavour::PolyData => Document::poly_vertices(n),
+        VtkFlavour::UnstructuredGrid => Document::unstructured_grid(n, n),
     };
-    let mut s = String::with_capacity(160 * n + 1024);
-    let _ = writeln!(
-        s,
-        "<?xml version=\"1.0\"?>\n<VTKFile type=\"{root}\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<{root}>"
+    // Per particle (none without a system): its class, age, velocity and position.
+    let particles = || {
+        sys.into_iter()
+            .flat_map(|s| (0..s.len()).map(move |i| (s, i)))
+    };
+    let class = |(s, i): (&ParticleSystem, usize)| s.class_of(i);
+    doc.point_data("kind", Some("velocity"));
+    doc.array("kind", particles().map(|p| [class(p).kind as u8]));
+    doc.array(
+        "diameter_m",
+        particles().map(|p| [class(p).diameter_m as f32]),
     );
-    if poly {
-        let _ = writeln!(
-            s,
-            "<Piece NumberOfPoints=\"{n}\" NumberOfVerts=\"{n}\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\"0\">"
-        );
-    } else {
-        let _ = writeln!(s, "<Piece NumberOfPoints=\"{n}\" NumberOfCells=\"{n}\">");
-    }
-    s.push_str("<PointData Scalars=\"kind\" Vectors=\"velocity\">\n<DataArray type=\"UInt8\" Name=\"kind\" format=\"ascii\">\n");
-    if let Some(sys) = sys {
-        for &c in &sys.class {
-            let _ = writeln!(s, "{}", sys.classes[c as usize].kind as u8);
-        }
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"diameter_m\" format=\"ascii\">\n");
-    if let Some(sys) = sys {
-        for &c in &sys.class {
-            let _ = writeln!(s, "{:e}", sys.classes[c as usize].diameter_m as f32);
-        }
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"age_s\" format=\"ascii\">\n");
-    if let Some(sys) = sys {
-        for &b in &sys.birth_s {
-            let _ = writeln!(s, "{:e}", sys.time_s as f32 - b);
-        }
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"velocity\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    if let Some(sys) = sys {
-        for i in 0..n {
-            let v = sys.velocity_m_per_s(i);
-            let _ = writeln!(s, "{:e} {:e} {:e}", v[0] as f32, v[1] as f32, v[2] as f32);
-        }
-    }
-    s.push_str("</DataArray>\n</PointData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    if let Some(sys) = sys {
-        for i in 0..n {
-            let p = sys.position_m(i);
-            let _ = writeln!(s, "{:e} {:e} {:e}", p[0] as f32, p[1] as f32, p[2] as f32);
-        }
-    }
-    let _ = writeln!(
-        s,
-        "</DataArray>\n</Points>\n<{cells_tag}>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">"
+    doc.array(
+        "age_s",
+        particles().map(|(s, i)| [s.time_s as f32 - s.birth_s[i]]),
     );
-    for i in 0..n {
-        let _ = writeln!(s, "{i}");
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for i in 0..n {
-        let _ = writeln!(s, "{}", i + 1);
-    }
-    s.push_str("</DataArray>\n");
-    if !poly {
-        // VTK_VERTEX.
-        s.push_str("<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-        for _ in 0..n {
-            s.push_str("1\n");
-        }
-        s.push_str("</DataArray>\n");
-    }
-    let _ = writeln!(s, "</{cells_tag}>\n</Piece>\n</{root}>\n</VTKFile>");
-    s
+    doc.array(
+        "velocity",
+        particles().map(|(s, i)| s.velocity_m_per_s(i).map(|v| v as f32)),
+    );
+    doc.points(particles().map(|(s, i)| s.position_m(i).map(|p| p as f32)));
+    doc.cells((0..n).map(|i| [i]), CellType::Vertex);
+    doc.finish()
 }

@@ -68,12 +68,12 @@ pub struct ParticleSystem {
     capacity: usize,
     max_substeps: usize,
     gravity: [f64; 3],
-    pub(super) classes: Vec<ParticleClass>,
+    classes: Vec<ParticleClass>,
     /// Position, grid units.
     pos: Vec<[f32; 3]>,
     /// Slip velocity, cells/s.
     slip: Vec<[f32; 3]>,
-    pub(super) class: Vec<u8>,
+    class: Vec<u8>,
     pub(super) birth_s: Vec<f32>,
     /// Cell-centred velocity, cells/s (4 lanes, the fourth unused).
     field: Vec<V4>,
