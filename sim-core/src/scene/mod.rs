@@ -7,15 +7,26 @@
 //!   pump,         flows,         of the cavity    surface ->   port and   grid      injected)    bubbles,
 //!   scope)        volume, dV/dt) surface, dx/dp)  cell states) wall vel.) step)                  fragments)
 //! ```
-//! Each stage is a type in a file of its own ([`HydraulicStage`], [`Deformation`], [`Voxelizer`],
-//! [`Ports`], [`FluidStage`], [`vortices::Vortices`], [`particles::Particles`]) whose `step` takes
-//! its inputs and returns its outputs as plain records (the shared ones in `types.rs`, which
-//! imports no stage); none takes the scene. Every stage decides whether it has work (the pressure moved, a vertex or the scope moved more
-//! than a fraction of a voxel, a port flows or the field is not at rest) and reports runs, skips
-//! and times in [`StepReport::counters`]. The hydraulics may run inside the scene (the offline
-//! runner) or in another loop that hands the scene its newest state (the daemon's 1 kHz loop):
-//! [`HydraulicsInput`]. The flux the fluid sees through the ports and moving walls equals the
-//! hydraulics' flows over the frame (see [`FluxBalance`]); `docs/scene.md` specifies it all.
+//! Each stage is a type in a file of its own, and its `step` names what it reads and what it
+//! gives (plain records; those several stages share are in `types.rs`, which imports no stage):
+//!
+//! | stage | reads | gives |
+//! |---|---|---|
+//! | [`HydraulicStage`] | the rig's [`crate::hydraulics::HydraulicInputs`], [`HydraulicsInput`] | [`FrameFlows`], its [`crate::hydraulics::HydraulicState`] |
+//! | [`Deformation`] | the hydraulic state | whether the [`CavitySurface`] moved |
+//! | [`Voxelizer`] | the moved surface's positions | the rows whose cell states changed |
+//! | [`Ports`] | those rows, the [`ScopePose`], [`CavityCells`], [`FrameFlows`] | labels and boundary velocities in the solver, [`FluxBalance`], [`PortsStep`] |
+//! | [`FluidStage`] | [`FluidDrive`] | the step of its solver, [`FluidStep`] |
+//! | [`vortices::Vortices`] | the inflow, the solver | their field (overlaid or injected) |
+//! | [`particles::Particles`] | [`particles::ParticleInputs`] | emission, advection, the view's clarity |
+//!
+//! No stage takes the scene. Every stage decides whether it has work (the pressure moved, a vertex
+//! or the scope moved more than a fraction of a voxel, a port flows or the field is not at rest)
+//! and reports runs, skips and times in its [`StageCounters`] ([`StepReport::counters`]). The
+//! hydraulics may run inside the scene (the offline runner) or in another loop that hands the
+//! scene its newest state (the daemon's 1 kHz loop): [`HydraulicsInput`]. The flux the fluid sees
+//! through the ports and moving walls equals the hydraulics' flows over the frame (see
+//! [`FluxBalance`]); `docs/scene.md` specifies it all.
 //!
 //! ```no_run
 //! use hydrometra_sim::scene::{prepare, HydraulicsInput, RigInputs, Scene, SceneDesc, SceneInputs};
@@ -92,8 +103,7 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Builds the scene's stages: the grid box covers the cavity at the atlas's highest pressure
-    /// (plus a cell of wall), clipped to the region of interest.
+    /// Builds the scene's stages on the grid box of the cavity at the atlas's highest pressure.
     pub fn new(desc: SceneDesc, assets: SceneAssets) -> Result<Self, SceneError> {
         desc.validate()?;
         let SceneAssets { mesh, atlas } = assets;
@@ -101,58 +111,10 @@ impl Scene {
         let top = atlas.pressure_pa[atlas.level_count() - 1];
         let surface_atlas = surface.compact_atlas(&atlas)?;
         surface.replay_compact(&surface_atlas, top)?;
-        let h = desc.voxel_m();
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for p in surface.positions_m() {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a] as f64);
-                hi[a] = hi[a].max(p[a] as f64);
-            }
-        }
-        if let (Some(rlo), Some(rhi)) = (desc.fluid.roi_min_mm, desc.fluid.roi_max_mm) {
-            for a in 0..3 {
-                lo[a] = lo[a].max(rlo[a] * 1e-3);
-                hi[a] = hi[a].min(rhi[a] * 1e-3);
-            }
-        }
-        if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
-            return Err(SceneError::Description {
-                origin: desc.origin.clone(),
-                message: format!(
-                    "`fluid.roi_min_mm`: the region of interest misses the cavity \
-                     ({lo:?} .. {hi:?} m)"
-                ),
-            });
-        }
-        let dims: [usize; 3] = std::array::from_fn(|a| ((hi[a] - lo[a]) / h).ceil() as usize + 2);
-        let cells = VoxelBox {
-            dims,
-            origin_m: std::array::from_fn(|a| lo[a] - h),
-            spacing_m: h,
-        };
-        if cells.cell_count() > 64_000_000 {
-            return Err(SceneError::Description {
-                origin: desc.origin.clone(),
-                message: format!(
-                    "`fluid.voxel_mm` = {}: {dims:?} = {} cells is too many",
-                    desc.fluid.voxel_mm,
-                    cells.cell_count()
-                ),
-            });
-        }
+        let cells = grid_box(&desc, &surface)?;
         let voxelizer = Voxelizer::new(cells, surface.triangles().to_vec(), surface.vertex_count());
         let fluid = if desc.stages.fluid {
-            // All solid at first: the first step labels the cavity.
-            let mut grid = FluidGrid::new(dims, h, cells.origin_m, [false; 3])?;
-            let far = cells.origin_m.map(|o| o + 1.0);
-            grid.fill_box(cells.origin_m, far, CellLabel::Solid, [0.0; 3]);
-            let params = FluidParams {
-                advection: desc.fluid.advection,
-                tolerance: desc.fluid.divergence_tolerance,
-                max_cfl: desc.fluid.max_cfl.is_finite().then_some(desc.fluid.max_cfl),
-                ..FluidParams::default()
-            };
-            Some(FluidSolver::new(grid, params)?)
+            Some(fluid_solver(&desc, &cells)?)
         } else {
             None
         };
@@ -398,4 +360,63 @@ impl Scene {
         self.report.grid_fluid_volume_m3 = self.ports.fluid_volume_m3();
         Ok(check)
     }
+}
+
+/// The grid box: it covers the cavity `surface` (replayed at the atlas's highest pressure) plus
+/// a cell of wall, clipped to the region of interest.
+fn grid_box(desc: &SceneDesc, surface: &CavitySurface) -> Result<VoxelBox, SceneError> {
+    let h = desc.voxel_m();
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for p in surface.positions_m() {
+        for a in 0..3 {
+            lo[a] = lo[a].min(p[a] as f64);
+            hi[a] = hi[a].max(p[a] as f64);
+        }
+    }
+    if let (Some(rlo), Some(rhi)) = (desc.fluid.roi_min_mm, desc.fluid.roi_max_mm) {
+        for a in 0..3 {
+            lo[a] = lo[a].max(rlo[a] * 1e-3);
+            hi[a] = hi[a].min(rhi[a] * 1e-3);
+        }
+    }
+    if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
+        return Err(SceneError::Description {
+            origin: desc.origin.clone(),
+            message: format!(
+                "`fluid.roi_min_mm`: the region of interest misses the cavity \
+                 ({lo:?} .. {hi:?} m)"
+            ),
+        });
+    }
+    let dims: [usize; 3] = std::array::from_fn(|a| ((hi[a] - lo[a]) / h).ceil() as usize + 2);
+    let cells = VoxelBox {
+        dims,
+        origin_m: std::array::from_fn(|a| lo[a] - h),
+        spacing_m: h,
+    };
+    if cells.cell_count() > 64_000_000 {
+        return Err(SceneError::Description {
+            origin: desc.origin.clone(),
+            message: format!(
+                "`fluid.voxel_mm` = {}: {dims:?} = {} cells is too many",
+                desc.fluid.voxel_mm,
+                cells.cell_count()
+            ),
+        });
+    }
+    Ok(cells)
+}
+
+/// The fluid solver on the grid `cells`, every cell solid (the first step labels the cavity).
+fn fluid_solver(desc: &SceneDesc, cells: &VoxelBox) -> Result<FluidSolver, SceneError> {
+    let mut grid = FluidGrid::new(cells.dims, cells.spacing_m, cells.origin_m, [false; 3])?;
+    let far = cells.origin_m.map(|o| o + 1.0);
+    grid.fill_box(cells.origin_m, far, CellLabel::Solid, [0.0; 3]);
+    let params = FluidParams {
+        advection: desc.fluid.advection,
+        tolerance: desc.fluid.divergence_tolerance,
+        max_cfl: desc.fluid.max_cfl.is_finite().then_some(desc.fluid.max_cfl),
+        ..FluidParams::default()
+    };
+    Ok(FluidSolver::new(grid, params)?)
 }

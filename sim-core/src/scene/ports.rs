@@ -785,8 +785,6 @@ fn mark_row(row: usize, marks: &mut [bool], rows: &mut Vec<u32>) {
     }
 }
 
-/// The coupled pipeline.
-
 /// Sum over the set faces of `v . n` (n: the face's unit normal from the cell into the fluid).
 fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
     let mut s = 0.0;

@@ -28,9 +28,9 @@ impl Default for ScopePose {
     }
 }
 
-/// What the rig says, in SI units: the one record from the driver to the scene. The valves, the
-/// pump and the case's perforation are the hydraulics' own inputs ([`HydraulicInputs`], the record
-/// the hydraulic model steps on), the scope's pose is the scene's.
+/// What the rig says, in SI units. The valves, the pump and the case's perforation are the
+/// hydraulic model's own input record ([`HydraulicInputs`], stepped on as is), the scope's pose is
+/// the scene's: one record for both.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RigInputs {
     /// Valves, pump and the perforation event.
