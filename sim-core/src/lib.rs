@@ -20,3 +20,4 @@ pub mod hydraulics;
 pub mod mesh;
 pub mod scene;
 pub mod units;
+pub mod vtk;

@@ -10,12 +10,14 @@ use std::time::Instant;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::harness::fork_join::set_guard;
+use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneError, SceneInputs,
-    ScopePose, Stage, StepReport, VoxelKind,
+    ScopePose, Stage, StepReport,
 };
 use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
+use hydrometra_sim::vtk;
 use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
 use crate::service::hydraulics::load_scenario;
@@ -195,15 +197,17 @@ fn rig_inputs(
     perforation: bool,
 ) -> RigInputs {
     RigInputs {
-        valve_in_opening: s.valve_in,
-        valve_out_opening: s.valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(s.pump_mmhg),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: s.valve_in,
+            valve_out_opening: s.valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(s.pump_mmhg),
+            perforation,
+        },
         scope: ScopePose {
             tip_position_m: s.tip_mm.map(|v| v * 1e-3),
             view_direction: s.view_dir,
             valid: s.pose_valid,
         },
-        perforation,
     }
 }
 
@@ -239,7 +243,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
          fluid_wall_ml_min,fluid_open_ml_min,wall_flux_scale,deficit_ml,step_ms,replay_ms,voxelize_ms,ports_ms,fluid_ms,\
          fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity\n",
     );
-    let mut pvd = String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
+    let mut pvd = vtk::Collection::new();
     let ml_min = |q: f64| q * 6e7;
     let mut written = 0;
     for f in 0..frames {
@@ -301,31 +305,26 @@ fn run_offline(a: &RunArgs) -> Result<()> {
             let name = format!("frame_{written:05}");
             let cavity = format!("vtu/{name}_cavity.vtu");
             let flow = format!("vtu/{name}_flow.vtu");
-            std::fs::write(a.out.join(&cavity), cavity_vtu(&scene))
+            std::fs::write(a.out.join(&cavity), scene.cavity().vtu_string())
                 .with_context(|| format!("writing {cavity}"))?;
-            std::fs::write(a.out.join(&flow), flow_vtu(&scene))
+            let flow_vtu = scene.flow().map(|f| f.vtu_string()).unwrap_or_default();
+            std::fs::write(a.out.join(&flow), flow_vtu)
                 .with_context(|| format!("writing {flow}"))?;
-            let _ = writeln!(
-                pvd,
-                "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"0\" file=\"{cavity}\"/>\n<DataSet timestep=\"{t:.4}\" group=\"\" part=\"1\" file=\"{flow}\"/>"
-            );
+            pvd.dataset(t, 0, &cavity);
+            pvd.dataset(t, 1, &flow);
             // The particles, when the scene has the stage: a file every series frame (no
             // points before any is released), so the series stays aligned in ParaView.
             if let Some(p) = scene.particles() {
                 let particles = format!("vtu/{name}_particles.vtu");
                 std::fs::write(a.out.join(&particles), p.vtu_string())
                     .with_context(|| format!("writing {particles}"))?;
-                let _ = writeln!(
-                    pvd,
-                    "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"2\" file=\"{particles}\"/>"
-                );
+                pvd.dataset(t, 2, &particles);
             }
             written += 1;
         }
     }
-    pvd.push_str("</Collection>\n</VTKFile>\n");
     std::fs::write(a.out.join("scene.csv"), csv).context("writing scene.csv")?;
-    std::fs::write(a.out.join("scene.pvd"), pvd).context("writing scene.pvd")?;
+    std::fs::write(a.out.join("scene.pvd"), pvd.finish()).context("writing scene.pvd")?;
     let r = scene.report();
     let summary = serde_json::json!({
         "scene": scene.desc().name,
@@ -393,133 +392,6 @@ fn stage_json(c: &hydrometra_sim::scene::Counters) -> serde_json::Value {
             "p50_ms": c.step.p50_ms(), "p99_ms": c.step.p99_ms()}),
     );
     serde_json::Value::Object(m)
-}
-
-/// The closed cavity surface as a VTU of triangles (point data: displacement-free positions).
-fn cavity_vtu(scene: &Scene) -> String {
-    let c = scene.cavity();
-    let (np, nc) = (c.positions_m.len(), c.triangles.len());
-    let mut s = String::with_capacity(40 * (np + nc));
-    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
-    let _ = writeln!(s, "<Piece NumberOfPoints=\"{np}\" NumberOfCells=\"{nc}\">");
-    s.push_str(
-        "<CellData Scalars=\"cap\">\n<DataArray type=\"UInt8\" Name=\"cap\" format=\"ascii\">\n",
-    );
-    for t in 0..nc {
-        s.push_str(if t < c.cap_triangles { "1\n" } else { "0\n" });
-    }
-    s.push_str("</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for p in c.positions_m {
-        let _ = writeln!(s, "{:e} {:e} {:e}", p[0], p[1], p[2]);
-    }
-    s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for t in c.triangles {
-        let _ = writeln!(s, "{} {} {}", t[0], t[1], t[2]);
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for i in 0..nc {
-        let _ = writeln!(s, "{}", 3 * (i + 1));
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for _ in 0..nc {
-        s.push_str("5\n");
-    }
-    s.push_str("</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
-    s
-}
-
-/// The non-solid cells of the flow field as a VTU of hexahedra (cell data `label`: the
-/// [`VoxelKind`] value, `velocity`: m/s).
-fn flow_vtu(scene: &Scene) -> String {
-    let Some(flow) = scene.flow() else {
-        return String::new();
-    };
-    let [nx, ny, nz] = flow.dims();
-    let h = flow.spacing_m();
-    let c0 = flow.first_centre_m();
-    let o = [c0[0] - 0.5 * h, c0[1] - 0.5 * h, c0[2] - 0.5 * h];
-    let kinds = flow.kinds();
-    let mut vel = vec![[0.0f32; 3]; kinds.len()];
-    flow.velocities_into(&mut vel);
-    let cells: Vec<usize> = (0..kinds.len())
-        .filter(|&n| !matches!(kinds[n], VoxelKind::Solid | VoxelKind::Scope))
-        .collect();
-    // Shared corner nodes.
-    let node = |i: usize, j: usize, k: usize| i + (nx + 1) * (j + (ny + 1) * k);
-    let mut id = vec![u32::MAX; (nx + 1) * (ny + 1) * (nz + 1)];
-    let mut points: Vec<usize> = Vec::new();
-    let mut conn: Vec<u32> = Vec::with_capacity(8 * cells.len());
-    for &n in &cells {
-        let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-        // VTK_VOXEL order: x fastest, then y, then z.
-        for (dk, dj, di) in [
-            (0, 0, 0),
-            (0, 0, 1),
-            (0, 1, 0),
-            (0, 1, 1),
-            (1, 0, 0),
-            (1, 0, 1),
-            (1, 1, 0),
-            (1, 1, 1),
-        ] {
-            let q = node(i + di, j + dj, k + dk);
-            if id[q] == u32::MAX {
-                id[q] = points.len() as u32;
-                points.push(q);
-            }
-            conn.push(id[q]);
-        }
-    }
-    let mut s = String::with_capacity(64 * (points.len() + cells.len()));
-    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
-    let _ = writeln!(
-        s,
-        "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
-        points.len(),
-        cells.len()
-    );
-    s.push_str("<CellData Scalars=\"label\" Vectors=\"velocity\">\n<DataArray type=\"UInt8\" Name=\"label\" format=\"ascii\">\n");
-    for &n in &cells {
-        let _ = writeln!(s, "{}", kinds[n] as u8);
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"velocity\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for &n in &cells {
-        let v = vel[n];
-        let _ = writeln!(s, "{:.5e} {:.5e} {:.5e}", v[0], v[1], v[2]);
-    }
-    s.push_str("</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for &q in &points {
-        let (i, j, k) = (
-            q % (nx + 1),
-            (q / (nx + 1)) % (ny + 1),
-            q / ((nx + 1) * (ny + 1)),
-        );
-        let _ = writeln!(
-            s,
-            "{:e} {:e} {:e}",
-            (o[0] + i as f64 * h) as f32,
-            (o[1] + j as f64 * h) as f32,
-            (o[2] + k as f64 * h) as f32
-        );
-    }
-    s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for c in conn.chunks(8) {
-        let _ = writeln!(
-            s,
-            "{} {} {} {} {} {} {} {}",
-            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
-        );
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for i in 0..cells.len() {
-        let _ = writeln!(s, "{}", 8 * (i + 1));
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for _ in 0..cells.len() {
-        s.push_str("12\n");
-    }
-    s.push_str("</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
-    s
 }
 
 /// One row of the bench table.
@@ -593,16 +465,18 @@ fn operating_point(f: usize, dt: f64, pump_mmhg: f64, valve_out: f64) -> RigInpu
     let t = f as f64 * dt;
     let sway = 1.5e-3 * (0.7 * t).sin();
     RigInputs {
-        valve_in_opening: 1.0,
-        valve_out_opening: valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: 1.0,
+            valve_out_opening: valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+            perforation: false,
+        },
         scope: ScopePose {
             // In the corpus of the default uterus (drivers/scenarios/default.toml, t = 45 s).
             tip_position_m: [sway, 0.0129, 0.0426],
             view_direction: [0.0, 0.5, 0.866],
             valid: true,
         },
-        perforation: false,
     }
 }
 
@@ -831,7 +705,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
                 dt,
             )?;
         }
-        if let Some(t) = Particles::time_to_traverse(&run.scene, 1e-3, a.traverse_max_s) {
+        if let Some(t) = (run.scene.flow()).map(|f| f.time_to_traverse(1e-3, a.traverse_max_s)) {
             row.traverse_released = t.released;
             row.traverse_reached = t.reached;
             row.traverse_open = t.open;

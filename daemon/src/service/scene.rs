@@ -20,7 +20,7 @@ use hydrometra_ipc::particles::ParticlesHeader;
 use hydrometra_ipc::slice::{self, SliceService};
 use hydrometra_ipc::status::scene_state;
 use hydrometra_ipc::{events, ServiceNames, Status, SCHEMA_VERSION};
-use hydrometra_sim::hydraulics::{CavityCompliance, HydraulicState};
+use hydrometra_sim::hydraulics::{CavityCompliance, HydraulicInputs, HydraulicState};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneDesc, SceneInputs, ScopePose, Stage,
 };
@@ -409,15 +409,17 @@ fn ports(
 fn rig_inputs(s: &FeedSnapshot) -> RigInputs {
     let i = &s.inputs;
     RigInputs {
-        valve_in_opening: i.valve_in_opening,
-        valve_out_opening: i.valve_out_opening,
-        pump_set_pressure_pa: i.pump_set_pressure_pa,
+        hydraulic: HydraulicInputs {
+            valve_in_opening: i.valve_in_opening,
+            valve_out_opening: i.valve_out_opening,
+            pump_set_pressure_pa: i.pump_set_pressure_pa,
+            perforation: s.perforation,
+        },
         scope: ScopePose {
             tip_position_m: i.scope.tip_position_m,
             view_direction: i.scope.view_direction,
             valid: i.scope.valid,
         },
-        perforation: s.perforation,
     }
 }
 

@@ -1,11 +1,13 @@
 //! One Rankine vortex in closed form ([`Vortex`]) and the vortices' vector potential on the grid
-//! nodes (`docs/particles.md`; the field of many in [`super::vortices`]): each vortex adds `g(s) Psi(r) n` at the nodes of its support, four
+//! nodes (`docs/particles.md`; the field of many in [`super::VortexField`]): each vortex adds `g(s) Psi(r) n` at the nodes of its support, four
 //! consecutive nodes of a row at a time (SSE2, the x86-64 baseline; element-wise elsewhere).
 //!
 //! A vortex touches a few dozen nodes in short rows (a core of one or two cells), so the work is
 //! per row, not per node: a row is skipped or narrowed to the support by one quadratic, and its
 //! nodes go through one branch-free four-lane kernel whose lanes outside the row, the support or
 //! `node_mask` add zero.
+
+use crate::mesh::{cross, dot};
 
 /// Rankine's profile holds exactly out to this many core radii.
 pub const RANKINE_EXACT_CORES: f64 = 1.5;
@@ -83,21 +85,6 @@ impl Vortex {
         self.axis
             .map(|n| l * n.abs() + r * (1.0 - n * n).max(0.0).sqrt())
     }
-}
-
-#[inline]
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// The cross product.
-#[inline]
-pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 /// Intervals of the potential's table over `q = r^2 / R^2` in `[0, CUTOFF_CORES^2]` (a power of
