@@ -18,4 +18,5 @@ pub mod harness;
 pub mod hydraulics;
 pub mod mesh;
 pub mod scene;
+mod simd;
 pub mod units;

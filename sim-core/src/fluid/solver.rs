@@ -175,7 +175,7 @@ pub struct FluidSolver {
     u: [Vec<f32>; 3],
     tmp: [Vec<f32>; 3],
     /// Cell-centred velocity (for tracing), padded to 4 lanes.
-    centred: Vec<advection::V4>,
+    centred: Vec<crate::simd::V4>,
     faces: [FaceSet; 3],
     compact: [Vec<f32>; 3],
     /// Advection: geometry, runs of active faces, and results in concatenated compact order (with
@@ -277,7 +277,7 @@ impl FluidSolver {
         let centred_rows = (layout.periodic == [false; 3]).then(Default::default);
         let mut s = Self {
             tmp: u.clone(),
-            centred: vec![advection::v4::zero(); grid.cell_count()],
+            centred: vec![crate::simd::v4::zero(); grid.cell_count()],
             geo: advection::Geometry::new(grid.dims(), &layout),
             plan: advection::Plan::default(),
             adv: Vec::new(),
@@ -632,7 +632,7 @@ impl FluidSolver {
             let set = &self.faces[c];
             let u = &self.u[c];
             #[cfg(target_arch = "x86_64")]
-            if advection::avx2::available() {
+            if crate::simd::avx2_fma() {
                 // SAFETY: the CPU has AVX2 and FMA (checked just above).
                 m = unsafe { runs_max_avx2(u, &set.runs, m, bits) };
             } else {
@@ -1487,18 +1487,18 @@ mod tests {
                 }
                 s.update_centred();
                 let [u0, u1, u2] = &s.u;
-                let mut whole = vec![advection::v4::zero(); s.centred.len()];
+                let mut whole = vec![crate::simd::v4::zero(); s.centred.len()];
                 advection::update_centred(&s.layout, dims, [u0, u1, u2], &mut whole, None, false);
                 for (n, (got, want)) in s.centred.iter().zip(&whole).enumerate() {
                     assert_eq!(
-                        advection::v4::lanes(*got),
-                        advection::v4::lanes(*want),
+                        crate::simd::v4::lanes(*got),
+                        crate::simd::v4::lanes(*want),
                         "cell {n} of {dims:?}, step {step}"
                     );
                 }
                 checked += whole
                     .iter()
-                    .filter(|v| advection::v4::lanes(**v) != [0.0; 4])
+                    .filter(|v| crate::simd::v4::lanes(**v) != [0.0; 4])
                     .count();
             }
             assert!(checked > 1000, "{checked} non-zero cells compared");

@@ -122,7 +122,7 @@ pub(crate) fn explicit(
     };
     let run = |r: &[[u32; 3]], base: usize, out: &mut [f32]| {
         #[cfg(target_arch = "x86_64")]
-        if super::advection::avx2::available() {
+        if crate::simd::avx2_fma() {
             // SAFETY: the CPU has AVX2 and FMA (checked just above).
             unsafe { runs_avx2(st, r, base, out) };
             return;

@@ -26,6 +26,12 @@ pub mod stage_bench;
 pub mod testmesh;
 pub mod validation;
 
+/// The SIMD paths (`sim-core/src/simd`): whether the AVX2 + FMA kernels run, and the switch that
+/// runs every kernel on its portable path instead (process-wide; for tests and benchmarks).
+pub mod simd {
+    pub use crate::simd::{avx2_fma, set_portable};
+}
+
 /// The solver's two-way fork-join, switchable to `rayon::join` or chili to measure against.
 pub mod fork_join {
     pub use crate::fork_join::{set_backend, set_guard, Backend};

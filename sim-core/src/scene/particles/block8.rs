@@ -15,7 +15,7 @@
 use std::arch::x86_64::*;
 
 use super::{lane, ClassSums, Kernel, VoxelKind, BLOCK, KEEP, SUBSTEP_CELLS};
-use crate::fluid::V4;
+use crate::simd::V4;
 
 /// Eight lanes of the one-at-a-time path's 0, 1/2, dt, dt/2 and grid constants.
 struct Consts {
@@ -132,7 +132,7 @@ pub(super) fn run(
                     // (a slide, or the outlet's fate), as the substeps would end.
                     let at = |v: &[[f32; BLOCK]; 3]| lane::new4(v[0][l], v[1][l], v[2][l], 0.0);
                     let (end, f) = k.land(at(&p), at(&q));
-                    let e = crate::fluid::v4::lanes(end);
+                    let e = crate::simd::v4::lanes(end);
                     let e = [e[0], e[1], e[2]];
                     if let (Some(pl), Some(fl)) = (pos.get_mut(g + l), fate.get_mut(g + l)) {
                         (*pl, *fl) = (e, f);
@@ -238,7 +238,7 @@ fn substeps(
             // `Kernel::land` past its fluid case: an outlet, or a slide along the wall.
             let (pl, ql) = (w.lane(l, &w.p), w.lane(l, &q));
             let (end, f) = k.land(pl, ql);
-            let e = crate::fluid::v4::lanes(end);
+            let e = crate::simd::v4::lanes(end);
             for a in 0..3 {
                 w.p[a][l] = e[a];
             }
