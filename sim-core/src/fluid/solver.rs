@@ -602,46 +602,52 @@ impl FluidSolver {
                 b
             }
         };
-        #[inline(always)]
-        fn runs_max(u: &[f32], runs: &[[u32; 3]], mut m: i32, bits: impl Fn(f32) -> i32) -> i32 {
-            // Eight running maxima (lanes), so the reduction is plain lane-wise code.
-            let mut acc = [m; 8];
-            for &[f, _, len] in runs {
-                let (f, len) = (f as usize, len as usize);
-                let run = &u[f..f + len];
-                let mut chunks = run.chunks_exact(8);
-                for ch in &mut chunks {
-                    for (a, &v) in acc.iter_mut().zip(ch) {
-                        *a = (*a).max(bits(v));
+        /// The largest `bits` of the faces of `runs` (and `m`), in eight running maxima (lanes),
+        /// so the reduction is plain lane-wise code: a kernel compiled twice (`crate::simd`), as
+        /// SSE2 has no i32 max and LLVM keeps the baseline compilation scalar.
+        struct RunsMax<'a, B> {
+            u: &'a [f32],
+            runs: &'a [[u32; 3]],
+            m: i32,
+            bits: B,
+        }
+        impl<B: Fn(f32) -> i32> crate::simd::Kernel for RunsMax<'_, B> {
+            type Output = i32;
+            #[inline(always)]
+            fn run(self) -> i32 {
+                let RunsMax {
+                    u,
+                    runs,
+                    mut m,
+                    bits,
+                } = self;
+                let mut acc = [m; 8];
+                for &[f, _, len] in runs {
+                    let (f, len) = (f as usize, len as usize);
+                    let run = &u[f..f + len];
+                    let mut chunks = run.chunks_exact(8);
+                    for ch in &mut chunks {
+                        for (a, &v) in acc.iter_mut().zip(ch) {
+                            *a = (*a).max(bits(v));
+                        }
+                    }
+                    for &v in chunks.remainder() {
+                        m = m.max(bits(v));
                     }
                 }
-                for &v in chunks.remainder() {
-                    m = m.max(bits(v));
-                }
+                acc.into_iter().fold(m, i32::max)
             }
-            acc.into_iter().fold(m, i32::max)
-        }
-        // Compiled for AVX2 when the CPU has it: SSE2 has no i32 max, and LLVM keeps it scalar.
-        #[cfg(target_arch = "x86_64")]
-        #[target_feature(enable = "avx2,fma")]
-        fn runs_max_avx2(u: &[f32], runs: &[[u32; 3]], m: i32, bits: impl Fn(f32) -> i32) -> i32 {
-            runs_max(u, runs, m, bits)
         }
         let mut m = 0i32;
         for c in 0..3 {
             let set = &self.faces[c];
             let u = &self.u[c];
-            #[cfg(target_arch = "x86_64")]
-            if crate::simd::avx2_fma() {
-                // SAFETY: the CPU has AVX2 and FMA (checked just above).
-                m = unsafe { runs_max_avx2(u, &set.runs, m, bits) };
-            } else {
-                m = runs_max(u, &set.runs, m, bits);
-            }
-            #[cfg(not(target_arch = "x86_64"))]
-            {
-                m = runs_max(u, &set.runs, m, bits);
-            }
+            m = crate::simd::dispatch(RunsMax {
+                u,
+                runs: &set.runs,
+                m,
+                bits,
+            });
             for f in &set.fixed {
                 m = m.max(bits(u[f[0] as usize]));
             }
