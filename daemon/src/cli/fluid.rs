@@ -6,11 +6,11 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::fluid::case::Case;
-use hydrometra_sim::fluid::cavity::{
+use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
+use hydrometra_sim::harness::analytic_cavity::{
     CAVITY_SEMI_AXES_M, UTERINE_HALF_LENGTH_M, UTERINE_HALF_THICKNESS_M, UTERINE_HALF_WIDTH_M,
     UTERINE_TAPER,
 };
-use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
 use hydrometra_sim::harness::benchmark::{
     bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
 };

@@ -26,7 +26,6 @@
 
 mod advection;
 pub mod case;
-pub mod cavity;
 mod grid;
 mod labels;
 mod multigrid;

@@ -1,11 +1,11 @@
-//! The paper's Table 1 operating points on the benchmark cavity ([`super::cavity::uterine_cavity`]): our solver and the
+//! The paper's Table 1 operating points on the benchmark cavity ([`super::analytic_cavity::uterine_cavity`]): our solver and the
 //! paper-class baseline side by side.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use super::cavity::{ellipsoid_cavity, uterine_cavity};
+use super::analytic_cavity::{ellipsoid_cavity, uterine_cavity};
 use super::{FluidError, FluidParams, FluidSolver, ProjectionMethod};
 use crate::fork_join::{cpu_time_ns, CpuClock};
 

@@ -5,6 +5,8 @@
 //!
 //! - [`testmesh`]: thick sphere and cylinder meshes for the FEM (exact solutions in
 //!   [`crate::fem::analytic`]).
+//! - [`analytic_cavity`]: analytic cavities (uterine-shaped, ellipsoid) voxelized with a scope, the
+//!   geometry of the fluid benchmark and tests.
 //! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
 //! - [`soak`]: the random stability soak of the fluid solver.
@@ -14,10 +16,10 @@
 // `super::`; these imports are what `super::` finds.
 use crate::fem::{element, pressure};
 use crate::fluid::{
-    cavity, AdvectionScheme, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver,
-    ProjectionMethod,
+    AdvectionScheme, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
 };
 
+pub mod analytic_cavity;
 pub mod benchmark;
 pub mod soak;
 pub mod stage_bench;

@@ -3,7 +3,7 @@
 //! a 1 m/s jet after 30 frames, a scope looking along +z from the cavity's lower middle, and blood
 //! particles kept at a fixed count.
 
-use crate::fluid::cavity::uterine_cavity;
+use super::analytic_cavity::uterine_cavity;
 use crate::fluid::{CellLabel, FluidError, FluidParams, FluidSolver};
 use crate::scene::clarity::{View, ViewSpec};
 use crate::scene::particles::{kinds_from_labels, ParticleClass, ParticleKind, ParticleSystem};

@@ -9,8 +9,8 @@ use super::*;
 #[test]
 fn the_fused_update_with_closed_regions_equals_the_plain_one() {
     let solver = |plain: bool| {
-        let mut grid = super::super::cavity::ellipsoid_cavity(0.0015, 1.0).unwrap();
-        assert!(super::super::cavity::add_stray_blocks(&mut grid, 4).len() >= 16);
+        let mut grid = crate::harness::analytic_cavity::ellipsoid_cavity(0.0015, 1.0).unwrap();
+        assert!(crate::harness::analytic_cavity::add_stray_blocks(&mut grid, 4).len() >= 16);
         let params = FluidParams {
             tolerance: 1e-6,
             ..FluidParams::default()
