@@ -3,6 +3,8 @@
 //! Pure computation, no I/O beyond reading and writing its own files. SI units everywhere
 //! (m, s, Pa, m^3); clinical units only through [`units`] at the edges.
 #![warn(missing_docs)]
+// Every `unsafe` block says why it is sound (`// SAFETY: ...`); CI's `-D warnings` makes it an error.
+#![warn(clippy::undocumented_unsafe_blocks)]
 
 pub mod anatomy;
 pub mod atlas;

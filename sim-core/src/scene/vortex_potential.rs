@@ -474,7 +474,7 @@ impl<'a> Kernel<'a> {
         if at + 4 > out.node_mask.len() || at + 4 > p0.len().min(p1.len()).min(p2.len()) {
             return;
         }
-        // SAFETY (the loads and stores below): `at + 4` is within the mask and the three
+        // SAFETY: (the loads and stores below) `at + 4` is within the mask and the three
         // potentials (checked above).
         let mask = unsafe { lane::nonzero_at(out.node_mask, at) };
         let x = lane::add(lane::ramp(), lane::splat(x0));
@@ -512,6 +512,7 @@ impl<'a> Kernel<'a> {
         let psi = lane::lookup(self.table, tq);
         let phi = lane::and(inside, lane::mul(g, psi));
         for (p, an) in [p0, p1, p2].into_iter().zip(self.amp_axis) {
+            // SAFETY: `at + 4` is within the three potentials (checked at the top).
             unsafe {
                 let v = lane::add(lane::load_at(p, at), lane::mul(phi, an));
                 lane::store_at(p, at, v);
@@ -561,7 +562,7 @@ mod avx2 {
             if at + 8 > out.node_mask.len() || at + 8 > p0.len().min(p1.len()).min(p2.len()) {
                 return;
             }
-            // SAFETY (the loads and stores below): `at + 8` is within the mask and the three
+            // SAFETY: (the loads and stores below) `at + 8` is within the mask and the three
             // potentials (checked above); the table's index is masked to its size.
             let bytes = unsafe {
                 out.node_mask
@@ -617,6 +618,8 @@ mod avx2 {
                 );
                 let i2 = _mm256_slli_epi32::<1>(i);
                 let tp = kernel.table.as_ptr().cast::<f32>();
+                // SAFETY: the CPU has AVX2 (this function's contract); `i2` indexes value and
+                // slope of entries below TABLE_SIZE (masked above), inside the table.
                 let (v, d) = unsafe {
                     (
                         _mm256_i32gather_ps::<4>(tp, i2),
@@ -625,6 +628,7 @@ mod avx2 {
                 };
                 let phi = _mm256_and_ps(inside, _mm256_mul_ps(g, _mm256_fmadd_ps(f, d, v)));
                 for (p, an) in [p0, p1, p2].into_iter().zip(b.amp_axis) {
+                    // SAFETY: `at + 8` is within the three potentials (checked above).
                     unsafe {
                         let ptr = p.as_mut_ptr().add(at);
                         let v = _mm256_fmadd_ps(phi, splat(an), _mm256_loadu_ps(ptr));

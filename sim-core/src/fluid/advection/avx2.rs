@@ -9,8 +9,8 @@
 use std::arch::x86_64::*;
 
 use super::geometry::{Axis, Geometry};
-use super::passes::Pass;
 use super::plan::BLOCK;
+use super::trace::Pass;
 use crate::simd::V4;
 
 /// Vectors (of eight faces) per chunk of the trace's split loops.
@@ -141,7 +141,7 @@ unsafe fn gather(base: *const f32, len: usize, idx: __m256i) -> __m256 {
     unsafe { _mm256_i32gather_ps::<4>(base, idx) }
 }
 
-/// [`update_centred`](super::centred::update_centred) on one row, eight cells at a time while the upper x face of all
+/// `update_centred` (`centred.rs`) on one row, eight cells at a time while the upper x face of all
 /// eight is in the row (`x[i + 1]`, no wrap): the same operations as the scalar loop, so the
 /// same values. Returns the number of cells done (a multiple of eight).
 ///

@@ -7,7 +7,8 @@
 //!
 //! - `plan.rs`: the work list (runs of active faces, blocks) and the compact gather/scatter;
 //! - `geometry.rs`: where a point falls among the samples, and the interpolations there;
-//! - `passes.rs`: the trace and the schemes' passes (scalar paths);
+//! - `trace.rs`: a pass's inputs and its scalar kernels (the trace, MacCormack's correction);
+//! - `passes.rs`: the schemes' passes over all blocks, each block on the AVX2 or scalar kernel;
 //! - `centred.rs`: the cell-centred velocity the traces follow;
 //! - `avx2.rs`: the AVX2 paths of the trace, MacCormack's correction and the centred velocity.
 //!
@@ -26,11 +27,12 @@ mod passes;
 mod plan;
 #[cfg(test)]
 mod tests;
+mod trace;
 
 pub(crate) use centred::{update_centred, CentredRows};
 pub(crate) use geometry::Geometry;
-pub(crate) use passes::Pass;
 pub(crate) use plan::{gather, scatter, Plan};
+pub(crate) use trace::Pass;
 
 /// Advection scheme.
 ///

@@ -1,28 +1,13 @@
-//! The advection passes: the RK2 trace of every active face through the centred velocity and
-//! the schemes built on it (semi-Lagrangian, MacCormack's fused trace and correction, BFECC,
-//! clamping, monotone cubic), block by block in two halves on two threads. Each pass has its scalar
-//! path here and its AVX2 path in `avx2.rs`.
+//! The advection passes over all active faces, block by block in two halves on two threads:
+//! semi-Lagrangian (with or without the clamping bounds), MacCormack's fused trace and
+//! correction, BFECC's error estimate, clamping, monotone cubic. Each block runs the AVX2 kernel
+//! (`avx2.rs`) where the CPU has it, else the scalar one (`trace.rs`).
 
 #[cfg(target_arch = "x86_64")]
 use super::avx2;
-use super::geometry::Geometry;
-use super::plan::{split_block, Plan, BLOCK};
-use crate::simd::{v4, V4};
-
-/// Faces per chunk of the trace's split loops.
-const CHAIN: usize = 64;
-
-/// Read-only inputs of one advection pass.
-pub(crate) struct Pass<'a> {
-    pub geo: &'a Geometry,
-    pub plan: &'a Plan,
-    /// Padded cell-centred velocity for the trace.
-    pub vc: &'a [V4],
-    /// Fields sampled at the foot points, per component.
-    pub src: [&'a [f32]; 3],
-    /// dt / h; negative for the forward trace of MacCormack.
-    pub dt_cells: f32,
-}
+use super::plan::{split_block, BLOCK};
+use super::trace::Pass;
+use crate::simd::v4;
 
 impl Pass<'_> {
     /// For every face of block `b`: traces it back (RK2 midpoint rule through the centred
@@ -47,96 +32,6 @@ impl Pass<'_> {
             return;
         }
         self.block_scalar::<BOUNDS>(b, each)
-    }
-
-    /// [`Pass::block`] one face at a time (the fallback, and the reference of the AVX2 kernel).
-    #[inline(always)]
-    pub(super) fn block_scalar<const BOUNDS: bool>(
-        &self,
-        b: usize,
-        mut each: impl FnMut(usize, (f32, f32, f32)),
-    ) {
-        let geo = self.geo;
-        self.trace_scalar::<false>(
-            b,
-            |c, src, p| geo.sample::<BOUNDS>(c, src, p),
-            |n, r, _| each(n, r),
-        )
-    }
-
-    /// [`Pass::block_scalar`] with the foot-point sampler `sample(component, field, point)`.
-    #[inline(always)]
-    fn block_scalar_with(
-        &self,
-        b: usize,
-        sample: impl Fn(usize, &[f32], V4) -> (f32, f32, f32),
-        mut each: impl FnMut(usize, (f32, f32, f32)),
-    ) {
-        self.trace_scalar::<false>(b, sample, |n, r, _| each(n, r))
-    }
-
-    /// [`Pass::block_scalar_with`], and with `FORWARD` also the foot point of the forward trace
-    /// (the trace of this pass with `-dt_cells`, to the bit; zero without `FORWARD`):
-    /// `each(position within the block, sample, forward foot)`.
-    #[inline(always)]
-    pub(super) fn trace_scalar<const FORWARD: bool>(
-        &self,
-        b: usize,
-        sample: impl Fn(usize, &[f32], V4) -> (f32, f32, f32),
-        mut each: impl FnMut(usize, (f32, f32, f32), V4),
-    ) {
-        let plan = self.plan;
-        let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
-        let base = b * BLOCK;
-        let (geo, v, dt) = (self.geo, self.vc, self.dt_cells);
-        let dt_f = -dt;
-        for run in runs {
-            let c = run.c as usize;
-            let f0 = run.f.map(|v| v as usize);
-            let src = self.src[c];
-            let o = run.compact as usize - base;
-            let sh: [f32; 3] = std::array::from_fn(|a| if a == c { 0.0 } else { 0.5 });
-            let mut x0 = v4::new(
-                f0[0] as f32 + sh[0],
-                f0[1] as f32 + sh[1],
-                f0[2] as f32 + sh[2],
-            );
-            let step = v4::new(1.0, 0.0, 0.0);
-            // Three short loops over a chunk instead of one long one: each face's work is a
-            // chain of dependent loads (velocity -> midpoint -> velocity -> foot -> samples),
-            // and independent iterations let the CPU overlap many chains.
-            let len = run.len as usize;
-            let mut start = 0;
-            while start < len {
-                let n = (len - start).min(CHAIN);
-                let mut pts = [v4::zero(); CHAIN];
-                let mut pts_f = [v4::zero(); CHAIN];
-                let mut x = x0;
-                for i in 0..n {
-                    // At the face the centred field is the mean of the two cells beside it.
-                    let (lo, hi) = geo.face_cells(c, [f0[0] + start + i, f0[1], f0[2]]);
-                    let vf = v4::lerp(v[lo], v[hi], v4::splat(0.5));
-                    pts[i] = v4::sub_scaled(x, 0.5 * dt, vf);
-                    if FORWARD {
-                        pts_f[i] = v4::sub_scaled(x, 0.5 * dt_f, vf);
-                    }
-                    x = v4::add(x, step);
-                }
-                let mut x = x0;
-                for i in 0..n {
-                    pts[i] = v4::sub_scaled(x, dt, geo.centred(v, pts[i]));
-                    if FORWARD {
-                        pts_f[i] = v4::sub_scaled(x, dt_f, geo.centred(v, pts_f[i]));
-                    }
-                    x = v4::add(x, step);
-                }
-                for i in 0..n {
-                    each(o + start + i, sample(c, src, pts[i]), pts_f[i]);
-                }
-                x0 = x;
-                start += n;
-            }
-        }
     }
 
     /// Semi-Lagrangian values at every active face into `out` (concatenated compact order).
@@ -244,7 +139,7 @@ impl Pass<'_> {
     /// MacCormack's correction, this pass sampling the backward step's field in `src` (`u` off
     /// the active faces) at the forward feet `foot` of [`Pass::maccormack_trace`]: `out` holds the
     /// backward step's values on entry and the corrected values clamped to `[lo, hi]` on return
-    /// ([`maccormack_value`]). `orig` is the full face arrays before the step.
+    /// (`maccormack_value` in `trace.rs`). `orig` is the full face arrays before the step.
     pub fn maccormack_correct(
         &self,
         orig: [&[f32]; 3],
@@ -269,30 +164,6 @@ impl Pass<'_> {
             },
         );
     }
-
-    /// [`Pass::maccormack_correct`] on block `b` one face at a time (the fallback, and the
-    /// reference of the AVX2 kernel): `foot`, `lo`, `hi` and `out` are the block's slices.
-    pub(super) fn correct_scalar(
-        &self,
-        b: usize,
-        orig: [&[f32]; 3],
-        [xs, ys, zs]: [&[f32]; 3],
-        [ls, hs]: [&[f32]; 2],
-        os: &mut [f32],
-    ) {
-        let (plan, base) = (self.plan, b * BLOCK);
-        let runs = &plan.runs[plan.block_runs[b] as usize..plan.block_runs[b + 1] as usize];
-        for run in runs {
-            let c = run.c as usize;
-            let (o, full) = (run.compact as usize - base, run.full as usize);
-            for i in 0..run.len as usize {
-                let n = o + i;
-                let p = v4::new(xs[n], ys[n], zs[n]);
-                let (back, _, _) = self.geo.sample::<false>(c, self.src[c], p);
-                os[n] = maccormack_value(os[n], orig[c][full + i], back, ls[n], hs[n]);
-            }
-        }
-    }
 }
 
 /// The first `m` of `v` to `out` from `o`: a fixed-size copy for whole vectors (one store, no
@@ -304,24 +175,6 @@ fn put(out: &mut [f32], o: usize, v: &[f32; 8], m: usize) {
         out[o..o + 8].copy_from_slice(v);
     } else {
         out[o..o + m].copy_from_slice(&v[..m]);
-    }
-}
-
-/// MacCormack's corrected value of a face: `hat + (u - back) / 2` (`hat` the backward step's
-/// value, `u` the value before the step, `back` the forward step of `hat`), clamped to the
-/// backward step's samples `[lo, hi]`; `hat` where that is not finite.
-#[inline(always)]
-fn maccormack_value(hat: f32, u: f32, back: f32, lo: f32, hi: f32) -> f32 {
-    let v = hat + 0.5 * (u - back);
-    if !v.is_finite() {
-        return hat;
-    }
-    // `f32::clamp`'s order without its panic on NaN bounds.
-    let v = if v < lo { lo } else { v };
-    if v > hi {
-        hi
-    } else {
-        v
     }
 }
 
@@ -386,7 +239,7 @@ impl Pass<'_> {
         });
     }
 
-    /// Monotone tricubic semi-Lagrangian values ([`Geometry::sample_cubic`]) into `out`.
+    /// Monotone tricubic semi-Lagrangian values (`Geometry::sample_cubic`) into `out`.
     pub fn cubic(&self, out: &mut [f32], parallel: bool) {
         let geo = self.geo;
         for_blocks([out], [], parallel, |b, [os], []| {

@@ -1,8 +1,7 @@
 //! The next coarser level: its labels (a coarse cell is open if any child is, else fluid if any
 //! child is, else solid) and the Galerkin couplings of piecewise-constant prolongation.
 
-use super::level::{pad_index, Level};
-use super::{L_FLUID, L_OPEN, L_SOLID};
+use super::level::{pad_index, Level, L_FLUID, L_OPEN, L_SOLID};
 
 impl Level {
     /// The Galerkin operator of piecewise-constant prolongation on the coarse level `coarse`

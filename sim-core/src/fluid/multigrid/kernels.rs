@@ -4,12 +4,10 @@
 //! baseline: the same operations, so the same results to the bit; the reductions use fixed
 //! lanes). On a level marked `parallel` the spans run in two halves on two threads.
 
-use super::level::Level;
+use super::level::{Level, LANES};
 
 /// Cells per stack buffer of the smoother (a few cache lines; any length is correct).
 const CHUNK: usize = 128;
-/// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies).
-pub(super) const LANES: usize = 8;
 
 /// Neighbour windows of cells `c..c+n` in a padded vector: (x-1, x+1, y-1, y+1, z-1, z+1).
 macro_rules! windows {

@@ -4,8 +4,15 @@
 
 use super::super::grid::step_along;
 use super::super::topology::NONE;
-use super::kernels::LANES;
-use super::{L_FLUID, L_OPEN, L_SOLID};
+
+/// Label codes of a level.
+pub(crate) const L_SOLID: u8 = 0;
+pub(crate) const L_FLUID: u8 = 1;
+pub(crate) const L_OPEN: u8 = 2;
+
+/// Lanes of the f32 reductions (one AVX register; the compiler vectorises the fixed-width bodies),
+/// and the multiple of cells the spans are rounded to ([`round_spans`]).
+pub(super) const LANES: usize = 8;
 
 /// Spans closer than this many cells merge (the cells between are masked out, so this only trades
 /// work on non-fluid cells for longer vector loops; on the benchmark cavity 48 beat 12 by ~15 % of

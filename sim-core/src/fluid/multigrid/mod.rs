@@ -40,13 +40,8 @@ mod transfer;
 
 pub(crate) use kernels::{for_spans, max_abs_from, max_abs_spans, run, Real, SpanOp};
 use level::DenseDiag;
-pub(crate) use level::Level;
+pub(crate) use level::{Level, L_FLUID, L_OPEN, L_SOLID};
 use transfer::{prolongate, restrict};
-
-/// Label codes of a level.
-pub(crate) const L_SOLID: u8 = 0;
-pub(crate) const L_FLUID: u8 = 1;
-pub(crate) const L_OPEN: u8 = 2;
 
 /// The level hierarchy.
 #[derive(Default, Debug)]

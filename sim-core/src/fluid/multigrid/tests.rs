@@ -1,5 +1,4 @@
-use super::kernels::LANES;
-use super::level::round_spans;
+use super::level::{round_spans, LANES};
 use super::*;
 
 /// An irregular label grid: a ball of fluid with an open cap and a solid inclusion.
