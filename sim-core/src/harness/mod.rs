@@ -10,6 +10,7 @@
 //! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
 //! - [`soak`]: the random stability soak of the fluid solver.
+//! - [`load`]: busy threads, to measure the fork-joins under load.
 //! - [`stage_bench`]: the cavity and particles the vortex and particle benchmarks share.
 
 // The harness files moved here from `fluid` and `fem` and still name the library's items through
@@ -21,6 +22,7 @@ use crate::fluid::{
 
 pub mod analytic_cavity;
 pub mod benchmark;
+pub mod load;
 pub mod soak;
 pub mod stage_bench;
 // Index loops mirror the mesh formulas, as in `fem`.
