@@ -9,7 +9,9 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::harness::fork_join::set_guard;
+use hydrometra_sim::harness::benchmark::StepTimes;
+use hydrometra_sim::harness::fork_join::{set_backend, set_guard, Backend};
+use hydrometra_sim::harness::load::BusyThreads;
 use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
@@ -20,6 +22,7 @@ use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
 use hydrometra_sim::vtk;
 use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
+use super::fluid::ForkJoinArg;
 use crate::service::hydraulics::load_scenario;
 
 /// `hydrometra scene ...`
@@ -73,6 +76,10 @@ pub struct RunArgs {
     /// Voxel size override, mm.
     #[arg(long)]
     voxel_mm: Option<f64>,
+    /// Run every SIMD kernel on its portable (SSE2 baseline) path instead of AVX2 + FMA, to check
+    /// the fallbacks against a run on the AVX2 paths (the fluid's agree to the bit).
+    #[arg(long)]
+    portable_simd: bool,
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
@@ -121,6 +128,20 @@ pub struct BenchArgs {
     /// offered to the helper, to measure the guard against.
     #[arg(long)]
     no_fork_join_guard: bool,
+    /// Compare fork-joins instead of the Table 1 columns (comma separated: helper, rayon,
+    /// chili): per voxel size, `--repeats` runs of each, interleaved, each a new scene with the
+    /// same warm-up and timed steps at the operating point (and the same vortices); prints the
+    /// step and fluid-stage ms (mean, median, p99), the projection's iterations and divergence,
+    /// and whether every run ended in the same state.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    fork_join: Vec<ForkJoinArg>,
+    /// Runs per fork-join and voxel size of `--fork-join` (interleaved: one of each in turn).
+    #[arg(long, default_value_t = 1)]
+    repeats: usize,
+    /// Busy threads competing for the cores while `--fork-join` runs (0: quiet), as a renderer or
+    /// another process on the machine would.
+    #[arg(long, default_value_t = 0)]
+    load_threads: usize,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -218,6 +239,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
     if !(a.rate_hz.is_finite() && (1.0..=1000.0).contains(&a.rate_hz)) {
         bail!("--rate-hz {}: expected 1 to 1000", a.rate_hz);
     }
+    hydrometra_sim::harness::simd::set_portable(a.portable_simd);
     let mut desc = SceneDesc::load(&a.scene.scene)?;
     if let Some(v) = a.voxel_mm {
         desc.fluid.voxel_mm = v;
@@ -334,6 +356,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "series_frames": written,
         "grid_dims": scene.cells().dims,
         "voxel_mm": scene.desc().fluid.voxel_mm,
+        "simd": if hydrometra_sim::harness::simd::avx2_fma() { "avx2_fma" } else { "portable" },
         "stages": stage_json(&r.counters),
         "particles": scene.particles().map(particles_json),
     });
@@ -596,6 +619,9 @@ fn bench(a: &BenchArgs) -> Result<()> {
     set_guard(!a.no_fork_join_guard);
     let base = SceneDesc::load(&a.scene.scene)?;
     let (assets, _) = assets(&base, &a.scene)?;
+    if !a.fork_join.is_empty() {
+        return fork_join_bench(a, &base, &assets);
+    }
     let dt = 1.0 / a.rate_hz;
     let mut rows = Vec::new();
     for &v in &a.voxels_mm {
@@ -763,6 +789,207 @@ fn bench(a: &BenchArgs) -> Result<()> {
             r.replay_us_p99, r.step_ms_mean, r.step_ms_p99, r.grid_fluid_volume_ml,
             r.surface_volume_ml, r.volume_error_percent, opt(r.traverse_first_s),
             opt(r.traverse_median_s), r.traverse_reached, r.traverse_released
+        );
+    }
+    Ok(())
+}
+
+/// One timed run of `scene bench --fork-join`.
+#[derive(Debug, Default, serde::Serialize)]
+struct ForkJoinRun {
+    /// Wall time of every timed scene step, ms.
+    #[serde(skip)]
+    step_ms: Vec<f64>,
+    /// The fluid stage's time in the timed steps it ran, ms.
+    #[serde(skip)]
+    fluid_ms: Vec<f64>,
+    fluid_steps: usize,
+    projection_iterations: usize,
+    div_rel_sum: f64,
+    div_rel_max: f64,
+    /// Halves run on the fork-join helper, and joins its guard ran in one thread, in the timed
+    /// steps (process-wide counts: zero for the other fork-joins).
+    helper_halves: u64,
+    guard_serial_joins: u64,
+    /// FNV-1a of the flow field's velocities and the cavity pressure after the run.
+    state_digest: u64,
+}
+
+/// A row of `scene bench --fork-join`: one fork-join at one voxel size, its runs pooled.
+#[derive(Debug, serde::Serialize)]
+struct ForkJoinRow {
+    voxel_mm: f64,
+    fork_join: String,
+    runs: usize,
+    load_threads: usize,
+    step_ms: StepTimes,
+    fluid_ms: StepTimes,
+    projection_iterations_mean: f64,
+    div_rel_mean: f64,
+    div_rel_max: f64,
+    helper_halves: u64,
+    guard_serial_joins: u64,
+    /// The state digest of every run (equal when the fork-joins ran the same arithmetic).
+    state_digests: Vec<u64>,
+}
+
+/// The flow field's velocities and the cavity pressure, hashed bit for bit (FNV-1a).
+fn state_digest(scene: &Scene) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |bits: u64| {
+        for b in bits.to_le_bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    if let Some(flow) = scene.flow() {
+        let mut vel = vec![[0.0f32; 3]; flow.kinds().len()];
+        flow.velocities_into(&mut vel);
+        for v in &vel {
+            v.iter().for_each(|x| eat(u64::from(x.to_bits())));
+        }
+    }
+    eat(scene.report().cavity_pressure_pa.to_bits());
+    h
+}
+
+/// Warms up and times one scene of `desc` at the operating point on the current fork-join.
+fn fork_join_run(desc: SceneDesc, assets: &SceneAssets, a: &BenchArgs) -> Result<ForkJoinRun> {
+    let dt = 1.0 / a.rate_hz;
+    let inputs = |f: usize| SceneInputs {
+        rig: operating_point(f, dt, a.pump_mmhg, 0.5),
+        hydraulics: HydraulicsInput::Own,
+    };
+    let mut scene = Scene::new(desc, assets.clone())?;
+    for f in 0..a.warmup {
+        scene.step(&inputs(f), dt)?;
+    }
+    let mut run = ForkJoinRun {
+        step_ms: Vec::with_capacity(a.steps),
+        fluid_ms: Vec::with_capacity(a.steps),
+        ..Default::default()
+    };
+    let before = (helper_tasks(), guard_serial_joins());
+    for f in a.warmup..a.warmup + a.steps {
+        let r = timed_step(&mut scene, &inputs(f), dt)?;
+        let c = &r.counters;
+        run.step_ms.push(c.step.last_ms);
+        if c.get(Stage::Fluid).ran_last {
+            run.fluid_ms.push(c.get(Stage::Fluid).last_ms);
+        }
+        if let Some(s) = r.fluid {
+            run.fluid_steps += 1;
+            run.projection_iterations += s.projection_iterations;
+            run.div_rel_sum += s.max_div_rel;
+            run.div_rel_max = run.div_rel_max.max(s.max_div_rel);
+        }
+    }
+    run.helper_halves = helper_tasks() - before.0;
+    run.guard_serial_joins = guard_serial_joins() - before.1;
+    run.state_digest = state_digest(&scene);
+    Ok(run)
+}
+
+/// `scene bench --fork-join`: the fork-joins like for like on the real scene (module doc of
+/// `sim-core/src/fork_join.rs`), quiet or beside `--load-threads` busy threads.
+fn fork_join_bench(a: &BenchArgs, base: &SceneDesc, assets: &SceneAssets) -> Result<()> {
+    if a.repeats == 0 || a.steps == 0 {
+        bail!("--repeats and --steps must be at least 1");
+    }
+    let load = BusyThreads::start(a.load_threads).context("starting the load threads")?;
+    let mut rows = Vec::new();
+    for &v in &a.voxels_mm {
+        let mut desc = base.clone();
+        desc.fluid.voxel_mm = v;
+        if let Some(c) = a.max_cfl {
+            desc.fluid.max_cfl = c;
+        }
+        desc.stages.vortices = false;
+        desc.validate()?;
+        if a.vortices > 0 {
+            desc = with_vortices(desc, a.vortices, a.vortex_mode)?;
+        }
+        let mut runs: Vec<Vec<ForkJoinRun>> = a.fork_join.iter().map(|_| Vec::new()).collect();
+        for _ in 0..a.repeats {
+            for (i, &fj) in a.fork_join.iter().enumerate() {
+                set_backend(fj.into());
+                let run = fork_join_run(desc.clone(), assets, a);
+                set_backend(Backend::Helper);
+                runs[i].push(run?);
+            }
+        }
+        for (fj, runs) in a.fork_join.iter().zip(runs) {
+            let pool = |f: fn(&ForkJoinRun) -> &Vec<f64>| -> Vec<f64> {
+                runs.iter().flat_map(|r| f(r).iter().copied()).collect()
+            };
+            let fluid_steps = runs.iter().map(|r| r.fluid_steps).sum::<usize>().max(1) as f64;
+            rows.push(ForkJoinRow {
+                voxel_mm: v,
+                fork_join: format!("{fj:?}").to_lowercase(),
+                runs: runs.len(),
+                load_threads: load.count(),
+                step_ms: StepTimes::of(&pool(|r| &r.step_ms)),
+                fluid_ms: StepTimes::of(&pool(|r| &r.fluid_ms)),
+                projection_iterations_mean: runs
+                    .iter()
+                    .map(|r| r.projection_iterations)
+                    .sum::<usize>() as f64
+                    / fluid_steps,
+                div_rel_mean: runs.iter().map(|r| r.div_rel_sum).sum::<f64>() / fluid_steps,
+                div_rel_max: runs.iter().map(|r| r.div_rel_max).fold(0.0, f64::max),
+                helper_halves: runs.iter().map(|r| r.helper_halves).sum(),
+                guard_serial_joins: runs.iter().map(|r| r.guard_serial_joins).sum(),
+                state_digests: runs.iter().map(|r| r.state_digest).collect(),
+            });
+        }
+        tracing::info!("{v} mm done");
+    }
+    drop(load);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "scene {}, fork-joins compared: {} warm-up + {} timed steps at {} Hz per run, pump {} mmHg, \
+         {} run(s) per fork-join interleaved, rayon threads {}, load threads {}, fork-join guard {}, \
+         vortices {} ({:?}). ms: wall time of the timed steps of all runs pooled (scene step; fluid \
+         stage where it ran), mean ± sem, median, p99 (nearest rank). div h/U: max |div u| h / U \
+         after each fluid step, mean and worst.",
+        base.name,
+        a.warmup,
+        a.steps,
+        a.rate_hz,
+        a.pump_mmhg,
+        a.repeats,
+        rayon::current_num_threads(),
+        a.load_threads,
+        if a.no_fork_join_guard { "off" } else { "on" },
+        a.vortices,
+        a.vortex_mode
+    );
+    println!("| voxel mm | fork-join | step ms mean ± sem | median | p99 | fluid ms mean ± sem | median | p99 | CG its | div h/U mean / max | helper halves | guard serial joins |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in &rows {
+        let (s, f) = (&r.step_ms, &r.fluid_ms);
+        println!(
+            "| {} | {} | {:.3} ± {:.3} | {:.3} | {:.3} | {:.3} ± {:.3} | {:.3} | {:.3} | {:.2} | {:.2e} / {:.2e} | {} | {} |",
+            r.voxel_mm, r.fork_join, s.mean, s.sem, s.median, s.p99, f.mean, f.sem, f.median,
+            f.p99, r.projection_iterations_mean, r.div_rel_mean, r.div_rel_max, r.helper_halves,
+            r.guard_serial_joins
+        );
+    }
+    // The fork-join changes which thread runs a half, never the arithmetic: every run of a voxel
+    // size must end in the same state.
+    for v in &a.voxels_mm {
+        let digests: Vec<u64> = rows
+            .iter()
+            .filter(|r| r.voxel_mm == *v)
+            .flat_map(|r| r.state_digests.iter().copied())
+            .collect();
+        let same = digests.windows(2).all(|w| w[0] == w[1]);
+        println!(
+            "{v} mm: final state {} in all {} runs",
+            if same { "identical" } else { "DIFFERENT" },
+            digests.len()
         );
     }
     Ok(())

@@ -15,8 +15,8 @@
 use std::arch::x86_64::*;
 
 use super::kernel::{ClassSums, Cone, Kernel, BLOCK, KEEP, SUBSTEP_CELLS};
-use super::lane::{self, v4, V4};
 use crate::scene::VoxelKind;
+use crate::simd::{v4, v4 as lane, V4};
 
 /// Eight lanes of the one-at-a-time path's 0, 1/2, dt, dt/2 and grid constants.
 struct Consts {
@@ -318,7 +318,7 @@ impl Consts {
     /// cell's kind), as bits.
     #[inline(always)]
     fn in_fluid(&self, k: &Kernel<'_>, q: [__m256; 3]) -> u32 {
-        // SAFETY (the intrinsics): the caller has AVX2 (inlined into `run`).
+        // SAFETY: (the intrinsics) the caller has AVX2 (inlined into `run`).
         let (inside, cells) = unsafe {
             // In [0, dims) along every axis (a NaN fails).
             let mut inside = _mm256_cmp_ps::<_CMP_GE_OQ>(q[0], self.zero);
@@ -382,7 +382,7 @@ fn class_factors(k: &Kernel<'_>, cb: &[u8]) -> ([__m256; 3], __m256, __m256) {
 /// closures here: those would be compiled without them.)
 #[inline(always)]
 fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3] {
-    // SAFETY (all intrinsics here): the caller has AVX2 and FMA (a `target_feature` function).
+    // SAFETY: (all intrinsics here) the caller has AVX2 and FMA (a `target_feature` function).
     unsafe {
         // `lane::locate`: s clamped to [0, smax] (max returns its second operand for a NaN),
         // its lower sample index at most imax, the weight s - i.

@@ -2,9 +2,9 @@
 //! slip, the landing (a slide along a wall, an outlet) and the clarity's cone weight.
 //! [`super::sweep`] runs it over a task's particles; [`super::block8`] is its eight-lane twin.
 
-use super::lane::{self, v4, V4};
 use crate::scene::clarity::View;
 use crate::scene::VoxelKind;
+use crate::simd::{v4, v4 as lane, V4};
 
 /// A particle stays in the cavity ...
 pub(super) const KEEP: u8 = 0;

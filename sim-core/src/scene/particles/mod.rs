@@ -11,15 +11,13 @@
 //!
 //! The files: `spec` (the `[particles]` table), `slip` (drag and settling), `system` (storage
 //! and the step), `kernel` and `sweep` (the per-particle step and its sweep over a task; `block8`
-//! its eight-lane twin, `lane` the four-lane operations), `inputs` (what the stage reads),
-//! `sources` (classes and emission),
-//! `output` (VTK), `traverse` (the time to traverse), and here the scene's stage.
+//! its eight-lane twin; the four-lane operations are `crate::simd::v4`'s), `inputs` (what the
+//! stage reads), `sources` (classes and emission), `output` (VTK), `traverse` (the time to traverse), and here the scene's stage.
 
 #[cfg(target_arch = "x86_64")]
 mod block8;
 mod inputs;
 mod kernel;
-mod lane;
 mod output;
 mod slip;
 mod sources;

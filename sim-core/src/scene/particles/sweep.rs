@@ -6,13 +6,12 @@
 #[cfg(target_arch = "x86_64")]
 use super::block8;
 use super::kernel::{ClassSums, Kernel, Resume, Task, GROUP, KEEP};
-use super::lane;
 
 /// Moves the particles of `task` with `k`; adds the clarity's cone weights of those that stay
 /// to `sums` and returns how many left (their fate is not KEEP).
 pub(super) fn sweep(k: &Kernel<'_>, task: Task<'_>, sums: &mut ClassSums) -> usize {
     #[cfg(target_arch = "x86_64")]
-    if lane::avx2_available() {
+    if crate::simd::avx2_fma() {
         // SAFETY: the CPU has AVX2 and FMA (checked above).
         return unsafe { sweep_avx2(k, task, sums) };
     }

@@ -3,13 +3,13 @@
 //! removal of those that left) and the clarity of a view.
 
 use super::kernel::{ClassSums, Cone, Kernel, Sampler, Task, BLOCK, KEEP, OPEN, OUTFLOW};
-use super::lane::{self, v4, V4};
 use super::spec::ParticleKind;
 use super::sweep::sweep;
 use crate::fluid::{CellLabel, FluidGrid, FluidSolver};
 use crate::scene::clarity::View;
 use crate::scene::dispersion;
 use crate::scene::VoxelKind;
+use crate::simd::{v4, v4 as lane, V4};
 
 /// The eddy dispersion's default seed; a scene's walk uses `particles.seed ^ WALK_STREAM` (a
 /// stream apart from the emission's).
