@@ -761,7 +761,9 @@ fn run_scene(
             notify(&ports, events::PARTICLES, errors);
         }
         if let Some(level) = pacer.end(began.elapsed(), Instant::now()) {
-            apply_quality(&mut scene, level);
+            if let Err(e) = scene.set_quality(scene_pace::quality_at(level)) {
+                tracing::warn!(level, error = %e, "could not set the scene's quality");
+            }
             tracing::info!(
                 level,
                 period_ms = pacer.period().as_secs_f64() * 1e3,
@@ -773,15 +775,6 @@ fn run_scene(
     };
     *revision_base += scene.cavity().topology_revision;
     Ok(end)
-}
-
-/// Sets the scene's quality for a degradation level (`scene_pace`).
-fn apply_quality(scene: &mut Scene, level: u32) {
-    let _ = (
-        scene,
-        scene_pace::max_fluid_substeps(level),
-        scene_pace::particle_budget_share(level),
-    );
 }
 
 /// Counts a failed publication (logged the first times only); true when it was sent.

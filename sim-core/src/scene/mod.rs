@@ -77,7 +77,7 @@ pub use scope::{ScopeGeometry, ScopePart};
 pub use surface::CavitySurface;
 pub use types::{
     BoundaryCell, CavityView, FluxBalance, FrameFlows, HydraulicsInput, InflowPort, RigInputs,
-    SceneInputs, ScopePose, StepReport, VoxelKind, WholeBoxCheck,
+    SceneInputs, SceneQuality, ScopePose, StepReport, VoxelKind, WholeBoxCheck,
 };
 pub use voxelize::{VoxelBox, Voxelizer};
 
@@ -293,6 +293,18 @@ impl Scene {
     pub fn atlas(&self) -> &Atlas {
         &self.atlas
     }
+    /// Lowers (or restores) how much work the stages do: the daemon's overload steps
+    /// (docs/daemon.md, "Overload"). The full quality is `SceneQuality::default()`.
+    pub fn set_quality(&mut self, quality: SceneQuality) -> Result<(), SceneError> {
+        if let Some(fluid) = &mut self.fluid {
+            fluid.cap_substeps(quality.max_fluid_substeps)?;
+        }
+        if let Some(particles) = &mut self.particles {
+            particles.set_budget_share(quality.particle_budget_share);
+        }
+        Ok(())
+    }
+
     /// The last step's report.
     pub fn report(&self) -> &StepReport {
         &self.report

@@ -274,3 +274,23 @@ pub struct InflowPort<'a> {
     /// The inflow channel's area, m^2.
     pub channel_area_m2: f64,
 }
+
+/// How much of its configured work the scene does: the daemon lowers it in steps under overload
+/// (docs/daemon.md, "Overload") and restores it when frames fit again.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SceneQuality {
+    /// At most this many fluid substeps per step (`None`: the configured bound).
+    pub max_fluid_substeps: Option<usize>,
+    /// The share of the particle budget in use, `[0, 1]` (at least one particle).
+    pub particle_budget_share: f64,
+}
+
+impl Default for SceneQuality {
+    /// The full quality: everything as configured.
+    fn default() -> Self {
+        Self {
+            max_fluid_substeps: None,
+            particle_budget_share: 1.0,
+        }
+    }
+}

@@ -54,6 +54,8 @@ pub struct Particles {
     sources: Option<Sources>,
     clarity: Option<f64>,
     tracker: ClarityTracker,
+    /// The share of the budget in use (`SceneQuality::particle_budget_share`).
+    budget_share: f64,
 }
 
 impl Particles {
@@ -63,7 +65,15 @@ impl Particles {
         Self {
             spec,
             tracker,
+            budget_share: 1.0,
             ..Self::default()
+        }
+    }
+    /// Uses `share` of the budget from now on (`ParticleSystem::set_budget_share`).
+    pub fn set_budget_share(&mut self, share: f64) {
+        self.budget_share = share;
+        if let Some(sys) = &mut self.system {
+            sys.set_budget_share(share);
         }
     }
     /// The particles, once the stage has run.
@@ -157,6 +167,7 @@ impl Particles {
         let fluid = SlipFluid::of(inputs.solver.params());
         let sources = Sources::new(spec, &mut sys, &inputs.cavity, fluid)?;
         sys.seed_walk(spec.seed ^ WALK_STREAM);
+        sys.set_budget_share(self.budget_share);
         Some((sys, sources))
     }
 }

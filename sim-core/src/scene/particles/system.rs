@@ -66,6 +66,8 @@ pub struct ParticleSystem {
     h: f64,
     origin: [f64; 3],
     capacity: usize,
+    /// The budget in use (at most `capacity`): the daemon lowers it under overload.
+    limit: usize,
     max_substeps: usize,
     gravity: [f64; 3],
     classes: Vec<ParticleClass>,
@@ -128,6 +130,7 @@ impl ParticleSystem {
             h: grid.spacing_m(),
             origin: grid.origin_m(),
             capacity,
+            limit: capacity,
             max_substeps: max_substeps.max(1),
             gravity: gravity_unit,
             classes: Vec::with_capacity(256),
@@ -221,6 +224,22 @@ impl ParticleSystem {
     pub fn capacity(&self) -> usize {
         self.capacity
     }
+    /// The budget in use: emission stops at this many particles (at most the capacity).
+    pub fn limit(&self) -> usize {
+        self.limit
+    }
+    /// Uses `share` of the budget (clamped to `[0, 1]`, at least one particle): emission stops
+    /// at that count; particles already above it stay until they leave. No allocation.
+    pub fn set_budget_share(&mut self, share: f64) {
+        let share = if share.is_nan() {
+            1.0
+        } else {
+            share.clamp(0.0, 1.0)
+        };
+        self.limit = ((self.capacity as f64 * share).round() as usize)
+            .max(1)
+            .min(self.capacity);
+    }
     /// The counters.
     pub fn counts(&self) -> ParticleCounts {
         ParticleCounts {
@@ -293,7 +312,7 @@ impl ParticleSystem {
             return false;
         };
         let k = c.kind as usize;
-        if self.pos.len() >= self.capacity {
+        if self.pos.len() >= self.limit {
             self.counts.dropped += 1;
             return false;
         }
@@ -664,6 +683,62 @@ fn kind_bytes(kinds: &[VoxelKind]) -> &[u8] {
 mod tests {
     use super::*;
     use crate::fluid::FluidParams;
+
+    /// A lowered budget stops emission at its share (and counts the refusals as dropped), never
+    /// allocates past the capacity, and restoring it lets emission go on.
+    #[test]
+    fn a_lowered_budget_stops_emission_at_its_share_and_restoring_it_resumes() {
+        let (n, h) = (8, 1e-3);
+        let grid = FluidGrid::new([n, n, n], h, [0.0; 3], [false; 3]).unwrap();
+        let kinds = vec![VoxelKind::Fluid; n * n * n];
+        for capacity in [1, 7, 100] {
+            // A fresh system per share (a clone's storage holds only its particles).
+            let new_system = || {
+                let mut sys = ParticleSystem::new(&grid, capacity, 8, [0.0, -1.0, 0.0]);
+                let class = sys
+                    .add_class(ParticleClass {
+                        kind: ParticleKind::Blood,
+                        settle_m_s: 0.0,
+                        tau_s: 1e-3,
+                        shade_m2: 0.0,
+                        diameter_m: 0.0,
+                    })
+                    .unwrap();
+                (sys, class)
+            };
+            let fill = |sys: &mut ParticleSystem, cls: u8| {
+                let mut placed = 0;
+                for i in 0..2 * capacity {
+                    let x = (0.5 + (i % n) as f64) * h;
+                    placed += usize::from(sys.emit(&kinds, cls, [x, 4.5 * h, 4.5 * h]));
+                }
+                placed
+            };
+            for share in [0.5, 0.0, f64::NAN, 2.0] {
+                let (mut s, cls) = new_system();
+                s.set_budget_share(share);
+                let want = match share {
+                    x if x.is_nan() || x >= 1.0 => capacity,
+                    x => ((capacity as f64 * x).round() as usize).clamp(1, capacity),
+                };
+                assert_eq!(
+                    (s.limit(), fill(&mut s, cls)),
+                    (want, want),
+                    "{capacity} x {share}"
+                );
+                assert_eq!(s.len(), want);
+                assert_eq!(s.counts().dropped, (2 * capacity - want) as u64);
+                let storage = s.pos.capacity();
+                s.set_budget_share(1.0);
+                assert_eq!(
+                    fill(&mut s, cls),
+                    capacity - want,
+                    "restored: {capacity} x {share}"
+                );
+                assert_eq!((s.len(), s.pos.capacity()), (capacity, storage));
+            }
+        }
+    }
 
     /// The grouped kernels (particles that start in fluid, eight at a time on AVX2, else four at
     /// a time, the one-substep case together) move every particle bit for bit as the
