@@ -2,15 +2,19 @@
 """Fails when two source files of one crate import each other, directly or through a chain.
 
 For every crate root of the workspace (src/lib.rs, src/main.rs, src/bin/*.rs) it builds the module
-tree from the `mod name;` lines, then reads every `use` line and every inline `crate::`/`super::`/
-`self::` path and resolves it to the file that defines the item (following `use` re-exports, so
-`super::FluidParams` counts as a dependency on the file that defines `FluidParams`, not on the
-`mod.rs` that re-exports it). A file depends on another when one of its paths resolves there.
+tree from the `mod name;` lines, then reads every `use` line and every path inside the code: those
+that start with `crate::`, `super::` or `self::`, and the bare ones (`particles::Particles`,
+`Stage::Fluid`) whose first segment is a child module or a name the module imports. Each resolves
+to the file that defines the item (following `use` re-exports, so `super::FluidParams` counts as a
+dependency on the file that defines `FluidParams`, not on the `mod.rs` that re-exports it). A file
+depends on another when one of its paths resolves there: a child file that names `super::Scene`
+and a parent that names `particles::Particles` import each other.
 
 Not counted as dependencies: `mod` declarations and `pub use` re-exports (they shape the module
 tree, they do not use anything), comments, string literals, and paths into other crates.
-Known limits: `#[path]` attributes and macro-generated paths are not followed; a path naming an item
-through a private `use` binding of the module is followed like a re-export.
+Known limits: `#[path]` attributes and macro-generated paths are not followed; a lone name (a type
+or function used without `::`, through a `use` of its parent's re-export) is not followed; a path
+naming an item through a private `use` binding of the module is followed like a re-export.
 
 Usage: .ci/module_cycles.py [workspace_dir]   (exit status 1 and a report on any cycle)
 """
@@ -232,11 +236,17 @@ class Crate:
                 if segs[-1] != "*" and name != "_":
                     mod.bindings[name] = (segs, mod)
                 mod.uses.append((segs, is_pub, line))
-        for m in re.finditer(r"(?<![\w:])((?:crate|super|self)(?:::" + IDENT + r")+)", text):
+        # Paths in code: `crate::`, `super::`, `self::` ones, and bare `a::b` ones (resolved only
+        # when `a` is a child module or an imported name; a field or method access `.a::` and a
+        # path's tail `x::a::b` are not paths of their own).
+        for m in re.finditer(r"(?<![\w:.])(" + IDENT + r"(?:\s*::\s*" + IDENT + r")+)", text):
             if any(s <= m.start() <= e for s, e in use_spans):
                 continue
+            segs = [seg.strip() for seg in m.group(1).split("::")]
+            if segs[0] in ("Self", "std", "core", "alloc"):
+                continue
             mod = module_at(m.start())
-            mod.inline_paths.append((m.group(1).split("::"), line_of(text, m.start())))
+            mod.inline_paths.append((segs, line_of(text, m.start())))
 
     def resolve(self, segs, ctx, depth=0):
         """The file that defines what `segs` names from module `ctx`, or None (another crate)."""
@@ -337,29 +347,64 @@ def crate_roots(ws):
 
 
 def self_test():
-    """The checker on a scratch workspace: a re-export and a test-module `super::*` are no cycle, a
-    `use` each way (directly or via a re-export) is."""
+    """The checker on scratch workspaces: a re-export and a test-module `super::*` are no cycle, a
+    `use` each way (directly or via a re-export) is, and so is a child file naming `super::Scene`
+    in code while its parent names the child's items by a bare path (`particles::step`) or by
+    `self::`/`crate::` paths, with no `use` line either way."""
     import tempfile
 
-    files = {
+    def cycles_of(files):
+        with tempfile.TemporaryDirectory() as d:
+            root = Path(d)
+            for name, text in files.items():
+                (root / name).parent.mkdir(parents=True, exist_ok=True)
+                (root / name).write_text(text)
+            crate = Crate("a", root / "a/src/lib.rs")
+            nodes = sorted(m.file for m in crate.modules.values())
+            found = [c for c in strongly_connected(nodes, crate.edges()) if len(c) > 1]
+            return [sorted(f.relative_to(root / "a/src").as_posix() for f in c) for c in found]
+
+    base = {
         "Cargo.toml": '[workspace]\nmembers = ["a"]\n',
         "a/src/lib.rs": "pub mod m;\npub mod n;\npub use m::Thing;\n",
         "a/src/m.rs": "use crate::n::helper;\npub struct Thing;\n#[cfg(test)]\nmod tests { use super::*; }\n",
         "a/src/n.rs": "// use super::m::Thing; (a comment is no import)\npub fn helper() {}\n",
     }
-    with tempfile.TemporaryDirectory() as d:
-        root = Path(d)
-        for name, text in files.items():
-            (root / name).parent.mkdir(parents=True, exist_ok=True)
-            (root / name).write_text(text)
-        crate = Crate("a", root / "a/src/lib.rs")
-        acyclic = [c for c in strongly_connected(sorted(m.file for m in crate.modules.values()), crate.edges()) if len(c) > 1]
-        assert not acyclic, f"false cycle {acyclic}"
-        # n now names Thing through the crate root's re-export: m <-> n.
-        (root / "a/src/n.rs").write_text("pub fn helper() -> crate::Thing { crate::Thing }\n")
-        crate = Crate("a", root / "a/src/lib.rs")
-        cycles = [c for c in strongly_connected(sorted(m.file for m in crate.modules.values()), crate.edges()) if len(c) > 1]
-        assert len(cycles) == 1 and len(cycles[0]) == 2, f"missed cycle: {cycles}"
+    assert not cycles_of(base), f"false cycle {cycles_of(base)}"
+    # n now names Thing through the crate root's re-export: m <-> n.
+    found = cycles_of({**base, "a/src/n.rs": "pub fn helper() -> crate::Thing { crate::Thing }\n"})
+    assert found == [["m.rs", "n.rs"]], f"missed cycle: {found}"
+
+    # The scene's old shape: a stage file takes `super::Scene` (in code, no `use`), the scene calls
+    # the stage by a bare path.
+    scene = {
+        "Cargo.toml": '[workspace]\nmembers = ["a"]\n',
+        "a/src/lib.rs": "pub mod scene;\n",
+        "a/src/scene/mod.rs": "mod particles;\nmod types;\npub use types::Kind;\n"
+        "pub struct Scene { pub kinds: Vec<Kind> }\n"
+        "impl Scene { pub fn step(&self) { particles::step(self); } }\n",
+        "a/src/scene/types.rs": "#[derive(Clone, Copy)]\npub enum Kind { Fluid }\n",
+        "a/src/scene/particles.rs": "pub fn step(scene: &super::Scene) -> usize { scene.kinds.len() }\n",
+    }
+    found = cycles_of(scene)
+    assert found == [["scene/mod.rs", "scene/particles.rs"]], f"missed the super:: cycle: {found}"
+    # The same through `self::` and `crate::` paths in code.
+    found = cycles_of({**scene, "a/src/scene/mod.rs": scene["a/src/scene/mod.rs"].replace(
+        "particles::step(self)", "self::particles::step(self)")})
+    assert found == [["scene/mod.rs", "scene/particles.rs"]], f"missed the self:: cycle: {found}"
+    found = cycles_of({**scene, "a/src/scene/particles.rs":
+                       "pub fn step(scene: &crate::scene::Scene) -> usize { scene.kinds.len() }\n"})
+    assert found == [["scene/mod.rs", "scene/particles.rs"]], f"missed the crate:: cycle: {found}"
+    # Fixed as the scene is now: the stage takes the shared record from the leaf (through the
+    # parent's re-export: `super::Kind` resolves to types.rs), never the scene.
+    fixed = {**scene, "a/src/scene/particles.rs": "pub fn step(kinds: &[super::Kind]) -> usize { kinds.len() }\n",
+             "a/src/scene/mod.rs": scene["a/src/scene/mod.rs"].replace("particles::step(self)",
+                                                                     "particles::step(&self.kinds)")}
+    assert not cycles_of(fixed), f"false cycle {cycles_of(fixed)}"
+    # A field or method named like a child module is no path: `self.particles.step()`.
+    method = {**scene, "a/src/scene/mod.rs": scene["a/src/scene/mod.rs"].replace(
+        "particles::step(self);", "let _ = self.kinds.len();")}
+    assert not cycles_of(method), f"false cycle {cycles_of(method)}"
     print("module-cycles: self-test passed")
 
 

@@ -6,15 +6,16 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::fluid::case::Case;
-use hydrometra_sim::fluid::cavity::{
+use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
+use hydrometra_sim::harness::analytic_cavity::{
     CAVITY_SEMI_AXES_M, UTERINE_HALF_LENGTH_M, UTERINE_HALF_THICKNESS_M, UTERINE_HALF_WIDTH_M,
     UTERINE_TAPER,
 };
-use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, ProjectionMethod};
 use hydrometra_sim::harness::benchmark::{
-    bench_shape, BenchRow, Cavity, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
+    bench_shape, BenchRow, Cavity, StepTimes, PAPER_FLUID_VOXELS, PAPER_MS, PAPER_VOXELS_M,
 };
 use hydrometra_sim::harness::fork_join::{set_backend, Backend};
+use hydrometra_sim::harness::load::BusyThreads;
 use hydrometra_sim::harness::soak::run_soak;
 
 /// `hydrometra fluid ...`
@@ -90,7 +91,7 @@ pub struct BenchArgs {
     /// Runs per row, interleaved across the rows of a voxel size (pooled in the table).
     #[arg(long, default_value_t = 1)]
     pub repeats: usize,
-    /// Benchmark geometry: the uterine stand-in (matches the paper's fluid-cell counts) or the
+    /// Benchmark geometry: the analytic uterine cavity (matches the paper's fluid-cell counts) or the
     /// earlier ellipsoid (for comparison with older figures).
     #[arg(long, value_enum, default_value_t = CavityArg::Uterine)]
     pub cavity: CavityArg,
@@ -109,6 +110,10 @@ pub struct BenchArgs {
     /// Rayon threads (0: rayon's default, all cores).
     #[arg(long, default_value_t = 0)]
     pub threads: usize,
+    /// Busy threads competing for the cores while the rows run (0: quiet), to measure the
+    /// fork-joins under load.
+    #[arg(long, default_value_t = 0)]
+    pub load_threads: usize,
     /// Print the rows as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -138,7 +143,7 @@ impl From<ForkJoinArg> for Backend {
 /// Benchmark geometry on the command line.
 #[derive(clap::ValueEnum, Clone, Copy, Debug)]
 pub enum CavityArg {
-    /// The uterine stand-in (flattened pear).
+    /// The analytic uterine cavity (flattened pear; `harness::analytic_cavity`).
     Uterine,
     /// The earlier ellipsoid.
     Ellipsoid,
@@ -355,6 +360,7 @@ fn bench(a: BenchArgs) -> Result<()> {
     // Rows of one voxel size and configuration over the repeats, interleaved so that load drifts
     // touch every configuration alike.
     let mut rows: Vec<(Config, Vec<BenchRow>)> = Vec::new();
+    let load = BusyThreads::start(a.load_threads).context("starting the load threads")?;
     for &mm in &a.voxels_mm {
         let h = mm * 1e-3;
         let first = rows.len();
@@ -386,6 +392,7 @@ fn bench(a: BenchArgs) -> Result<()> {
         set_backend(Backend::Helper);
         tracing::info!("{mm} mm done");
     }
+    drop(load);
     if a.json {
         let out: Vec<_> = rows
             .iter()
@@ -408,7 +415,7 @@ fn bench(a: BenchArgs) -> Result<()> {
         }
     };
     println!(
-        "{shape}, jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps per run, {} run(s) per row interleaved, rayon threads {}, our tolerance max|div u|h/U <= {:.0e}, baselines {} Gauss-Seidel sweeps per step.",
+        "{shape}, jet {} m/s, dt {:.5} s, {:?} advection, {} warm-up + {} timed steps per run, {} run(s) per row interleaved, rayon threads {}, load threads {}, our tolerance max|div u|h/U <= {:.0e}, baselines {} Gauss-Seidel sweeps per step.",
         a.jet_m_s,
         dt_s,
         advection,
@@ -416,13 +423,14 @@ fn bench(a: BenchArgs) -> Result<()> {
         a.steps,
         a.repeats,
         rayon::current_num_threads(),
+        a.load_threads,
         a.tolerance,
         a.sweeps
     );
-    println!("ms: wall time per step (mean ± sem over all timed steps of all runs; p99 of all steps). CPU: CLOCK_PROCESS_CPUTIME_ID (all threads) and CLOCK_THREAD_CPUTIME_ID (stepping thread) around the timed steps only. div h/U: max |div u| h / U after each step, its mean and worst over the steps.");
+    println!("ms: wall time per step (mean ± sem and median over all timed steps of all runs; p99: the largest of the runs'). CPU: CLOCK_PROCESS_CPUTIME_ID (all threads) and CLOCK_THREAD_CPUTIME_ID (stepping thread) around the timed steps only. div h/U: max |div u| h / U after each step, its mean and worst over the steps.");
     println!();
-    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | solver | ms mean ± sem | p99 | CPU ms all threads | CPU ms stepping thread | advect / diffuse / project / other ms | projection its | mean div h/U | max div h/U |");
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("| voxel [mm] | voxels total | fluid (paper) | paper ms | solver | ms mean ± sem | median | p99 | CPU ms all threads | CPU ms stepping thread | advect / diffuse / project / other ms | projection its | mean div h/U | max div h/U |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for (c, runs) in &rows {
         let Some(o) = runs.first() else { continue };
         let paper = PAPER_VOXELS_M
@@ -433,7 +441,7 @@ fn bench(a: BenchArgs) -> Result<()> {
         });
         let m = merge(runs);
         println!(
-            "| {:.1} | {} | {} ({}) | {} | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.1} | {:.2e} | {:.2e} |",
+            "| {:.1} | {} | {} ({}) | {} | {} | {:.2} ± {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} / {:.3} / {:.3} / {:.3} | {:.1} | {:.2e} | {:.2e} |",
             o.voxel_m * 1e3,
             o.voxels_total,
             o.fluid_voxels,
@@ -442,6 +450,7 @@ fn bench(a: BenchArgs) -> Result<()> {
             c.label,
             m.ms_mean,
             m.ms_sem,
+            m.ms_median,
             m.ms_p99,
             m.cpu_ms_per_step,
             m.caller_cpu_ms_per_step,
@@ -479,6 +488,11 @@ fn merge(runs: &[BenchRow]) -> BenchRow {
         / n;
     m.ms_sem = (var / n).sqrt();
     m.ms_p99 = runs.iter().map(|r| r.ms_p99).fold(0.0, f64::max);
+    m.step_ms = runs
+        .iter()
+        .flat_map(|r| r.step_ms.iter().copied())
+        .collect();
+    m.ms_median = StepTimes::of(&m.step_ms).median;
     m.cpu_ms_per_step = mean(|r| r.cpu_ms_per_step);
     m.caller_cpu_ms_per_step = mean(|r| r.caller_cpu_ms_per_step);
     m.advect_ms_mean = mean(|r| r.advect_ms_mean);

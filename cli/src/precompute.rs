@@ -9,6 +9,7 @@ use hydrometra_sim::fem::material::MaterialSet;
 use hydrometra_sim::fem::{Element, Equilibrium, FemModel, Solver, SolverOptions};
 use hydrometra_sim::mesh::TetMesh;
 use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
+use hydrometra_sim::vtk;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -312,20 +313,16 @@ pub fn run(args: &PrecomputeArgs) -> Result<()> {
     if !args.no_vtu {
         let dir = args.out.join("vtu");
         std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        let mut pvd = String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
+        let mut pvd = vtk::Collection::new();
         let mut deformed = mesh.clone();
         for (k, s) in states.iter().enumerate() {
             deformed.positions_m.clone_from(&s.positions_m);
             let name = format!("level_{k:03}.vtu");
             anatomy::write_vtu(&deformed, &dir.join(&name))?;
-            pvd.push_str(&format!(
-                "<DataSet timestep=\"{:.4}\" group=\"\" part=\"0\" file=\"vtu/{name}\"/>\n",
-                pa_to_mmhg(s.pressure_pa)
-            ));
+            pvd.dataset(pa_to_mmhg(s.pressure_pa), 0, &format!("vtu/{name}"));
         }
-        pvd.push_str("</Collection>\n</VTKFile>\n");
         let pvd_path = args.out.join("atlas.pvd");
-        std::fs::write(&pvd_path, pvd)
+        std::fs::write(&pvd_path, pvd.finish())
             .with_context(|| format!("writing {}", pvd_path.display()))?;
     }
 

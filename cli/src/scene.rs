@@ -9,15 +9,20 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
-use hydrometra_sim::harness::fork_join::set_guard;
+use hydrometra_sim::harness::benchmark::StepTimes;
+use hydrometra_sim::harness::fork_join::{set_backend, set_guard, Backend};
+use hydrometra_sim::harness::load::BusyThreads;
+use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneError, SceneInputs,
-    ScopePose, Stage, StepReport, VoxelKind,
+    ScopePose, Stage, StepReport,
 };
 use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
+use hydrometra_sim::vtk;
 use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
+use crate::fluid::ForkJoinArg;
 use crate::scenario::load_scenario;
 
 /// `hydrometra scene ...`
@@ -71,6 +76,10 @@ pub struct RunArgs {
     /// Voxel size override, mm.
     #[arg(long)]
     voxel_mm: Option<f64>,
+    /// Run every SIMD kernel on its portable (SSE2 baseline) path instead of AVX2 + FMA, to check
+    /// the fallbacks against a run on the AVX2 paths (the fluid's agree to the bit).
+    #[arg(long)]
+    portable_simd: bool,
     /// Output directory.
     #[arg(long)]
     out: PathBuf,
@@ -119,6 +128,20 @@ pub struct BenchArgs {
     /// offered to the helper, to measure the guard against.
     #[arg(long)]
     no_fork_join_guard: bool,
+    /// Compare fork-joins instead of the Table 1 columns (comma separated: helper, rayon,
+    /// chili): per voxel size, `--repeats` runs of each, interleaved, each a new scene with the
+    /// same warm-up and timed steps at the operating point (and the same vortices); prints the
+    /// step and fluid-stage ms (mean, median, p99), the projection's iterations and divergence,
+    /// and whether every run ended in the same state.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    fork_join: Vec<ForkJoinArg>,
+    /// Runs per fork-join and voxel size of `--fork-join` (interleaved: one of each in turn).
+    #[arg(long, default_value_t = 1)]
+    repeats: usize,
+    /// Busy threads competing for the cores while `--fork-join` runs (0: quiet), as a renderer or
+    /// another process on the machine would.
+    #[arg(long, default_value_t = 0)]
+    load_threads: usize,
     /// Print JSON instead of a table.
     #[arg(long)]
     json: bool,
@@ -195,15 +218,17 @@ fn rig_inputs(
     perforation: bool,
 ) -> RigInputs {
     RigInputs {
-        valve_in_opening: s.valve_in,
-        valve_out_opening: s.valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(s.pump_mmhg),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: s.valve_in,
+            valve_out_opening: s.valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(s.pump_mmhg),
+            perforation,
+        },
         scope: ScopePose {
             tip_position_m: s.tip_mm.map(|v| v * 1e-3),
             view_direction: s.view_dir,
             valid: s.pose_valid,
         },
-        perforation,
     }
 }
 
@@ -214,6 +239,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
     if !(a.rate_hz.is_finite() && (1.0..=1000.0).contains(&a.rate_hz)) {
         bail!("--rate-hz {}: expected 1 to 1000", a.rate_hz);
     }
+    hydrometra_sim::harness::simd::set_portable(a.portable_simd);
     let mut desc = SceneDesc::load(&a.scene.scene)?;
     if let Some(v) = a.voxel_mm {
         desc.fluid.voxel_mm = v;
@@ -239,7 +265,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
          fluid_wall_ml_min,fluid_open_ml_min,wall_flux_scale,deficit_ml,step_ms,replay_ms,voxelize_ms,ports_ms,fluid_ms,\
          fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity\n",
     );
-    let mut pvd = String::from("<?xml version=\"1.0\"?>\n<VTKFile type=\"Collection\" version=\"0.1\" byte_order=\"LittleEndian\">\n<Collection>\n");
+    let mut pvd = vtk::Collection::new();
     let ml_min = |q: f64| q * 6e7;
     let mut written = 0;
     for f in 0..frames {
@@ -301,31 +327,26 @@ fn run_offline(a: &RunArgs) -> Result<()> {
             let name = format!("frame_{written:05}");
             let cavity = format!("vtu/{name}_cavity.vtu");
             let flow = format!("vtu/{name}_flow.vtu");
-            std::fs::write(a.out.join(&cavity), cavity_vtu(&scene))
+            std::fs::write(a.out.join(&cavity), scene.cavity().vtu_string())
                 .with_context(|| format!("writing {cavity}"))?;
-            std::fs::write(a.out.join(&flow), flow_vtu(&scene))
+            let flow_vtu = scene.flow().map(|f| f.vtu_string()).unwrap_or_default();
+            std::fs::write(a.out.join(&flow), flow_vtu)
                 .with_context(|| format!("writing {flow}"))?;
-            let _ = writeln!(
-                pvd,
-                "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"0\" file=\"{cavity}\"/>\n<DataSet timestep=\"{t:.4}\" group=\"\" part=\"1\" file=\"{flow}\"/>"
-            );
+            pvd.dataset(t, 0, &cavity);
+            pvd.dataset(t, 1, &flow);
             // The particles, when the scene has the stage: a file every series frame (no
             // points before any is released), so the series stays aligned in ParaView.
             if let Some(p) = scene.particles() {
                 let particles = format!("vtu/{name}_particles.vtu");
                 std::fs::write(a.out.join(&particles), p.vtu_string())
                     .with_context(|| format!("writing {particles}"))?;
-                let _ = writeln!(
-                    pvd,
-                    "<DataSet timestep=\"{t:.4}\" group=\"\" part=\"2\" file=\"{particles}\"/>"
-                );
+                pvd.dataset(t, 2, &particles);
             }
             written += 1;
         }
     }
-    pvd.push_str("</Collection>\n</VTKFile>\n");
     std::fs::write(a.out.join("scene.csv"), csv).context("writing scene.csv")?;
-    std::fs::write(a.out.join("scene.pvd"), pvd).context("writing scene.pvd")?;
+    std::fs::write(a.out.join("scene.pvd"), pvd.finish()).context("writing scene.pvd")?;
     let r = scene.report();
     let summary = serde_json::json!({
         "scene": scene.desc().name,
@@ -335,6 +356,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "series_frames": written,
         "grid_dims": scene.cells().dims,
         "voxel_mm": scene.desc().fluid.voxel_mm,
+        "simd": if hydrometra_sim::harness::simd::avx2_fma() { "avx2_fma" } else { "portable" },
         "stages": stage_json(&r.counters),
         "particles": scene.particles().map(particles_json),
     });
@@ -393,133 +415,6 @@ fn stage_json(c: &hydrometra_sim::scene::Counters) -> serde_json::Value {
             "p50_ms": c.step.p50_ms(), "p99_ms": c.step.p99_ms()}),
     );
     serde_json::Value::Object(m)
-}
-
-/// The closed cavity surface as a VTU of triangles (point data: displacement-free positions).
-fn cavity_vtu(scene: &Scene) -> String {
-    let c = scene.cavity();
-    let (np, nc) = (c.positions_m.len(), c.triangles.len());
-    let mut s = String::with_capacity(40 * (np + nc));
-    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
-    let _ = writeln!(s, "<Piece NumberOfPoints=\"{np}\" NumberOfCells=\"{nc}\">");
-    s.push_str(
-        "<CellData Scalars=\"cap\">\n<DataArray type=\"UInt8\" Name=\"cap\" format=\"ascii\">\n",
-    );
-    for t in 0..nc {
-        s.push_str(if t < c.cap_triangles { "1\n" } else { "0\n" });
-    }
-    s.push_str("</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for p in c.positions_m {
-        let _ = writeln!(s, "{:e} {:e} {:e}", p[0], p[1], p[2]);
-    }
-    s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for t in c.triangles {
-        let _ = writeln!(s, "{} {} {}", t[0], t[1], t[2]);
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for i in 0..nc {
-        let _ = writeln!(s, "{}", 3 * (i + 1));
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for _ in 0..nc {
-        s.push_str("5\n");
-    }
-    s.push_str("</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
-    s
-}
-
-/// The non-solid cells of the flow field as a VTU of hexahedra (cell data `label`: the
-/// [`VoxelKind`] value, `velocity`: m/s).
-fn flow_vtu(scene: &Scene) -> String {
-    let Some(flow) = scene.flow() else {
-        return String::new();
-    };
-    let [nx, ny, nz] = flow.dims();
-    let h = flow.spacing_m();
-    let c0 = flow.first_centre_m();
-    let o = [c0[0] - 0.5 * h, c0[1] - 0.5 * h, c0[2] - 0.5 * h];
-    let kinds = flow.kinds();
-    let mut vel = vec![[0.0f32; 3]; kinds.len()];
-    flow.velocities_into(&mut vel);
-    let cells: Vec<usize> = (0..kinds.len())
-        .filter(|&n| !matches!(kinds[n], VoxelKind::Solid | VoxelKind::Scope))
-        .collect();
-    // Shared corner nodes.
-    let node = |i: usize, j: usize, k: usize| i + (nx + 1) * (j + (ny + 1) * k);
-    let mut id = vec![u32::MAX; (nx + 1) * (ny + 1) * (nz + 1)];
-    let mut points: Vec<usize> = Vec::new();
-    let mut conn: Vec<u32> = Vec::with_capacity(8 * cells.len());
-    for &n in &cells {
-        let (i, j, k) = (n % nx, (n / nx) % ny, n / (nx * ny));
-        // VTK_VOXEL order: x fastest, then y, then z.
-        for (dk, dj, di) in [
-            (0, 0, 0),
-            (0, 0, 1),
-            (0, 1, 0),
-            (0, 1, 1),
-            (1, 0, 0),
-            (1, 0, 1),
-            (1, 1, 0),
-            (1, 1, 1),
-        ] {
-            let q = node(i + di, j + dj, k + dk);
-            if id[q] == u32::MAX {
-                id[q] = points.len() as u32;
-                points.push(q);
-            }
-            conn.push(id[q]);
-        }
-    }
-    let mut s = String::with_capacity(64 * (points.len() + cells.len()));
-    s.push_str("<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n<UnstructuredGrid>\n");
-    let _ = writeln!(
-        s,
-        "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
-        points.len(),
-        cells.len()
-    );
-    s.push_str("<CellData Scalars=\"label\" Vectors=\"velocity\">\n<DataArray type=\"UInt8\" Name=\"label\" format=\"ascii\">\n");
-    for &n in &cells {
-        let _ = writeln!(s, "{}", kinds[n] as u8);
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Float32\" Name=\"velocity\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for &n in &cells {
-        let v = vel[n];
-        let _ = writeln!(s, "{:.5e} {:.5e} {:.5e}", v[0], v[1], v[2]);
-    }
-    s.push_str("</DataArray>\n</CellData>\n<Points>\n<DataArray type=\"Float32\" NumberOfComponents=\"3\" format=\"ascii\">\n");
-    for &q in &points {
-        let (i, j, k) = (
-            q % (nx + 1),
-            (q / (nx + 1)) % (ny + 1),
-            q / ((nx + 1) * (ny + 1)),
-        );
-        let _ = writeln!(
-            s,
-            "{:e} {:e} {:e}",
-            (o[0] + i as f64 * h) as f32,
-            (o[1] + j as f64 * h) as f32,
-            (o[2] + k as f64 * h) as f32
-        );
-    }
-    s.push_str("</DataArray>\n</Points>\n<Cells>\n<DataArray type=\"Int64\" Name=\"connectivity\" format=\"ascii\">\n");
-    for c in conn.chunks(8) {
-        let _ = writeln!(
-            s,
-            "{} {} {} {} {} {} {} {}",
-            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]
-        );
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"Int64\" Name=\"offsets\" format=\"ascii\">\n");
-    for i in 0..cells.len() {
-        let _ = writeln!(s, "{}", 8 * (i + 1));
-    }
-    s.push_str("</DataArray>\n<DataArray type=\"UInt8\" Name=\"types\" format=\"ascii\">\n");
-    for _ in 0..cells.len() {
-        s.push_str("12\n");
-    }
-    s.push_str("</DataArray>\n</Cells>\n</Piece>\n</UnstructuredGrid>\n</VTKFile>\n");
-    s
 }
 
 /// One row of the bench table.
@@ -593,16 +488,18 @@ fn operating_point(f: usize, dt: f64, pump_mmhg: f64, valve_out: f64) -> RigInpu
     let t = f as f64 * dt;
     let sway = 1.5e-3 * (0.7 * t).sin();
     RigInputs {
-        valve_in_opening: 1.0,
-        valve_out_opening: valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: 1.0,
+            valve_out_opening: valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(pump_mmhg) * (1.0 + 0.05 * (0.3 * t).sin()),
+            perforation: false,
+        },
         scope: ScopePose {
             // In the corpus of the default uterus (drivers/scenarios/default.toml, t = 45 s).
             tip_position_m: [sway, 0.0129, 0.0426],
             view_direction: [0.0, 0.5, 0.866],
             valid: true,
         },
-        perforation: false,
     }
 }
 
@@ -722,6 +619,9 @@ fn bench(a: &BenchArgs) -> Result<()> {
     set_guard(!a.no_fork_join_guard);
     let base = SceneDesc::load(&a.scene.scene)?;
     let (assets, _) = assets(&base, &a.scene)?;
+    if !a.fork_join.is_empty() {
+        return fork_join_bench(a, &base, &assets);
+    }
     let dt = 1.0 / a.rate_hz;
     let mut rows = Vec::new();
     for &v in &a.voxels_mm {
@@ -831,7 +731,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
                 dt,
             )?;
         }
-        if let Some(t) = Particles::time_to_traverse(&run.scene, 1e-3, a.traverse_max_s) {
+        if let Some(t) = (run.scene.flow()).map(|f| f.time_to_traverse(1e-3, a.traverse_max_s)) {
             row.traverse_released = t.released;
             row.traverse_reached = t.reached;
             row.traverse_open = t.open;
@@ -889,6 +789,207 @@ fn bench(a: &BenchArgs) -> Result<()> {
             r.replay_us_p99, r.step_ms_mean, r.step_ms_p99, r.grid_fluid_volume_ml,
             r.surface_volume_ml, r.volume_error_percent, opt(r.traverse_first_s),
             opt(r.traverse_median_s), r.traverse_reached, r.traverse_released
+        );
+    }
+    Ok(())
+}
+
+/// One timed run of `scene bench --fork-join`.
+#[derive(Debug, Default, serde::Serialize)]
+struct ForkJoinRun {
+    /// Wall time of every timed scene step, ms.
+    #[serde(skip)]
+    step_ms: Vec<f64>,
+    /// The fluid stage's time in the timed steps it ran, ms.
+    #[serde(skip)]
+    fluid_ms: Vec<f64>,
+    fluid_steps: usize,
+    projection_iterations: usize,
+    div_rel_sum: f64,
+    div_rel_max: f64,
+    /// Halves run on the fork-join helper, and joins its guard ran in one thread, in the timed
+    /// steps (process-wide counts: zero for the other fork-joins).
+    helper_halves: u64,
+    guard_serial_joins: u64,
+    /// FNV-1a of the flow field's velocities and the cavity pressure after the run.
+    state_digest: u64,
+}
+
+/// A row of `scene bench --fork-join`: one fork-join at one voxel size, its runs pooled.
+#[derive(Debug, serde::Serialize)]
+struct ForkJoinRow {
+    voxel_mm: f64,
+    fork_join: String,
+    runs: usize,
+    load_threads: usize,
+    step_ms: StepTimes,
+    fluid_ms: StepTimes,
+    projection_iterations_mean: f64,
+    div_rel_mean: f64,
+    div_rel_max: f64,
+    helper_halves: u64,
+    guard_serial_joins: u64,
+    /// The state digest of every run (equal when the fork-joins ran the same arithmetic).
+    state_digests: Vec<u64>,
+}
+
+/// The flow field's velocities and the cavity pressure, hashed bit for bit (FNV-1a).
+fn state_digest(scene: &Scene) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut eat = |bits: u64| {
+        for b in bits.to_le_bytes() {
+            h = (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    if let Some(flow) = scene.flow() {
+        let mut vel = vec![[0.0f32; 3]; flow.kinds().len()];
+        flow.velocities_into(&mut vel);
+        for v in &vel {
+            v.iter().for_each(|x| eat(u64::from(x.to_bits())));
+        }
+    }
+    eat(scene.report().cavity_pressure_pa.to_bits());
+    h
+}
+
+/// Warms up and times one scene of `desc` at the operating point on the current fork-join.
+fn fork_join_run(desc: SceneDesc, assets: &SceneAssets, a: &BenchArgs) -> Result<ForkJoinRun> {
+    let dt = 1.0 / a.rate_hz;
+    let inputs = |f: usize| SceneInputs {
+        rig: operating_point(f, dt, a.pump_mmhg, 0.5),
+        hydraulics: HydraulicsInput::Own,
+    };
+    let mut scene = Scene::new(desc, assets.clone())?;
+    for f in 0..a.warmup {
+        scene.step(&inputs(f), dt)?;
+    }
+    let mut run = ForkJoinRun {
+        step_ms: Vec::with_capacity(a.steps),
+        fluid_ms: Vec::with_capacity(a.steps),
+        ..Default::default()
+    };
+    let before = (helper_tasks(), guard_serial_joins());
+    for f in a.warmup..a.warmup + a.steps {
+        let r = timed_step(&mut scene, &inputs(f), dt)?;
+        let c = &r.counters;
+        run.step_ms.push(c.step.last_ms);
+        if c.get(Stage::Fluid).ran_last {
+            run.fluid_ms.push(c.get(Stage::Fluid).last_ms);
+        }
+        if let Some(s) = r.fluid {
+            run.fluid_steps += 1;
+            run.projection_iterations += s.projection_iterations;
+            run.div_rel_sum += s.max_div_rel;
+            run.div_rel_max = run.div_rel_max.max(s.max_div_rel);
+        }
+    }
+    run.helper_halves = helper_tasks() - before.0;
+    run.guard_serial_joins = guard_serial_joins() - before.1;
+    run.state_digest = state_digest(&scene);
+    Ok(run)
+}
+
+/// `scene bench --fork-join`: the fork-joins like for like on the real scene (module doc of
+/// `sim-core/src/fork_join.rs`), quiet or beside `--load-threads` busy threads.
+fn fork_join_bench(a: &BenchArgs, base: &SceneDesc, assets: &SceneAssets) -> Result<()> {
+    if a.repeats == 0 || a.steps == 0 {
+        bail!("--repeats and --steps must be at least 1");
+    }
+    let load = BusyThreads::start(a.load_threads).context("starting the load threads")?;
+    let mut rows = Vec::new();
+    for &v in &a.voxels_mm {
+        let mut desc = base.clone();
+        desc.fluid.voxel_mm = v;
+        if let Some(c) = a.max_cfl {
+            desc.fluid.max_cfl = c;
+        }
+        desc.stages.vortices = false;
+        desc.validate()?;
+        if a.vortices > 0 {
+            desc = with_vortices(desc, a.vortices, a.vortex_mode)?;
+        }
+        let mut runs: Vec<Vec<ForkJoinRun>> = a.fork_join.iter().map(|_| Vec::new()).collect();
+        for _ in 0..a.repeats {
+            for (i, &fj) in a.fork_join.iter().enumerate() {
+                set_backend(fj.into());
+                let run = fork_join_run(desc.clone(), assets, a);
+                set_backend(Backend::Helper);
+                runs[i].push(run?);
+            }
+        }
+        for (fj, runs) in a.fork_join.iter().zip(runs) {
+            let pool = |f: fn(&ForkJoinRun) -> &Vec<f64>| -> Vec<f64> {
+                runs.iter().flat_map(|r| f(r).iter().copied()).collect()
+            };
+            let fluid_steps = runs.iter().map(|r| r.fluid_steps).sum::<usize>().max(1) as f64;
+            rows.push(ForkJoinRow {
+                voxel_mm: v,
+                fork_join: format!("{fj:?}").to_lowercase(),
+                runs: runs.len(),
+                load_threads: load.count(),
+                step_ms: StepTimes::of(&pool(|r| &r.step_ms)),
+                fluid_ms: StepTimes::of(&pool(|r| &r.fluid_ms)),
+                projection_iterations_mean: runs
+                    .iter()
+                    .map(|r| r.projection_iterations)
+                    .sum::<usize>() as f64
+                    / fluid_steps,
+                div_rel_mean: runs.iter().map(|r| r.div_rel_sum).sum::<f64>() / fluid_steps,
+                div_rel_max: runs.iter().map(|r| r.div_rel_max).fold(0.0, f64::max),
+                helper_halves: runs.iter().map(|r| r.helper_halves).sum(),
+                guard_serial_joins: runs.iter().map(|r| r.guard_serial_joins).sum(),
+                state_digests: runs.iter().map(|r| r.state_digest).collect(),
+            });
+        }
+        tracing::info!("{v} mm done");
+    }
+    drop(load);
+    if a.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "scene {}, fork-joins compared: {} warm-up + {} timed steps at {} Hz per run, pump {} mmHg, \
+         {} run(s) per fork-join interleaved, rayon threads {}, load threads {}, fork-join guard {}, \
+         vortices {} ({:?}). ms: wall time of the timed steps of all runs pooled (scene step; fluid \
+         stage where it ran), mean ± sem, median, p99 (nearest rank). div h/U: max |div u| h / U \
+         after each fluid step, mean and worst.",
+        base.name,
+        a.warmup,
+        a.steps,
+        a.rate_hz,
+        a.pump_mmhg,
+        a.repeats,
+        rayon::current_num_threads(),
+        a.load_threads,
+        if a.no_fork_join_guard { "off" } else { "on" },
+        a.vortices,
+        a.vortex_mode
+    );
+    println!("| voxel mm | fork-join | step ms mean ± sem | median | p99 | fluid ms mean ± sem | median | p99 | CG its | div h/U mean / max | helper halves | guard serial joins |");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    for r in &rows {
+        let (s, f) = (&r.step_ms, &r.fluid_ms);
+        println!(
+            "| {} | {} | {:.3} ± {:.3} | {:.3} | {:.3} | {:.3} ± {:.3} | {:.3} | {:.3} | {:.2} | {:.2e} / {:.2e} | {} | {} |",
+            r.voxel_mm, r.fork_join, s.mean, s.sem, s.median, s.p99, f.mean, f.sem, f.median,
+            f.p99, r.projection_iterations_mean, r.div_rel_mean, r.div_rel_max, r.helper_halves,
+            r.guard_serial_joins
+        );
+    }
+    // The fork-join changes which thread runs a half, never the arithmetic: every run of a voxel
+    // size must end in the same state.
+    for v in &a.voxels_mm {
+        let digests: Vec<u64> = rows
+            .iter()
+            .filter(|r| r.voxel_mm == *v)
+            .flat_map(|r| r.state_digests.iter().copied())
+            .collect();
+        let same = digests.windows(2).all(|w| w[0] == w[1]);
+        println!(
+            "{v} mm: final state {} in all {} runs",
+            if same { "identical" } else { "DIFFERENT" },
+            digests.len()
         );
     }
     Ok(())

@@ -16,11 +16,14 @@ use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 /// honouring `CARGO_TARGET_DIR`). Panics with the build command when it is missing.
 pub fn binary(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("current_exe");
-    // target/<profile>/deps/<test> -> target/<profile>/<name>
-    let dir = exe
-        .parent()
-        .and_then(Path::parent)
-        .expect("test executable in target/<profile>/deps");
+    // target/<profile>/deps/<test> -> target/<profile>/<name>; a binary of this crate
+    // (target/<profile>/hm-soak) finds its siblings beside it.
+    let parent = exe.parent().expect("an executable in a directory");
+    let dir = if parent.ends_with("deps") {
+        parent.parent().expect("target/<profile>/deps")
+    } else {
+        parent
+    };
     let path = dir.join(name);
     assert!(
         path.is_file(),

@@ -11,6 +11,9 @@ pub const RIG_INCOMPATIBLE: u64 = 1 << 2;
 pub const SCOPE_POSE_INVALID: u64 = 1 << 3;
 /// A simulation tick missed its deadline within the last second.
 pub const DEADLINE_MISSED: u64 = 1 << 4;
+/// The procedure recording stopped on an error (disk full, directory not writable); the
+/// procedure and its deficit go on. Clears when a recording starts again.
+pub const RECORDING_FAILED: u64 = 1 << 5;
 
 /// Hydraulics: the fluid deficit reached warning stage 1, `deficit.warning_fractions[0]` of the
 /// limit (the name is the default fraction, 0.5).
@@ -46,12 +49,13 @@ pub fn deficit_warning_bits(stages_reached: usize) -> u64 {
 }
 
 /// Every defined bit with its name, lowest bit first (for monitors and logs).
-pub const ALL: [(u64, &str); 12] = [
+pub const ALL: [(u64, &str); 13] = [
     (RIG_LINK_LOST, "rig-link-lost"),
     (RIG_SAFE_STATE, "rig-safe-state"),
     (RIG_INCOMPATIBLE, "rig-incompatible"),
     (SCOPE_POSE_INVALID, "scope-pose-invalid"),
     (DEADLINE_MISSED, "deadline-missed"),
+    (RECORDING_FAILED, "recording-failed"),
     (DEFICIT_WARNING_50, "deficit-50"),
     (DEFICIT_WARNING_75, "deficit-75"),
     (DEFICIT_LIMIT, "deficit-limit"),

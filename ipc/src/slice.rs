@@ -157,3 +157,44 @@ pub fn open<K: SliceService, S: Service>(
         .open()
         .map_err(SliceServiceError::Open)
 }
+
+/// Samples a publisher pre-allocates for a service with this quality of service (iceoryx2 0.10:
+/// each subscriber's buffer and the [`SUBSCRIBER_BORROWED_SAMPLES`] it may borrow, the history
+/// and the publisher's [`PUBLISHER_LOANED_SAMPLES`] loans; docs/ipc.md, "Quality of service").
+pub fn preallocated_samples(qos: SliceQos) -> usize {
+    qos.max_subscribers * (qos.subscriber_max_buffer_size + SUBSCRIBER_BORROWED_SAMPLES)
+        + qos.history_size
+        + PUBLISHER_LOANED_SAMPLES
+}
+
+/// Samples a subscriber may hold borrowed (iceoryx2 0.10's default configuration).
+pub const SUBSCRIBER_BORROWED_SAMPLES: usize = 2;
+/// Samples the daemon's publishers may hold on loan at once (one being written, one spare).
+pub const PUBLISHER_LOANED_SAMPLES: usize = 2;
+
+/// Shared memory (bytes, in `/dev/shm`) the daemon's publisher of `K` needs for payloads of at
+/// most `max_len` elements: its pre-allocated samples of header and payload (an estimate: iceoryx2
+/// adds a few kB of management data per service).
+pub fn shared_memory_bytes<K: SliceService>(max_len: usize) -> usize {
+    let sample =
+        core::mem::size_of::<K::Header>() + max_len.max(1) * core::mem::size_of::<K::Element>();
+    preallocated_samples(K::QOS) * sample.next_multiple_of(8)
+}
+
+#[cfg(test)]
+mod shm_tests {
+    use super::*;
+
+    /// The figure docs/ipc.md states for the default scene's flow service: 19 samples of
+    /// 567,840 bytes in a segment of 10,791,922 bytes (measured with `ls -l /dev/shm`).
+    #[test]
+    fn the_flow_estimate_matches_the_measured_segment_within_a_page_per_sample() {
+        assert_eq!(preallocated_samples(Flow::QOS), 19);
+        let estimate = shared_memory_bytes::<Flow>(567_840);
+        let measured = 10_791_922usize;
+        assert!(
+            estimate <= measured && measured - estimate < 19 * 4096,
+            "{estimate}"
+        );
+    }
+}

@@ -419,6 +419,18 @@ pub const MAX_PUBLISHERS: usize = 1;
 /// Nodes that may hold the service open at once.
 pub const MAX_NODES: usize = 32;
 
+/// Shared memory (bytes, in `/dev/shm`) the daemon's status publisher pre-allocates: every
+/// subscriber's buffer and borrowed samples, the history and the publisher's loans (an estimate:
+/// iceoryx2 adds a few kB of management data).
+pub fn shared_memory_bytes() -> usize {
+    let qos = crate::slice::SliceQos {
+        history_size: HISTORY_SIZE,
+        subscriber_max_buffer_size: SUBSCRIBER_MAX_BUFFER_SIZE,
+        max_subscribers: MAX_SUBSCRIBERS,
+    };
+    crate::slice::preallocated_samples(qos) * core::mem::size_of::<Status>()
+}
+
 /// The status service as the publishing daemon creates it (or re-opens it after a restart):
 /// every quality-of-service setting of `docs/ipc.md` is set and verified.
 pub fn create<S: Service>(

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -100,6 +101,7 @@ enum Command {
 pub struct RecorderHandle {
     commands: mpsc::Sender<Command>,
     state: Arc<Mutex<RecorderStatus>>,
+    failed: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
 }
 
@@ -126,6 +128,7 @@ impl RecorderHandle {
         let (status_tap, status_rx) = tap::<Status>(STATUS_TAP_CAPACITY);
         let (commands, command_rx) = mpsc::channel();
         let state = Arc::new(Mutex::new(RecorderStatus::default()));
+        let failed = Arc::new(AtomicBool::new(false));
         let worker = Worker {
             recording: settings.start_recording,
             settings,
@@ -133,6 +136,7 @@ impl RecorderHandle {
             statuses: status_rx,
             commands: command_rx,
             state: Arc::clone(&state),
+            failed: Arc::clone(&failed),
             file: None,
             pending: Vec::new(),
             files_finished: 0,
@@ -148,6 +152,7 @@ impl RecorderHandle {
             RecorderHandle {
                 commands,
                 state,
+                failed,
                 thread: Some(thread),
             },
             RecorderTaps {
@@ -176,6 +181,12 @@ impl RecorderHandle {
     /// another procedure id.
     pub fn rotate(&self, reason: &str) {
         let _ = self.commands.send(Command::Rotate(reason.to_string()));
+    }
+
+    /// A flag that is set while recording is stopped by an error (disk full, unwritable
+    /// directory) and cleared when a file opens again: for a real-time reader (no lock).
+    pub fn failed_flag(&self) -> Arc<AtomicBool> {
+        Arc::clone(&self.failed)
     }
 
     /// What the recorder is doing.
@@ -230,6 +241,8 @@ struct Worker {
     statuses: TapReceiver<Status>,
     commands: mpsc::Receiver<Command>,
     state: Arc<Mutex<RecorderStatus>>,
+    /// Set while recording is stopped by an error (read by the 1 kHz loop for the alarm bit).
+    failed: Arc<AtomicBool>,
     file: Option<OpenFile>,
     /// Chunks read while recording is wanted but no file is open yet (before the first status).
     pending: Vec<RxChunk>,
@@ -237,9 +250,18 @@ struct Worker {
 }
 
 fn mcap_err(path: &Path, e: mcap::McapError) -> RecordError {
+    // The MCAP error's own text hides its cause ("I/O error from writing"): name it too (e.g. "No
+    // space left on device").
+    let mut message = e.to_string();
+    let mut source = std::error::Error::source(&e);
+    while let Some(cause) = source {
+        message.push_str(": ");
+        message.push_str(&cause.to_string());
+        source = cause.source();
+    }
     RecordError::Mcap {
         path: path.display().to_string(),
-        message: e.to_string(),
+        message,
     }
 }
 
@@ -298,7 +320,8 @@ impl Worker {
     }
 
     fn fail(&mut self, e: RecordError) {
-        tracing::error!(error = %e, "recording stopped");
+        tracing::error!(error = %e, "recording stopped; the procedure goes on");
+        self.failed.store(true, Ordering::Relaxed);
         self.recording = false;
         self.file = None;
         if let Ok(mut s) = self.state.lock() {
@@ -316,6 +339,7 @@ impl Worker {
             match self.open(&status) {
                 Ok(f) => {
                     tracing::info!(path = %f.path.display(), "recording the procedure");
+                    self.failed.store(false, Ordering::Relaxed);
                     self.file = Some(f);
                     for c in std::mem::take(&mut self.pending) {
                         self.on_chunk(c);

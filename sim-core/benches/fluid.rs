@@ -4,8 +4,8 @@
 //! iterations come from `hydrometra fluid bench`.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion};
-use hydrometra_sim::fluid::cavity::uterine_cavity;
 use hydrometra_sim::fluid::{FluidParams, FluidSolver, ProjectionMethod};
+use hydrometra_sim::harness::analytic_cavity::uterine_cavity;
 
 fn step(c: &mut Criterion) {
     let mut g = c.benchmark_group("fluid_step_cavity");

@@ -8,8 +8,8 @@
 
 use std::time::Instant;
 
-use hydrometra_sim::fluid::cavity::uterine_cavity;
 use hydrometra_sim::fluid::{FluidParams, FluidSolver, ProjectionMethod};
+use hydrometra_sim::harness::analytic_cavity::uterine_cavity;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

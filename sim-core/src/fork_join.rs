@@ -223,7 +223,7 @@ impl Guard {
 }
 
 /// Turns the guard on (the default) or off (every join offered to the helper; for benchmarks).
-#[cfg_attr(not(feature = "harness"), allow(dead_code))]
+#[cfg(any(test, feature = "harness"))]
 pub fn set_guard(enabled: bool) {
     GUARD.enabled.store(enabled, Ordering::Relaxed);
     if !enabled {
@@ -266,30 +266,29 @@ pub fn guard_serial_joins() -> u64 {
     GUARD.serial_joins.load(Ordering::Relaxed)
 }
 
-/// Which fork-join runs the two halves (the home-made helper by default; the others are kept to
-/// measure against, `hydrometra fluid bench --fork-join`).
-/// Without the `harness` feature nothing selects a backend (the helper runs), so the type is unused.
-#[cfg_attr(not(feature = "harness"), allow(dead_code))]
+/// Which fork-join runs the two halves: the home-made helper; the others are there to measure it
+/// against (`hydrometra fluid bench --fork-join`, `hydrometra scene bench --fork-join`), and exist
+/// only with the `harness` feature (without it every join goes to the helper).
+#[cfg(feature = "harness")]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Backend {
     /// The spinning helper thread of this module.
     Helper,
     /// `rayon::join` on rayon's global pool.
     Rayon,
-    /// `chili::Scope::join` (heartbeat scheduling) on chili's global pool (feature `harness`).
-    #[cfg(feature = "harness")]
+    /// `chili::Scope::join` (heartbeat scheduling) on chili's global pool.
     Chili,
 }
 
+#[cfg(feature = "harness")]
 static BACKEND: AtomicU8 = AtomicU8::new(0);
 
 /// Selects the fork-join of every later [`join`] (process-wide; for benchmarks).
-#[cfg_attr(not(feature = "harness"), allow(dead_code))]
+#[cfg(feature = "harness")]
 pub fn set_backend(backend: Backend) {
     let v = match backend {
         Backend::Helper => 0,
         Backend::Rayon => 1,
-        #[cfg(feature = "harness")]
         Backend::Chili => 2,
     };
     BACKEND.store(v, Ordering::Relaxed);
@@ -403,9 +402,13 @@ fn helper(s: &'static Shared) {
                     .compare_exchange(POSTED, RUNNING, Ordering::Acquire, Ordering::Relaxed)
                     .is_ok()
             {
-                // SAFETY: the slot is ours (RUNNING) and the caller keeps the task alive until it
-                // sees DONE.
+                // SAFETY: reading the slot: it is ours (we moved it POSTED -> RUNNING, acquiring
+                // the caller's write of `task` made before its release of POSTED), and no one
+                // writes `task` until the caller has seen DONE.
                 if let Some(mut task) = unsafe { *s.task.get() } {
+                    // SAFETY: calling the task: the caller keeps the closure behind the pointer
+                    // alive and untouched until it sees DONE (`Finish` waits for it, on return and
+                    // on unwind), and only this thread calls it while the state is RUNNING.
                     let run = catch_unwind(AssertUnwindSafe(|| unsafe { (task.as_mut())() }));
                     if let Err(payload) = run {
                         if let Ok(mut slot) = s.panic.lock() {
@@ -446,9 +449,12 @@ impl Drop for Finish<'_> {
             .compare_exchange(POSTED, TAKEN, Ordering::Acquire, Ordering::Relaxed)
             .is_ok()
         {
-            // SAFETY: taken back before the helper started it: the task is ours alone.
+            // SAFETY: reading the slot: taken back (POSTED -> TAKEN) before the helper started
+            // the task, so the helper will not read it; we wrote it ourselves.
             if let Some(mut task) = unsafe { *s.task.get() } {
                 if !thread::panicking() {
+                    // SAFETY: the pointer is to `join`'s closure, alive in the frame that owns this
+                    // `Finish`, and no other thread can call it any more (TAKEN).
                     unsafe { (task.as_mut())() };
                 }
             }
@@ -483,9 +489,9 @@ pub(crate) fn join<RA: Send, RB: Send>(
     if rayon::current_num_threads() < 2 {
         return (a(), b());
     }
+    #[cfg(feature = "harness")]
     match BACKEND.load(Ordering::Relaxed) {
         1 => return rayon::join(a, b),
-        #[cfg(feature = "harness")]
         2 => return chili_join(a, b),
         _ => {}
     }
@@ -511,9 +517,14 @@ pub(crate) fn join<RA: Send, RB: Send>(
             }
         };
         let ptr: *mut (dyn FnMut() + Send + '_) = &mut task;
-        // SAFETY: the lifetime is erased only for the slot; `Finish` below does not return until
-        // the helper is done with the task or the task was taken back, and `task` outlives it.
+        // SAFETY: only the trait object's lifetime bound changes (same pointer, same vtable). The
+        // 'static is never relied on: the pointer lives in the slot, which the helper reads only
+        // while the state is POSTED or RUNNING, and `Finish` (created below, dropped before
+        // `task` on return and on unwind) does not return until the state is DONE or TAKEN,
+        // after which nobody dereferences it; so every use happens while `task` is alive.
         let ptr: *mut (dyn FnMut() + Send + 'static) = unsafe { std::mem::transmute(ptr) };
+        // SAFETY: writing the slot: we own it (our IDLE -> POSTING exchange succeeded), and the
+        // helper reads it only after our release store of POSTED below.
         unsafe { *s.task.get() = NonNull::new(ptr) };
         s.state.store(POSTED, Ordering::SeqCst);
         if s.sleeping.load(Ordering::SeqCst) {

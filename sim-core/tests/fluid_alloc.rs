@@ -4,7 +4,8 @@
 
 use std::sync::atomic::Ordering;
 
-use hydrometra_sim::fluid::{cavity::ellipsoid_cavity, AdvectionScheme, FluidParams, FluidSolver};
+use hydrometra_sim::fluid::{AdvectionScheme, FluidParams, FluidSolver};
+use hydrometra_sim::harness::analytic_cavity::ellipsoid_cavity;
 
 mod common;
 use common::alloc::ALLOCS;

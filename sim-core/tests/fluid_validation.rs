@@ -263,8 +263,10 @@ fn rough_cavity(
     method: ProjectionMethod,
     stray_blocks: usize,
 ) -> (FluidSolver, usize) {
-    let mut grid = hydrometra_sim::fluid::cavity::ellipsoid_cavity(voxel_m, 1.0).unwrap();
-    let stray = hydrometra_sim::fluid::cavity::add_stray_blocks(&mut grid, stray_blocks).len();
+    let mut grid =
+        hydrometra_sim::harness::analytic_cavity::ellipsoid_cavity(voxel_m, 1.0).unwrap();
+    let stray =
+        hydrometra_sim::harness::analytic_cavity::add_stray_blocks(&mut grid, stray_blocks).len();
     let params = FluidParams {
         projection: method,
         tolerance: ROUGH_TOLERANCE,

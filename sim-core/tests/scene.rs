@@ -9,6 +9,7 @@
 
 use std::sync::atomic::Ordering;
 
+use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
     Stage, VoxelKind,
@@ -53,11 +54,13 @@ fn scope_in_cavity(scene: &Scene) -> ScopePose {
 
 fn inputs(valve_in: f64, valve_out: f64, pump_mmhg: f64, scope: ScopePose) -> RigInputs {
     RigInputs {
-        valve_in_opening: valve_in,
-        valve_out_opening: valve_out,
-        pump_set_pressure_pa: mmhg_to_pa(pump_mmhg),
+        hydraulic: HydraulicInputs {
+            valve_in_opening: valve_in,
+            valve_out_opening: valve_out,
+            pump_set_pressure_pa: mmhg_to_pa(pump_mmhg),
+            perforation: false,
+        },
         scope,
-        perforation: false,
     }
 }
 

@@ -1,5 +1,6 @@
 //! The vortex and particle stages inside a scene (coarse anatomy: 8000 tets, 6 atlas levels).
 
+use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneDesc, SceneInputs, ScopePose, Stage, VoxelKind,
 };
@@ -32,9 +33,12 @@ rate_ml_min = 2.0
     let (assets, _) = prepare::load_or_build(&desc, None, &mut |_, _, _, _| {}).unwrap();
     let mut scene = Scene::new(desc, assets).unwrap();
     let mut rig = RigInputs {
-        valve_in_opening: 1.0,
-        valve_out_opening: 1.0,
-        pump_set_pressure_pa: 12_000.0,
+        hydraulic: HydraulicInputs {
+            valve_in_opening: 1.0,
+            valve_out_opening: 1.0,
+            pump_set_pressure_pa: 12_000.0,
+            perforation: false,
+        },
         ..RigInputs::default()
     };
     let dt = 1.0 / 60.0;
@@ -113,8 +117,7 @@ rate_ml_min = 2.0
     assert!(p
         .vtp_string()
         .contains(&format!("NumberOfPoints=\"{}\"", counts.alive)));
-    let t =
-        hydrometra_sim::scene::particles::Particles::time_to_traverse(&scene, 1e-3, 2.0).unwrap();
+    let t = scene.flow().unwrap().time_to_traverse(1e-3, 2.0);
     // A 4 x 4 sub-grid on each of the port's fluid faces.
     let per_face = hydrometra_sim::scene::particles::TRAVERSE_SUBGRID.pow(2);
     assert!(

@@ -18,6 +18,7 @@ pub mod rig_connection;
 pub mod rig_source;
 pub mod scene;
 pub mod scene_pace;
+pub mod shm;
 pub mod sim;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -57,6 +58,21 @@ fn janitor_node() -> Option<iceoryx2::node::Node<iceoryx2::prelude::ipc::Service
         Err(e) => {
             tracing::warn!("cannot create the dead-node cleanup node ({e:?}); crashed renderers' resources stay until restart");
             None
+        }
+    }
+}
+
+/// The loop stage that raises `recording-failed` while the recorder is stopped by an error.
+struct RecorderAlarm(Arc<AtomicBool>);
+
+impl sim::Stage for RecorderAlarm {
+    fn name(&self) -> &'static str {
+        "recorder-alarm"
+    }
+    fn step(&mut self, _inputs: &sim::SimInputs, _dt_s: f64) {}
+    fn write_status(&self, status: &mut hydrometra_ipc::Status) {
+        if self.0.load(Ordering::Relaxed) {
+            status.alarm_bits |= hydrometra_ipc::alarms::RECORDING_FAILED;
         }
     }
 }
@@ -395,6 +411,10 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     // The rig I/O thread (which timestamps samples), the emulated rig and the loop (which
     // publishes status) inherit the real-time side from the main thread.
     let realtime_mode = placement.enter_realtime("main");
+    let mut stages = stages;
+    if let Some(r) = &recorder {
+        stages.push(Box::new(RecorderAlarm(r.failed_flag())));
+    }
     let (rx_tap, status_tap) = match taps {
         Some(t) => (Some(t.rx), Some(t.status)),
         None => (None, None),

@@ -68,6 +68,14 @@ impl StatusPublisher {
                 "removed resources of dead iceoryx2 nodes"
             );
         }
+        // Refuse now, with how much is needed, rather than die of SIGBUS once renderers fill
+        // the segments (docs/daemon.md, "Failure behaviour").
+        super::shm::check(
+            std::path::Path::new(super::shm::SHM_DIR),
+            "the status, event and control services",
+            &super::shm::daemon_services(),
+            0,
+        )?;
         let status_service = status::create(&node, names).map_err(|e| {
             anyhow::anyhow!(
                 "cannot create or open service {}: {e:?} (a service of another schema version or \

@@ -20,7 +20,7 @@ use hydrometra_ipc::particles::ParticlesHeader;
 use hydrometra_ipc::slice::{self, SliceService};
 use hydrometra_ipc::status::scene_state;
 use hydrometra_ipc::{events, ServiceNames, Status, SCHEMA_VERSION};
-use hydrometra_sim::hydraulics::{CavityCompliance, HydraulicState};
+use hydrometra_sim::hydraulics::{CavityCompliance, HydraulicInputs, HydraulicState};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneDesc, SceneInputs, ScopePose, Stage,
 };
@@ -356,6 +356,31 @@ fn ports(
     cells: usize,
     particles: usize,
 ) -> anyhow::Result<Ports> {
+    let needs = [
+        (
+            "cavity/topology",
+            slice::shared_memory_bytes::<slice::Topology>(3 * triangles),
+        ),
+        (
+            "cavity/positions",
+            slice::shared_memory_bytes::<slice::Positions>(3 * vertices),
+        ),
+        (
+            "flow",
+            slice::shared_memory_bytes::<slice::Flow>(flow_layout(cells).2),
+        ),
+        (
+            "particles",
+            slice::shared_memory_bytes::<slice::Particles>(particles),
+        ),
+    ];
+    let reserved = super::shm::daemon_services().iter().map(|s| s.1).sum();
+    super::shm::check(
+        std::path::Path::new(super::shm::SHM_DIR),
+        "the scene's services",
+        &needs,
+        reserved,
+    )?;
     let node_name = NodeName::new("hydrometrad-scene").map_err(|e| anyhow::anyhow!("{e:?}"))?;
     let node = NodeBuilder::new()
         .name(&node_name)
@@ -384,15 +409,17 @@ fn ports(
 fn rig_inputs(s: &FeedSnapshot) -> RigInputs {
     let i = &s.inputs;
     RigInputs {
-        valve_in_opening: i.valve_in_opening,
-        valve_out_opening: i.valve_out_opening,
-        pump_set_pressure_pa: i.pump_set_pressure_pa,
+        hydraulic: HydraulicInputs {
+            valve_in_opening: i.valve_in_opening,
+            valve_out_opening: i.valve_out_opening,
+            pump_set_pressure_pa: i.pump_set_pressure_pa,
+            perforation: s.perforation,
+        },
         scope: ScopePose {
             tip_position_m: i.scope.tip_position_m,
             view_direction: i.scope.view_direction,
             valid: i.scope.valid,
         },
-        perforation: s.perforation,
     }
 }
 
@@ -734,7 +761,9 @@ fn run_scene(
             notify(&ports, events::PARTICLES, errors);
         }
         if let Some(level) = pacer.end(began.elapsed(), Instant::now()) {
-            apply_quality(&mut scene, level);
+            if let Err(e) = scene.set_quality(scene_pace::quality_at(level)) {
+                tracing::warn!(level, error = %e, "could not set the scene's quality");
+            }
             tracing::info!(
                 level,
                 period_ms = pacer.period().as_secs_f64() * 1e3,
@@ -746,15 +775,6 @@ fn run_scene(
     };
     *revision_base += scene.cavity().topology_revision;
     Ok(end)
-}
-
-/// Sets the scene's quality for a degradation level (`scene_pace`).
-fn apply_quality(scene: &mut Scene, level: u32) {
-    let _ = (
-        scene,
-        scene_pace::max_fluid_substeps(level),
-        scene_pace::particle_budget_share(level),
-    );
 }
 
 /// Counts a failed publication (logged the first times only); true when it was sent.

@@ -15,6 +15,8 @@
 
 use std::time::{Duration, Instant};
 
+use hydrometra_sim::scene::SceneQuality;
+
 /// The deepest degradation level.
 pub const MAX_LEVEL: u32 = 3;
 /// A frame whose work (step and publication) takes more than this share of its period counts as
@@ -161,17 +163,12 @@ pub fn period_at(nominal: Duration, level: u32) -> Duration {
     }
 }
 
-/// The solver's substep cap at `level` (`None`: the scene's own).
-pub fn max_fluid_substeps(level: u32) -> Option<usize> {
-    (level >= 1).then_some(1)
-}
-
-/// The share of the particle budget in use at `level`.
-pub fn particle_budget_share(level: u32) -> f64 {
-    if level >= 2 {
-        0.5
-    } else {
-        1.0
+/// The scene's quality at `level`: one fluid substep from level 1, half the particle budget
+/// from level 2 (the frame period doubles at level 3: [`period_at`]).
+pub fn quality_at(level: u32) -> SceneQuality {
+    SceneQuality {
+        max_fluid_substeps: (level >= 1).then_some(1),
+        particle_budget_share: if level >= 2 { 0.5 } else { 1.0 },
     }
 }
 
@@ -270,10 +267,11 @@ mod tests {
 
     #[test]
     fn the_levels_map_to_documented_settings() {
-        assert_eq!(max_fluid_substeps(0), None);
-        assert_eq!(max_fluid_substeps(1), Some(1));
-        assert_eq!(particle_budget_share(1), 1.0);
-        assert_eq!(particle_budget_share(2), 0.5);
+        assert_eq!(quality_at(0), SceneQuality::default());
+        assert_eq!(quality_at(1).max_fluid_substeps, Some(1));
+        assert_eq!(quality_at(1).particle_budget_share, 1.0);
+        assert_eq!(quality_at(2).particle_budget_share, 0.5);
+        assert_eq!(quality_at(3), quality_at(2));
         assert_eq!(period_at(PERIOD, 2), PERIOD);
         assert_eq!(period_at(PERIOD, 3), PERIOD * 2);
     }

@@ -9,9 +9,8 @@ use std::time::{Duration, Instant};
 use serialport::{SerialPort, TTYPort};
 use tracing::{debug, info, warn};
 
-use super::{
-    EmuShared, EmulatorError, EmulatorOptions, EmulatorStats, Fault, FaultEvent, Scenario,
-};
+use super::shared::{EmuShared, EmulatorError, EmulatorOptions, EmulatorStats};
+use super::{Fault, FaultEvent, Scenario};
 use crate::calibration::{Calibration, PA_PER_MMHG};
 use crate::framing::FrameDecoder;
 use crate::wire::{

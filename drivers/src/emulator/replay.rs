@@ -25,7 +25,8 @@ use serialport::SerialPort;
 use tracing::{debug, info};
 
 use super::device::{Plugged, MAX_WAIT, WRITE_TIMEOUT};
-use super::{EmuShared, EmulatorError, EmulatorStats};
+pub use super::shared::ReplayError;
+use super::shared::{EmuShared, EmulatorError, EmulatorStats};
 use crate::framing::FrameDecoder;
 use crate::wire::{
     encode_frame, parse_raw_frame, DeviceHello, Message, MAX_ENCODED_LEN, MAX_FRAME_LEN,
@@ -66,17 +67,6 @@ impl ReplayItem {
 pub struct ReplayScript {
     /// Steps in recorded order.
     pub items: Vec<ReplayItem>,
-}
-
-/// The recording cannot be replayed.
-#[derive(Debug, thiserror::Error)]
-pub enum ReplayError {
-    /// No device hello anywhere: nothing to answer a host hello with.
-    #[error("the recording holds no device hello (the rig never completed a handshake in it)")]
-    NoHello,
-    /// The speed is not a positive finite factor.
-    #[error("invalid replay speed {0}: expected a factor > 0 (1 = real time)")]
-    Speed(f64),
 }
 
 impl ReplayScript {

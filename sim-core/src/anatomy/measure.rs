@@ -5,8 +5,53 @@ use serde::{Deserialize, Serialize};
 
 use crate::mesh::{Region, VertexLabel};
 
+use super::geometry::Geometry;
 use super::lesion::{ellipsoid_sdf, LesionKind};
-use super::Anatomy;
+use super::params::AnatomyParams;
+use super::quality::QualityStats;
+use crate::mesh::TetMesh;
+
+/// What the JSON summary holds.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AnatomySummary {
+    /// Number of vertices.
+    pub vertices: usize,
+    /// Number of tetrahedra.
+    pub tets: usize,
+    /// Number of cavity (endometrium) triangles.
+    pub cavity_triangles: usize,
+    /// Vertices in the cavity's opening loop at the external os.
+    pub opening_loop_vertices: usize,
+    /// Vertices per label: interior, fixed, endometrium, serosa.
+    pub label_counts: [usize; 4],
+    /// Tetrahedra per region: myometrium, fibroid, polyp.
+    pub region_counts: [usize; 3],
+    /// Lattice spacing, mm.
+    pub lattice_spacing_mm: f64,
+    /// Volume of the tissue (the mesh), ml.
+    pub tissue_volume_ml: f64,
+    /// Volume of the cavity at rest (closed over the external os), ml.
+    pub cavity_volume_ml: f64,
+    /// Uterine volume: tissue plus cavity, ml.
+    pub uterine_volume_ml: f64,
+    /// Element quality.
+    pub quality: QualityStats,
+    /// Dimensions measured on the mesh (straightened: version/flexion undone).
+    pub dimensions: Dimensions,
+    /// FIGO type of each myoma: requested, placed and measured on the mesh.
+    pub myomas: Vec<MyomaReport>,
+    /// Iterations of the harmonic opening solve.
+    pub opening_solve_iterations: usize,
+    /// The parameters used.
+    pub params: AnatomyParams,
+}
+
+impl AnatomySummary {
+    /// Whether every tetrahedron has positive volume.
+    pub fn min_volume_positive(&self) -> bool {
+        self.quality.min_volume_m3 > 0.0
+    }
+}
 
 /// Dimensions measured on the mesh, mm and degrees, from the mesh alone (positions, cavity
 /// triangles, the opening loop): no generator input is used. Definitions: docs/anatomy.md,
@@ -477,9 +522,13 @@ pub struct MyomaReport {
 }
 
 /// Fills the summary's volumes, counts, dimensions and myoma reports.
-pub(crate) fn fill_summary(a: &mut Anatomy) {
-    let mesh = &a.mesh;
-    let straight: Vec<[f64; 3]> = mesh.positions_m.iter().map(|&p| a.straighten(p)).collect();
+pub(crate) fn fill_summary(mesh: &TetMesh, geometry: &Geometry, s: &mut AnatomySummary) {
+    // Organ-frame positions back in the straight reference frame (version/flexion undone).
+    let straight: Vec<[f64; 3]> = mesh
+        .positions_m
+        .iter()
+        .map(|&p| geometry.bend.invert(p))
+        .collect();
     let mut label_counts = [0usize; 4];
     for l in &mesh.vertex_labels {
         label_counts[*l as usize] += 1;
@@ -499,13 +548,13 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
             on_endometrium[v as usize] = true;
         }
     }
-    let spacing = a.summary.lattice_spacing_mm / mm;
+    let spacing = s.lattice_spacing_mm / mm;
     let mut reports = Vec::new();
-    for l in &a.geometry.lesions {
+    for l in &geometry.lesions {
         let LesionKind::Myoma { figo } = l.kind else {
             continue;
         };
-        let plane = 0.5 * a.geometry.gap_at(l.centre_m);
+        let plane = 0.5 * geometry.gap_at(l.centre_m);
         let (mut inside, mut total, mut contact) = (0.0, 0.0, false);
         for (ti, t) in mesh.tets.iter().enumerate() {
             if mesh.tet_regions[ti] != Region::Fibroid {
@@ -524,7 +573,7 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
             total += vol;
             let intramural = if l.wall_sign == 0.0 {
                 // Lateral, fundal, oblique: everything not inside the opened slit.
-                !(a.geometry.footprint(c[0], c[2]) < 0.0 && c[1].abs() < 0.5 * a.geometry.gap_at(c))
+                !(geometry.footprint(c[0], c[2]) < 0.0 && c[1].abs() < 0.5 * geometry.gap_at(c))
             } else {
                 l.wall_sign * c[1] > plane
             };
@@ -547,7 +596,7 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
         };
         reports.push(MyomaReport {
             index: l.index,
-            figo_requested: a.params.myomas.get(l.index).and_then(|m| m.figo),
+            figo_requested: s.params.myomas.get(l.index).and_then(|m| m.figo),
             figo_placed: figo,
             figo_measured: measured,
             intramural_fraction: frac,
@@ -555,7 +604,6 @@ pub(crate) fn fill_summary(a: &mut Anatomy) {
             volume_ml: total * 1e6,
         });
     }
-    let s = &mut a.summary;
     s.label_counts = label_counts;
     s.region_counts = region_counts;
     s.tissue_volume_ml = tissue * 1e6;

@@ -34,14 +34,12 @@ mod smooth;
 mod vtu;
 
 pub use error::AnatomyError;
-pub use measure::{Dimensions, MyomaReport};
+pub use measure::{AnatomySummary, Dimensions, MyomaReport};
 pub use params::{
     AnatomyParams, MeshParams, MyomaParams, Parity, PolypKind, PolypParams, WallSide,
 };
 pub use quality::{mesh_quality, tet_quality, QualityStats, TetQuality};
 pub use vtu::write_vtu;
-
-use serde::{Deserialize, Serialize};
 
 use crate::mesh::{Region, TetMesh, VertexLabel};
 use geometry::{Bend, Geometry};
@@ -66,48 +64,6 @@ pub struct Anatomy {
     /// Counts, volumes, quality, measured dimensions.
     pub summary: AnatomySummary,
     geometry: Geometry,
-}
-
-/// What the JSON summary holds.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct AnatomySummary {
-    /// Number of vertices.
-    pub vertices: usize,
-    /// Number of tetrahedra.
-    pub tets: usize,
-    /// Number of cavity (endometrium) triangles.
-    pub cavity_triangles: usize,
-    /// Vertices in the cavity's opening loop at the external os.
-    pub opening_loop_vertices: usize,
-    /// Vertices per label: interior, fixed, endometrium, serosa.
-    pub label_counts: [usize; 4],
-    /// Tetrahedra per region: myometrium, fibroid, polyp.
-    pub region_counts: [usize; 3],
-    /// Lattice spacing, mm.
-    pub lattice_spacing_mm: f64,
-    /// Volume of the tissue (the mesh), ml.
-    pub tissue_volume_ml: f64,
-    /// Volume of the cavity at rest (closed over the external os), ml.
-    pub cavity_volume_ml: f64,
-    /// Uterine volume: tissue plus cavity, ml.
-    pub uterine_volume_ml: f64,
-    /// Element quality.
-    pub quality: QualityStats,
-    /// Dimensions measured on the mesh (straightened: version/flexion undone).
-    pub dimensions: Dimensions,
-    /// FIGO type of each myoma: requested, placed and measured on the mesh.
-    pub myomas: Vec<MyomaReport>,
-    /// Iterations of the harmonic opening solve.
-    pub opening_solve_iterations: usize,
-    /// The parameters used.
-    pub params: AnatomyParams,
-}
-
-impl AnatomySummary {
-    /// Whether every tetrahedron has positive volume.
-    pub fn min_volume_positive(&self) -> bool {
-        self.quality.min_volume_m3 > 0.0
-    }
 }
 
 impl Anatomy {
@@ -308,7 +264,7 @@ pub fn generate(params: &AnatomyParams) -> Result<Anatomy, AnatomyError> {
         mesh,
         geometry: geo,
     };
-    measure::fill_summary(&mut anatomy);
+    measure::fill_summary(&anatomy.mesh, &anatomy.geometry, &mut anatomy.summary);
     tracing::debug!(
         tets = anatomy.summary.tets,
         spacing_mm = anatomy.summary.lattice_spacing_mm,

@@ -26,7 +26,6 @@
 
 mod advection;
 pub mod case;
-pub mod cavity;
 mod grid;
 mod labels;
 mod multigrid;
@@ -38,10 +37,6 @@ mod topology;
 mod viscosity;
 
 pub use advection::AdvectionScheme;
-// The four-lane vectors and the AVX2 check, for the particle kernel (`scene::particles`).
-#[cfg(target_arch = "x86_64")]
-pub(crate) use advection::avx2;
-pub(crate) use advection::{v4, V4};
 pub(crate) use grid::step_along;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;

@@ -1,11 +1,11 @@
-//! The paper's Table 1 operating points on the benchmark cavity ([`super::cavity::uterine_cavity`]): our solver and the
+//! The paper's Table 1 operating points on the benchmark cavity ([`super::analytic_cavity::uterine_cavity`]): our solver and the
 //! paper-class baseline side by side.
 
 use std::time::Instant;
 
 use serde::Serialize;
 
-use super::cavity::{ellipsoid_cavity, uterine_cavity};
+use super::analytic_cavity::{ellipsoid_cavity, uterine_cavity};
 use super::{FluidError, FluidParams, FluidSolver, ProjectionMethod};
 use crate::fork_join::{cpu_time_ns, CpuClock};
 
@@ -33,8 +33,13 @@ pub struct BenchRow {
     pub ms_mean: f64,
     /// Standard error of the mean (ms).
     pub ms_sem: f64,
+    /// Median (ms).
+    pub ms_median: f64,
     /// 99th percentile (ms).
     pub ms_p99: f64,
+    /// Every timed step's wall time (ms), to pool runs.
+    #[serde(skip)]
+    pub step_ms: Vec<f64>,
     /// CPU time per timed step of the whole process (every thread: the stepping thread, the
     /// fork-join helper, pool threads; their spinning included), ms, from
     /// `CLOCK_PROCESS_CPUTIME_ID` read just before and after the timed steps.
@@ -65,7 +70,7 @@ pub enum Cavity {
     /// [`uterine_cavity`]: matches the paper's fluid-cell counts.
     #[default]
     Uterine,
-    /// [`ellipsoid_cavity`]: the earlier stand-in (for comparison with older figures).
+    /// [`ellipsoid_cavity`]: the earlier analytic cavity (for comparison with older figures).
     Ellipsoid,
 }
 
@@ -128,23 +133,18 @@ pub fn bench_shape(
     }
     let (process1, thread1) = (cpu_s(CpuClock::Process), cpu_s(CpuClock::Thread));
     let n = steps.max(1) as f64;
-    let mean = ms.iter().sum::<f64>() / n;
-    let var = ms.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
-    let mut sorted = ms.clone();
-    sorted.sort_by(|a, b| a.total_cmp(b));
-    let p99 = sorted
-        .get(((n * 0.99).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(0.0);
+    let times = StepTimes::of(&ms);
     Ok(BenchRow {
         voxel_m,
         method,
         voxels_total,
         fluid_voxels: s.fluid_cells(),
         steps,
-        ms_mean: mean,
-        ms_sem: (var / n).sqrt(),
-        ms_p99: p99,
+        ms_mean: times.mean,
+        ms_sem: times.sem,
+        ms_median: times.median,
+        ms_p99: times.p99,
+        step_ms: ms,
         cpu_ms_per_step: (process1 - process0) * 1e3 / n,
         caller_cpu_ms_per_step: (thread1 - thread0) * 1e3 / n,
         project_ms_mean: proj / n,
@@ -157,8 +157,67 @@ pub fn bench_shape(
     })
 }
 
-/// Which CPU clock.
+/// Mean, standard error of the mean, median and 99th percentile (nearest rank) of step times.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct StepTimes {
+    /// Steps.
+    pub count: usize,
+    /// Mean (ms).
+    pub mean: f64,
+    /// Standard error of the mean (ms).
+    pub sem: f64,
+    /// Median (ms; the mean of the two middle steps of an even count).
+    pub median: f64,
+    /// 99th percentile (ms; nearest rank).
+    pub p99: f64,
+}
+
+impl StepTimes {
+    /// The figures of the step times `ms` (all zero for none).
+    pub fn of(ms: &[f64]) -> StepTimes {
+        let count = ms.len();
+        if count == 0 {
+            return StepTimes::default();
+        }
+        let n = count as f64;
+        let mean = ms.iter().sum::<f64>() / n;
+        let var = ms.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+        let mut sorted = ms.to_vec();
+        sorted.sort_by(|a, b| a.total_cmp(b));
+        let median = if count % 2 == 1 {
+            sorted[count / 2]
+        } else {
+            0.5 * (sorted[count / 2 - 1] + sorted[count / 2])
+        };
+        let p99 = sorted[((n * 0.99).ceil() as usize).clamp(1, count) - 1];
+        StepTimes {
+            count,
+            mean,
+            sem: (var / n).sqrt(),
+            median,
+            p99,
+        }
+    }
+}
+
 /// CPU time consumed so far on `clock`, s (nanosecond resolution; NaN where unavailable).
 fn cpu_s(clock: CpuClock) -> f64 {
     cpu_time_ns(clock).map_or(f64::NAN, |ns| ns as f64 * 1e-9)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_times_of_known_samples() {
+        let t = StepTimes::of(&[4.0, 1.0, 3.0, 2.0]);
+        assert_eq!((t.count, t.mean, t.median, t.p99), (4, 2.5, 2.5, 4.0));
+        // Sample variance 5/3, over 4 steps.
+        assert!((t.sem - (5.0f64 / 3.0 / 4.0).sqrt()).abs() < 1e-12);
+        let t = StepTimes::of(&(1..=200).map(f64::from).collect::<Vec<_>>());
+        assert_eq!((t.median, t.p99), (100.5, 198.0));
+        assert_eq!(StepTimes::of(&[7.0]).p99, 7.0);
+        assert_eq!(StepTimes::of(&[]), StepTimes::default());
+    }
 }

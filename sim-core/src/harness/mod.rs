@@ -5,26 +5,36 @@
 //!
 //! - [`testmesh`]: thick sphere and cylinder meshes for the FEM (exact solutions in
 //!   [`crate::fem::analytic`]).
+//! - [`analytic_cavity`]: analytic cavities (uterine-shaped, ellipsoid) voxelized with a scope, the
+//!   geometry of the fluid benchmark and tests.
 //! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
 //! - [`soak`]: the random stability soak of the fluid solver.
+//! - [`load`]: busy threads, to measure the fork-joins under load.
 //! - [`stage_bench`]: the cavity and particles the vortex and particle benchmarks share.
 
 // The harness files moved here from `fluid` and `fem` and still name the library's items through
 // `super::`; these imports are what `super::` finds.
 use crate::fem::{element, pressure};
 use crate::fluid::{
-    cavity, AdvectionScheme, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver,
-    ProjectionMethod,
+    AdvectionScheme, CellLabel, FluidError, FluidGrid, FluidParams, FluidSolver, ProjectionMethod,
 };
 
+pub mod analytic_cavity;
 pub mod benchmark;
+pub mod load;
 pub mod soak;
 pub mod stage_bench;
 // Index loops mirror the mesh formulas, as in `fem`.
 #[allow(clippy::needless_range_loop)]
 pub mod testmesh;
 pub mod validation;
+
+/// The SIMD paths (`sim-core/src/simd`): whether the AVX2 + FMA kernels run, and the switch that
+/// runs every kernel on its portable path instead (process-wide; for tests and benchmarks).
+pub mod simd {
+    pub use crate::simd::{avx2_fma, set_portable};
+}
 
 /// The solver's two-way fork-join, switchable to `rayon::join` or chili to measure against.
 pub mod fork_join {

@@ -1,9 +1,10 @@
-//! The stand-in cavity that the vortex and particle benchmarks (`benches/particles.rs`) and their
-//! instruction-count driver (`examples/stage_costs.rs`) share: the uterine stand-in at 1.2 mm with
+//! The cavity that the vortex and particle benchmarks (`benches/particles.rs`) and their
+//! instruction-count driver (`examples/stage_costs.rs`) share: the analytic uterine cavity
+//! ([`super::analytic_cavity`]) at 1.2 mm with
 //! a 1 m/s jet after 30 frames, a scope looking along +z from the cavity's lower middle, and blood
 //! particles kept at a fixed count.
 
-use crate::fluid::cavity::uterine_cavity;
+use super::analytic_cavity::uterine_cavity;
 use crate::fluid::{CellLabel, FluidError, FluidParams, FluidSolver};
 use crate::scene::clarity::{View, ViewSpec};
 use crate::scene::particles::{kinds_from_labels, ParticleClass, ParticleKind, ParticleSystem};
@@ -12,7 +13,7 @@ use crate::scene::VoxelKind;
 /// The frame time of the benchmarks, s.
 pub const DT_S: f64 = 1.0 / 60.0;
 
-/// The stand-in cavity at 1.2 mm, jet 1 m/s, after 30 frames.
+/// The analytic uterine cavity at 1.2 mm, jet 1 m/s, after 30 frames.
 pub fn cavity() -> Result<FluidSolver, FluidError> {
     let grid = uterine_cavity(1.2e-3, 1.0)?;
     let params = FluidParams {

@@ -229,6 +229,7 @@ impl ProcedureRecord {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::units::mmhg_to_pa;
     /// A record as the model writes it mid-procedure (built by hand: these tests are about the
     /// file, not the model; values with full 53-bit mantissas so a lossy round trip would show).
     fn sample_record() -> ProcedureRecord {
@@ -241,7 +242,7 @@ mod tests {
             saved_unix_ms: 1_700_000_002_000,
             time_s: 2.0 / 3.0 + 1.0,
             cavity_volume_m3: 7.0 * ml / 3.0,
-            cavity_pressure_pa: 120.0 * 133.322_387_415 / 7.0,
+            cavity_pressure_pa: mmhg_to_pa(120.0) / 7.0,
             initial_cavity_volume_m3: ml / 3.0,
             perforated: true,
             totals: CumulativeVolumes {

@@ -1,5 +1,7 @@
 //! Per-stage counters: runs, skips and the time of recent runs (p50, p99), allocation-free.
 
+use std::time::Instant;
+
 use serde::Serialize;
 
 /// Runs whose times are kept for the percentiles.
@@ -93,6 +95,10 @@ impl StageCounters {
         self.total_ms += ms;
         self.recent[self.next % RECENT_RUNS] = ms as f32;
         self.next += 1;
+    }
+    /// Counts a run that started at `started`.
+    pub fn ran_since(&mut self, started: Instant) {
+        self.ran(started.elapsed().as_secs_f64() * 1e3);
     }
     /// Counts a skip.
     pub fn skipped(&mut self) {

@@ -1,216 +1,834 @@
-//! The hysteroscope in the grid: the sheath's cells, the inflow port at the tip and the outflow
-//! holes, and the flux-exact velocities of ports and moving walls.
+//! The ports stage: the cell labels of the cavity and the scope, the scope's ports and the moving
+//! walls, and their flux-exact velocities.
 //!
-//! Geometry (organ frame): the sheath is a cylinder of the outer radius around the axis through
-//! the tip along the view direction `d`, from the tip back 200 mm (out of every grid). A cell
-//! belongs to it when its centre lies inside (centre rule). With `s` the centre's axial coordinate
-//! from the tip (negative behind it) and `r` its distance from the axis:
-//! - the **tip layer** (`-h < s <= 0`) holds the inflow port: the tip cells with a face on fluid,
-//!   nearest the axis first, as many as bring the port's fluid-facing area (faces weighted by
-//!   `d . n`) closest to the channel area;
-//! - the **hole band** (`-far <= s <= -near`) holds the outflow holes: every sheath cell there with
-//!   a face on fluid;
-//! - the rest is sheath (a wall at rest).
+//! Each cell's kind comes from the voxelizer's cell states (inside: fluid; in the band of a
+//! triangle: the moving wall, or the open os for the cap's triangles) with the scope's sheath on
+//! top ([`ScopeGeometry::part`]). The **inflow port** is the tip layer's cells with a face on
+//! fluid, nearest the axis first, as many as bring the port's fluid-facing area (faces weighted
+//! by `d . n`) to the channel's; the **outflow holes** are the hole band's sheath cells with a
+//! face on fluid. Labels are composed row-incrementally, only where the cavity or the scope moved.
 //!
 //! A port's velocity is set so that its flux equals the hydraulics' flow exactly: the inflow cells
 //! move at `u d` with `u = Q_in / G_in`, `G_in = sum over their fluid faces of (d . n) h^2`; the
 //! hole cells at `-u r_hat` (into the sheath) with `u = Q_out / G_out`, `G_out = sum (r_hat . n) h^2`.
-//! `n` is the unit normal of the face from the port cell into the fluid.
+//! `n` is the unit normal of the face from the port cell into the fluid. The walls move at the
+//! atlas's `dx/dp dp/dt`, scaled so that their flux is the hydraulics' `dV/dt`.
 
-/// Sheath length behind the tip, m (longer than any grid).
-pub const SHEATH_LENGTH_M: f64 = 0.2;
+use std::time::Instant;
 
-/// The scope pose the ports were built for.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ScopeGeometry {
-    /// Tip, m.
-    pub tip_m: [f64; 3],
-    /// Unit view direction.
-    pub dir: [f64; 3],
-    /// Outer radius of the sheath, m.
-    pub radius_m: f64,
-    /// Hole band, m behind the tip: `[near, far]`.
-    pub holes_m: [f64; 2],
+use super::counters::StageCounters;
+use super::desc::SceneDesc;
+use super::error::SceneError;
+use super::scope::{unit, ScopeGeometry, ScopePart, FACE_NORMALS};
+use super::surface::CavitySurface;
+use super::types::{
+    BoundaryCell, FluxBalance, FrameFlows, InflowPort, ScopePose, VoxelKind, WholeBoxCheck,
+};
+use super::voxelize::{state, VoxelBox, Voxelizer, NO_TRIANGLE};
+use crate::fluid::{range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidSolver};
+
+/// The cavity as the ports stage reads it: the voxelizer's cell states and the surface they
+/// belong to.
+#[derive(Clone, Copy)]
+pub struct CavityCells<'a> {
+    /// Cell states, owning triangles and row extents of the cavity surface.
+    pub voxels: &'a Voxelizer,
+    /// The surface (its cap triangles, triangles and `dx/dp`).
+    pub surface: &'a CavitySurface,
 }
 
-/// Where a cell centre lies relative to the scope.
+/// What one step of the ports stage did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ScopePart {
-    /// Not in the sheath.
-    None,
-    /// In the tip layer.
-    Tip,
-    /// In the hole band.
-    Holes,
-    /// Elsewhere in the sheath.
-    Sheath,
+pub struct PortsStep {
+    /// The labels were composed anew (the cavity or the scope moved): solver labels changed.
+    pub relabelled_cells: Option<usize>,
+    /// Some port or wall carries more than one face's worth of flow at the rest speed: the
+    /// boundaries move fluid.
+    pub boundaries_flow: bool,
 }
 
-impl ScopeGeometry {
-    /// Axial coordinate `s` and axis distance `r` of a point.
-    #[inline]
-    pub fn axial_radial(&self, p: [f64; 3]) -> (f64, f64) {
-        let q = [
-            p[0] - self.tip_m[0],
-            p[1] - self.tip_m[1],
-            p[2] - self.tip_m[2],
-        ];
-        let s = q[0] * self.dir[0] + q[1] * self.dir[1] + q[2] * self.dir[2];
-        let r2 = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2] - s * s).max(0.0);
-        (s, r2.sqrt())
+/// The cell kinds and labels, the ports and the walls.
+pub struct Ports {
+    cells: VoxelBox,
+    /// Outer radius of the sheath, m.
+    sheath_radius_m: f64,
+    /// Hole band, m behind the tip: `[near, far]`.
+    holes_m: [f64; 2],
+    /// The inflow channel's area, m^2.
+    inflow_channel_area_m2: f64,
+    /// The scope moves the labels when it moved by this fraction of a voxel.
+    scope_move_fraction: f64,
+    /// Boundaries move fluid from this speed, m/s.
+    rest_speed_m_s: f64,
+    kinds: Vec<VoxelKind>,
+    labels: Vec<CellLabel>,
+    scope: Option<ScopeGeometry>,
+    scope_built: Option<ScopeGeometry>,
+    inflow: Vec<BoundaryCell>,
+    /// Share of the last inflow cell's fluid-facing area that the channel covers, (0, 1]: the
+    /// port's area on the grid is the channel's, not a whole number of faces.
+    inflow_rim_fraction: f64,
+    /// The jet velocity of the inflow cells (published; the rim cell imposes its share of it).
+    inflow_jet_m_per_s: [f32; 3],
+    outflow: Vec<BoundaryCell>,
+    walls: Vec<BoundaryCell>,
+    open: Vec<BoundaryCell>,
+    candidates: Vec<(f64, BoundaryCell, f64)>,
+    wall_velocity: Vec<[f32; 3]>,
+    labels_dirty: bool,
+    /// Per row `j + ny k`, the x range `[first, end)` of cells that are not solid after the last
+    /// [`Ports::compose_labels`].
+    kind_extent: Vec<[u32; 2]>,
+    /// Rows to recompose at the next composition (the voxelizer changed them; a composition adds
+    /// those whose scope cells changed), marked per row.
+    pending_rows: Vec<u32>,
+    row_pending: Vec<bool>,
+    /// The built scope's cells (the sheath's rasterization) and the part each lies in, by cell
+    /// index; scratch for the next pose's.
+    scope_cells: Vec<(u32, ScopePart)>,
+    scope_cells_next: Vec<(u32, ScopePart)>,
+    /// Fluid cells per row, and in all.
+    row_fluid: Vec<u32>,
+    fluid_cells: usize,
+    /// The tip layer's cells with a face on fluid (the inflow port's candidates), by cell index
+    /// like the other boundary lists.
+    tips: Vec<BoundaryCell>,
+    /// Scratch for listing rows anew: the rows and their marks, their new walls, open cells,
+    /// hole-band cells and tip cells, a spliced list.
+    relisted_rows: Vec<u32>,
+    row_relisted: Vec<bool>,
+    fresh: [Vec<BoundaryCell>; 4],
+    spliced: Vec<BoundaryCell>,
+}
+
+impl Ports {
+    /// The stage for the grid `cells` and the scene's scope and skip settings: every cell solid,
+    /// every row to be composed.
+    pub fn new(cells: VoxelBox, desc: &SceneDesc) -> Self {
+        let n = cells.cell_count();
+        let rows = cells.dims[1] * cells.dims[2];
+        Self {
+            cells,
+            sheath_radius_m: 0.5e-3 * desc.scope.sheath_outer_diameter_mm,
+            holes_m: desc.scope.outflow_holes_from_tip_mm.map(|v| v * 1e-3),
+            inflow_channel_area_m2: desc.scope.inflow_channel_area_mm2 * 1e-6,
+            scope_move_fraction: desc.skip.scope_move_fraction.max(1e-6),
+            rest_speed_m_s: desc.skip.rest_speed_m_s,
+            kinds: vec![VoxelKind::Solid; n],
+            labels: vec![CellLabel::Solid; n],
+            scope: None,
+            scope_built: None,
+            // Boundary lists hold at most every cell: reserved once, never grown per frame.
+            inflow: Vec::with_capacity(n),
+            inflow_rim_fraction: 1.0,
+            inflow_jet_m_per_s: [0.0; 3],
+            outflow: Vec::with_capacity(n),
+            walls: Vec::with_capacity(n),
+            open: Vec::with_capacity(n),
+            candidates: Vec::with_capacity(n),
+            wall_velocity: vec![[0.0; 3]; n],
+            labels_dirty: true,
+            kind_extent: vec![[0, 0]; rows],
+            // Every row composes the first time.
+            pending_rows: (0..rows as u32).collect(),
+            row_pending: vec![true; rows],
+            scope_cells: Vec::with_capacity(n),
+            scope_cells_next: Vec::with_capacity(n),
+            row_fluid: vec![0; rows],
+            fluid_cells: 0,
+            tips: Vec::with_capacity(n),
+            relisted_rows: Vec::with_capacity(rows),
+            row_relisted: vec![false; rows],
+            fresh: std::array::from_fn(|_| Vec::with_capacity(n)),
+            spliced: Vec::with_capacity(n),
+        }
     }
 
-    /// The part of the scope a cell centre `p` lies in, for cells of edge `h`.
-    #[inline]
-    pub fn part(&self, p: [f64; 3], h: f64) -> ScopePart {
-        let (s, r) = self.axial_radial(p);
-        if r > self.radius_m || !(-SHEATH_LENGTH_M..=0.0).contains(&s) {
-            ScopePart::None
-        } else if s > -h {
-            ScopePart::Tip
-        } else if s <= -self.holes_m[0] && s >= -self.holes_m[1] {
-            ScopePart::Holes
+    /// The grid's box.
+    pub fn cells(&self) -> &VoxelBox {
+        &self.cells
+    }
+    /// Kind of every cell, x fastest (as of the last composition).
+    pub fn kinds(&self) -> &[VoxelKind] {
+        &self.kinds
+    }
+    /// The scope as last placed, if ever.
+    pub fn scope(&self) -> Option<&ScopeGeometry> {
+        self.scope.as_ref()
+    }
+    /// The inflow port's cells and their faces on fluid.
+    pub fn inflow(&self) -> &[BoundaryCell] {
+        &self.inflow
+    }
+    /// The inflow port as the particles see it.
+    pub fn inflow_port(&self) -> InflowPort<'_> {
+        InflowPort {
+            cells: &self.inflow,
+            grid: self.cells,
+            direction: self.scope.map(|sc| sc.dir),
+            channel_area_m2: self.inflow_channel_area_m2,
+        }
+    }
+    /// The jet velocity of the inflow cells, m/s.
+    pub fn inflow_jet_m_per_s(&self) -> [f32; 3] {
+        self.inflow_jet_m_per_s
+    }
+    /// Fluid cells after the last composition.
+    pub fn fluid_cells(&self) -> usize {
+        self.fluid_cells
+    }
+    /// Volume of the fluid cells, m^3 (the conservative voxelization's volume).
+    pub fn fluid_volume_m3(&self) -> f64 {
+        let h = self.cells.spacing_m;
+        self.fluid_cells as f64 * h * h * h
+    }
+
+    /// Notes what moved since the last step: the rows whose cell states the voxelizer changed
+    /// (recomposed at the next step) and the scope's pose (placed when valid; its labels move
+    /// when it moved by more than the threshold).
+    pub fn track(&mut self, changed_rows: &[u32], pose: &ScopePose) {
+        if !changed_rows.is_empty() {
+            self.labels_dirty = true;
+            for &row in changed_rows {
+                self.mark_pending(row as usize);
+            }
+        }
+        if pose.valid {
+            if let Some(dir) = unit(pose.view_direction) {
+                if pose.tip_position_m.iter().all(|v| v.is_finite()) {
+                    self.scope = Some(ScopeGeometry {
+                        tip_m: pose.tip_position_m,
+                        dir,
+                        radius_m: self.sheath_radius_m,
+                        holes_m: self.holes_m,
+                    });
+                }
+            }
+        }
+        if self.scope_moved() {
+            self.labels_dirty = true;
+        }
+    }
+
+    /// Composes the labels when the cavity or the scope moved (into the solver's grid), and sets
+    /// the ports' and walls' velocities for the frame's `flows` when the labels changed or a
+    /// boundary carries flow (or did in the last frame). Writes the port figures of `flux`.
+    pub fn step(
+        &mut self,
+        cavity: &CavityCells<'_>,
+        flows: &FrameFlows,
+        solver: &mut FluidSolver,
+        flux: &mut FluxBalance,
+        counters: &mut StageCounters,
+    ) -> Result<PortsStep, SceneError> {
+        let t = Instant::now();
+        let relabelled_cells = if self.labels_dirty {
+            let changed = self.compose_labels(false, cavity, Some(&mut *solver), flux)?;
+            self.labels_dirty = false;
+            Some(changed)
         } else {
-            ScopePart::Sheath
+            None
+        };
+        // Boundaries move fluid when some flow exceeds one face's worth at the rest speed.
+        let floor = self.rest_speed_m_s * self.cells.spacing_m * self.cells.spacing_m;
+        let boundaries_flow = [
+            flows.inflow_m3_per_s,
+            flows.outflow_m3_per_s,
+            flows.dvdt_m3_per_s,
+        ]
+        .iter()
+        .any(|q| q.abs() > floor);
+        if relabelled_cells.is_some() || boundaries_flow || flux.wall_flux_scale != 0.0 {
+            let owners = cavity.voxels.owners();
+            self.set_boundary_velocities(flows, cavity.surface, owners, solver, flux);
+            counters.ran_since(t);
+        } else {
+            counters.skipped();
         }
+        Ok(PortsStep {
+            relabelled_cells,
+            boundaries_flow,
+        })
     }
 
-    /// The rows `j` (inclusive) of the slab of cell centres at height `z` whose centres may lie
-    /// in the sheath, for a grid whose row `j` has its centres at `y0 + (j + 0.5) h`; `None` if
-    /// none can. Conservative: a centre in the sheath lies within the radius of an axis point,
-    /// so that point is within the radius in z and in y (the caller tests each row).
-    pub fn slab_rows(&self, z: f64, y0: f64, h: f64, ny: usize) -> Option<(usize, usize)> {
-        let (d, r) = (self.dir, self.radius_m);
-        // The axis points `tip + s d`, `-L <= s <= 0`, within the radius of the slab.
-        let (mut lo, mut hi) = (-SHEATH_LENGTH_M, 0.0f64);
-        if d[2].abs() > 1e-12 {
-            let (a, b) = (
-                (z - r - self.tip_m[2]) / d[2],
-                (z + r - self.tip_m[2]) / d[2],
-            );
-            lo = lo.max(a.min(b));
-            hi = hi.min(a.max(b));
-        } else if (self.tip_m[2] - z).abs() > r {
-            return None;
-        }
-        if lo > hi {
-            return None;
-        }
-        let (ya, yb) = (self.tip_m[1] + lo * d[1], self.tip_m[1] + hi * d[1]);
-        let to_row = |y: f64| (y - y0) / h - 0.5;
-        let (a, b) = (
-            to_row(ya.min(yb) - r).floor() - 1.0,
-            to_row(ya.max(yb) + r).ceil() + 1.0,
-        );
-        if b < 0.0 || a > ny as f64 - 1.0 {
-            return None;
-        }
-        Some((a.max(0.0) as usize, b.min(ny as f64 - 1.0) as usize))
-    }
-
-    /// The x-interval (cell indices, inclusive) of row `(y, z)` (centres in m) whose centres may
-    /// lie in the sheath, for a grid whose cell `i` has its centre at `x0 + (i + 0.5) h`;
-    /// `None` if the row misses it. Conservative (the caller tests each centre).
-    pub fn row_span(&self, y: f64, z: f64, x0: f64, h: f64, nx: usize) -> Option<(usize, usize)> {
-        let d = self.dir;
-        let (b, c) = (y - self.tip_m[1], z - self.tip_m[2]);
-        let e = b * d[1] + c * d[2];
-        let (qa, qb, qc) = (
-            1.0 - d[0] * d[0],
-            -2.0 * d[0] * e,
-            b * b + c * c - e * e - self.radius_m * self.radius_m,
-        );
-        // x' = x - tip_x: a x'^2 + b x' + c <= 0 (distance to the line) and -L <= x' d0 + e <= 0.
-        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-        if qa > 1e-12 {
-            let disc = qb * qb - 4.0 * qa * qc;
-            if disc < 0.0 {
-                return None;
+    /// Whether the scope moved enough since the labels were composed for it to matter: its tip
+    /// or the part of the sheath in the grid by more than `scope_move_fraction` of a voxel.
+    fn scope_moved(&self) -> bool {
+        match (self.scope, self.scope_built) {
+            (None, _) => false,
+            (Some(_), None) => true,
+            (Some(a), Some(b)) => {
+                let h = self.cells.spacing_m;
+                let f = self.scope_move_fraction;
+                let dx = (0..3)
+                    .map(|i| (a.tip_m[i] - b.tip_m[i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let cos = (0..3).map(|i| a.dir[i] * b.dir[i]).sum::<f64>();
+                // The far end of the 200 mm sheath moves by L sin(angle): only the part in the
+                // grid matters, so the angle is compared over the grid's diagonal.
+                let diag = (0..3)
+                    .map(|i| (self.cells.dims[i] as f64 * h).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let sin = (1.0 - cos.min(1.0) * cos.min(1.0)).max(0.0).sqrt();
+                dx > f * h || sin * diag > f * h
             }
-            let sq = disc.sqrt();
-            lo = (-qb - sq) / (2.0 * qa);
-            hi = (-qb + sq) / (2.0 * qa);
-        } else if qc > 0.0 {
-            return None;
         }
-        if d[0].abs() > 1e-12 {
-            let (s0, s1) = ((-SHEATH_LENGTH_M - e) / d[0], -e / d[0]);
-            lo = lo.max(s0.min(s1));
-            hi = hi.min(s0.max(s1));
-        } else if !(-SHEATH_LENGTH_M..=0.0).contains(&e) {
-            return None;
-        }
-        if lo > hi {
-            return None;
-        }
-        let to_cell = |x: f64| (x + self.tip_m[0] - x0) / h - 0.5;
-        let (a, z) = (to_cell(lo).floor() - 1.0, to_cell(hi).ceil() + 1.0);
-        if z < 0.0 || a > nx as f64 - 1.0 {
-            return None;
-        }
-        Some((a.max(0.0) as usize, z.min(nx as f64 - 1.0) as usize))
     }
-}
 
-/// Unit normal of face `f` (0..6: -x, +x, -y, +y, -z, +z) of a cell.
-pub const FACE_NORMALS: [[f64; 3]; 6] = [
-    [-1.0, 0.0, 0.0],
-    [1.0, 0.0, 0.0],
-    [0.0, -1.0, 0.0],
-    [0.0, 1.0, 0.0],
-    [0.0, 0.0, -1.0],
-    [0.0, 0.0, 1.0],
-];
+    /// Marks row `row` for recomposition by the next [`Ports::compose_labels`].
+    fn mark_pending(&mut self, row: usize) {
+        mark_row(row, &mut self.row_pending, &mut self.pending_rows);
+    }
 
-/// Normalises a direction; `None` for a zero or non-finite one.
-pub fn unit(v: [f64; 3]) -> Option<[f64; 3]> {
-    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    (n.is_finite() && n > 1e-9).then(|| v.map(|c| c / n))
-}
+    /// Marks row `row` for listing its boundary cells anew in this composition.
+    fn mark_relisted(&mut self, row: usize) {
+        mark_row(row, &mut self.row_relisted, &mut self.relisted_rows);
+    }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// Every cell whose centre lies in the sheath is in a row that `slab_rows` and `row_span`
-    /// keep, for random poses (tilted, axis-parallel, tip in and out of the grid).
-    #[test]
-    fn slab_rows_and_row_spans_hold_every_sheath_cell() {
-        let mut rng = fastrand::Rng::with_seed(7);
-        let (h, n) = (1e-3, [24usize, 20, 28]);
-        let origin = [-0.012, -0.010, -0.014];
-        let mut inside = 0;
-        for pose in 0..200 {
-            let mut dir: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.f64() - 1.0);
-            if pose % 5 == 0 {
-                dir = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, -1.0]][pose % 3];
-            }
-            let Some(dir) = unit(dir) else { continue };
-            let sc = ScopeGeometry {
-                tip_m: std::array::from_fn(|_| 0.03 * (rng.f64() - 0.5)),
-                dir,
-                radius_m: 1e-3 + 3e-3 * rng.f64(),
-                holes_m: [3e-3, 12e-3],
-            };
-            for k in 0..n[2] {
-                let z = origin[2] + (k as f64 + 0.5) * h;
-                let rows = sc.slab_rows(z, origin[1], h, n[1]);
-                for j in 0..n[1] {
-                    let y = origin[1] + (j as f64 + 0.5) * h;
-                    let span = sc.row_span(y, z, origin[0], h, n[0]);
-                    for i in 0..n[0] {
-                        let x = origin[0] + (i as f64 + 0.5) * h;
-                        if sc.part([x, y, z], h) == ScopePart::None {
-                            continue;
+    /// Rasterizes the scope at its pose now (the cells whose centres lie in the sheath, and
+    /// their parts) and compares it with the built one row by row: a row whose scope cells
+    /// differ is recomposed; one whose cells are the same but lie in other parts (tip layer, hole
+    /// band) keeps its kinds and has its boundary cells listed anew; any other keeps both.
+    fn rasterize_scope(&mut self) {
+        let cells = self.cells;
+        let [nx, ny, nz] = cells.dims;
+        let h = cells.spacing_m;
+        let x0 = cells.origin_m[0];
+        self.scope_cells_next.clear();
+        if let Some(sc) = self.scope {
+            let y0 = cells.origin_m[1];
+            for k in 0..nz {
+                let z = cells.centre_m(0, 0, k)[2];
+                let Some((j0, j1)) = sc.slab_rows(z, y0, h, ny) else {
+                    continue;
+                };
+                for j in j0..=j1 {
+                    let c = cells.centre_m(0, j, k);
+                    if let Some((a, b)) = sc.row_span(c[1], c[2], x0, h, nx) {
+                        let base = cells.index(0, j, k);
+                        for i in a..=b {
+                            let part = sc.part(cells.centre_m(i, j, k), h);
+                            if part != ScopePart::None {
+                                self.scope_cells_next.push(((base + i) as u32, part));
+                            }
                         }
-                        inside += 1;
-                        let held = rows.is_some_and(|(a, b)| (a..=b).contains(&j))
-                            && span.is_some_and(|(a, b)| (a..=b).contains(&i));
-                        assert!(held, "pose {pose}: cell ({i}, {j}, {k}) of {sc:?} missed");
                     }
                 }
             }
         }
-        assert!(inside > 10_000, "only {inside} sheath cells tested");
+        let (mut a, mut b) = (0, 0);
+        let row_of = |c: &(u32, ScopePart)| c.0 as usize / nx;
+        while a < self.scope_cells.len() || b < self.scope_cells_next.len() {
+            let row = match (self.scope_cells.get(a), self.scope_cells_next.get(b)) {
+                (Some(x), Some(y)) => row_of(x).min(row_of(y)),
+                (Some(x), None) => row_of(x),
+                (None, Some(y)) => row_of(y),
+                (None, None) => break,
+            };
+            let run = |list: &[(u32, ScopePart)], from: usize| {
+                from + list[from..].iter().take_while(|c| row_of(c) == row).count()
+            };
+            let (ea, eb) = (run(&self.scope_cells, a), run(&self.scope_cells_next, b));
+            let (was, now) = (&self.scope_cells[a..ea], &self.scope_cells_next[b..eb]);
+            if was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0) {
+                self.mark_pending(row);
+            } else if was != now {
+                self.mark_relisted(row);
+            }
+            (a, b) = (ea, eb);
+        }
+        std::mem::swap(&mut self.scope_cells, &mut self.scope_cells_next);
     }
+
+    /// Kinds and labels from the voxelizer and the scope, and the boundary cell lists.
+    /// Incremental in rows: only the pending rows (those the voxelizer changed since the last
+    /// composition, and, when the scope moved, those whose scope cells changed) are
+    /// recomposed, each over the x range that is or was off solid, and only their cells' labels
+    /// go to the solver; only their rows and the four rows beside each (a cell's fluid faces look
+    /// one row across) are listed anew for the boundary cells. Every other row composes as before,
+    /// so the kinds, lists and labels equal those of a pass over every cell of the box (`whole`,
+    /// which [`Ports::relabel_whole_box`] checks them against). Returns how many solver labels
+    /// changed.
+    fn compose_labels(
+        &mut self,
+        whole: bool,
+        cavity: &CavityCells<'_>,
+        mut solver: Option<&mut FluidSolver>,
+        flux: &mut FluxBalance,
+    ) -> Result<usize, SceneError> {
+        let cells = self.cells;
+        let [nx, ny, nz] = cells.dims;
+        let h = cells.spacing_m;
+        let all = [0, nx as u32];
+        // 1. The rows to recompose.
+        if whole {
+            for row in 0..ny * nz {
+                self.mark_pending(row);
+            }
+        }
+        if whole || self.scope != self.scope_built {
+            self.rasterize_scope();
+        }
+        self.scope_built = self.scope;
+        // The ports' cells are sheath again until the ports are chosen anew below, and move no
+        // fluid (the ports chosen below get their velocities in `set_boundary_velocities`; a cell
+        // that stays sheath would otherwise keep injecting its old port velocity).
+        for b in self.inflow.iter().chain(&self.outflow) {
+            self.kinds[b.cell as usize] = VoxelKind::Scope;
+            if let Some(solver) = solver.as_deref_mut() {
+                let at = b.at.map(|x| x as usize);
+                still(
+                    &mut self.wall_velocity,
+                    solver.grid_mut(),
+                    b.cell as usize,
+                    at,
+                )?;
+            }
+        }
+
+        // 2. Kinds and labels of the pending rows; their boundary rows.
+        let states = cavity.voxels.states();
+        let owners = cavity.voxels.owners();
+        let extents = cavity.voxels.row_extents();
+        let caps = cavity.surface.cap_triangles() as u32;
+        let mut changed = 0;
+        // In row order, as a pass over the box visits them (the solver sees the same sequence).
+        self.pending_rows.sort_unstable();
+        for m in 0..self.pending_rows.len() {
+            let row = self.pending_rows[m] as usize;
+            self.row_pending[row] = false;
+            let (j, k) = (row % ny, row / ny);
+            let base = cells.index(0, j, k);
+            let last = self.kind_extent[row];
+            let vox = extents[row];
+            // Cavity first.
+            let mut fluid = 0u32;
+            let [a, b] = if whole { all } else { range_hull(last, vox) };
+            for n in base + a as usize..base + b as usize {
+                let kind = match states[n] {
+                    state::INSIDE => VoxelKind::Fluid,
+                    state::BAND if owners[n] < caps => VoxelKind::Open,
+                    state::BAND => VoxelKind::Wall,
+                    _ => VoxelKind::Solid,
+                };
+                fluid += u32::from(kind == VoxelKind::Fluid);
+                self.kinds[n] = kind;
+            }
+            // The scope on top.
+            let mut now = vox;
+            let first = self.scope_cells.partition_point(|c| (c.0 as usize) < base);
+            for &(n, _) in &self.scope_cells[first..] {
+                let n = n as usize;
+                if n >= base + nx {
+                    break;
+                }
+                fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
+                self.kinds[n] = VoxelKind::Scope;
+                let i = (n - base) as u32;
+                now = range_hull(now, [i, i + 1]);
+            }
+            self.kind_extent[row] = now;
+            self.fluid_cells = self.fluid_cells + fluid as usize - self.row_fluid[row] as usize;
+            self.row_fluid[row] = fluid;
+            // Labels into the solver, and cells that stopped being walls move no more.
+            if let Some(solver) = solver.as_deref_mut() {
+                let g = solver.grid_mut();
+                let [a, b] = if whole { all } else { range_hull(last, now) };
+                for i in a as usize..b as usize {
+                    let n = base + i;
+                    let label = match self.kinds[n] {
+                        VoxelKind::Fluid => CellLabel::Fluid,
+                        VoxelKind::Open => CellLabel::Outflow,
+                        VoxelKind::Solid => CellLabel::Solid,
+                        _ => CellLabel::Velocity,
+                    };
+                    if self.labels[n] != label {
+                        self.labels[n] = label;
+                        g.set_label([i, j, k], label)?;
+                        changed += 1;
+                    }
+                    // Only walls keep a velocity here (`set_boundary_velocities` sets it anew
+                    // each step); a sheath cell over an old wall cell moves no fluid.
+                    if self.kinds[n] != VoxelKind::Wall {
+                        still(&mut self.wall_velocity, g, n, [i, j, k])?;
+                    }
+                }
+            }
+            let beside = [
+                step_along(row, j, ny, 1, false),
+                step_along(row, k, nz, ny, false),
+            ];
+            for r in std::iter::once(row).chain(beside.into_iter().flatten().flatten()) {
+                mark_row(r, &mut self.row_relisted, &mut self.relisted_rows);
+            }
+        }
+        self.pending_rows.clear();
+
+        // 3. The boundary cells of those rows (walls beside fluid, port candidates at the tip and
+        // in the hole band), by cell index, into the kept list in place of the rows' old ones.
+        self.relisted_rows.sort_unstable();
+        for f in &mut self.fresh {
+            f.clear();
+        }
+        for m in 0..self.relisted_rows.len() {
+            let row = self.relisted_rows[m] as usize;
+            let (j, k) = (row % ny, row / ny);
+            let [a, b] = if whole { all } else { self.kind_extent[row] };
+            for i in a as usize..b as usize {
+                let n = cells.index(i, j, k);
+                // Into walls, open, hole band, tip layer.
+                let list = match self.kinds[n] {
+                    VoxelKind::Wall => 0,
+                    VoxelKind::Open => 1,
+                    VoxelKind::Scope => {
+                        match self.scope.map(|sc| sc.part(cells.centre_m(i, j, k), h)) {
+                            Some(ScopePart::Holes) => 2,
+                            Some(ScopePart::Tip) => 3,
+                            _ => continue,
+                        }
+                    }
+                    _ => continue,
+                };
+                let faces = self.fluid_faces(i, j, k);
+                if faces != 0 {
+                    self.fresh[list].push(BoundaryCell {
+                        cell: n as u32,
+                        at: [i, j, k].map(|x| x as u32),
+                        faces,
+                    });
+                }
+            }
+        }
+        let kept = [
+            &mut self.walls,
+            &mut self.open,
+            &mut self.outflow,
+            &mut self.tips,
+        ];
+        for (list, fresh) in kept.into_iter().zip(&self.fresh) {
+            splice_rows(list, &mut self.spliced, fresh, &self.relisted_rows, nx);
+        }
+        for &row in &self.relisted_rows {
+            self.row_relisted[row as usize] = false;
+        }
+        self.relisted_rows.clear();
+
+        // 4. The inflow port's candidates.
+        self.inflow.clear();
+        self.candidates.clear();
+        if let Some(sc) = self.scope {
+            for &b in &self.tips {
+                let g = face_weight(b.faces, sc.dir);
+                let (_, r) = sc.axial_radial(cells.centre_m_of(b.cell));
+                self.candidates.push((r, b, g));
+            }
+        }
+        // The inflow port: the tip cells whose fluid faces look forward, nearest the axis first,
+        // until their fluid-facing area reaches the channel's; the last one (the rim) counts
+        // with the share of its area that completes the channel's, so the port's area on the
+        // grid is the channel's at any voxel size and the jet leaves at the hydraulics' port
+        // velocity. Fewer forward faces than the channel's area: tissue covers part of the tip.
+        // Unstable (no scratch buffer on the heap), with the cells' order (that of `tips`) among
+        // equal distances: the order of a stable sort.
+        self.candidates
+            .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cell.cmp(&b.1.cell)));
+        let area = self.inflow_channel_area_m2;
+        let face = h * h;
+        let mut g = 0.0;
+        self.inflow_rim_fraction = 1.0;
+        for c in &self.candidates {
+            let gc = c.2 * face;
+            if gc <= 0.0 {
+                continue; // its fluid faces look sideways or back: no jet along the view
+            }
+            self.inflow.push(c.1);
+            if g + gc >= area {
+                self.inflow_rim_fraction = (area - g) / gc;
+                g = area;
+                break;
+            }
+            g += gc;
+        }
+        flux.inflow_open_fraction = if area > 0.0 { g / area } else { 0.0 };
+        for b in &self.inflow {
+            self.kinds[b.cell as usize] = VoxelKind::Inflow;
+        }
+        for b in &self.outflow {
+            self.kinds[b.cell as usize] = VoxelKind::Outflow;
+        }
+        Ok(changed)
+    }
+
+    /// Recomposes the kind and label of every cell of the box for the scope pose of the last
+    /// composition, visiting every cell, and says what that changed: nothing when the
+    /// row-incremental compositions of the steps before were complete. For verification; the
+    /// kinds, lists and labels end as a step leaves them.
+    pub fn relabel_whole_box(
+        &mut self,
+        cavity: &CavityCells<'_>,
+        solver: Option<&mut FluidSolver>,
+        flux: &mut FluxBalance,
+    ) -> Result<WholeBoxCheck, SceneError> {
+        let kinds = self.kinds.clone();
+        let lists = [&self.inflow, &self.outflow, &self.walls, &self.open].map(|l| l.clone());
+        let (fluid_cells, rim) = (self.fluid_cells, self.inflow_rim_fraction);
+        // A pose that moved less than the threshold since is not composed yet (by design).
+        let scope = std::mem::replace(&mut self.scope, self.scope_built);
+        let composed = self.compose_labels(true, cavity, solver, flux);
+        self.scope = scope;
+        let labels_changed = composed?;
+        let now = [&self.inflow, &self.outflow, &self.walls, &self.open];
+        Ok(WholeBoxCheck {
+            labels_changed,
+            kinds_changed: kinds
+                .iter()
+                .zip(&self.kinds)
+                .filter(|(a, b)| a != b)
+                .count(),
+            lists_changed: lists.iter().zip(now).any(|(a, b)| a != b)
+                || rim != self.inflow_rim_fraction,
+            fluid_cells_changed: fluid_cells != self.fluid_cells,
+        })
+    }
+
+    /// Bits of the faces of cell `(i, j, k)` that border fluid.
+    fn fluid_faces(&self, i: usize, j: usize, k: usize) -> u8 {
+        let c = &self.cells;
+        let [nx, ny, _] = c.dims;
+        let (at, n) = ([i, j, k], c.index(i, j, k));
+        let stride = [1, nx, nx * ny];
+        let mut bits = 0u8;
+        for a in 0..3 {
+            let beside = step_along(n, at[a], c.dims[a], stride[a], false);
+            for (s, m) in beside.into_iter().enumerate() {
+                if m.is_some_and(|m| self.kinds[m] == VoxelKind::Fluid) {
+                    bits |= 1 << (2 * a + s);
+                }
+            }
+        }
+        bits
+    }
+
+    /// Port and wall velocities with exact fluxes: the frame's `flows`.
+    fn set_boundary_velocities(
+        &mut self,
+        flows: &FrameFlows,
+        surface: &CavitySurface,
+        owners: &[u32],
+        solver: &mut FluidSolver,
+        flux: &mut FluxBalance,
+    ) {
+        let (q_in, q_out, dvdt) = (
+            flows.inflow_m3_per_s,
+            flows.outflow_m3_per_s,
+            flows.dvdt_m3_per_s,
+        );
+        let dpdt = flows.dpdt_pa_per_s;
+        let cells = self.cells;
+        let h2 = cells.spacing_m * cells.spacing_m;
+        let coords = |b: &BoundaryCell| b.at.map(|x| x as usize);
+        // Inflow: u d, u = Q_in / G_in.
+        flux.inflow_blocked = false;
+        flux.outflow_blocked = false;
+        if let Some(sc) = self.scope_built {
+            // The port's open area: whole cells and the rim's share (the channel's area when
+            // the tip is clear of tissue).
+            let last = self.inflow.len().saturating_sub(1);
+            let share = |m: usize| {
+                if m == last {
+                    self.inflow_rim_fraction
+                } else {
+                    1.0
+                }
+            };
+            let g_in: f64 = self
+                .inflow
+                .iter()
+                .enumerate()
+                .map(|(m, b)| share(m) * face_weight(b.faces, sc.dir))
+                .sum::<f64>()
+                * h2;
+            let u = if g_in > 0.0 { q_in / g_in } else { 0.0 };
+            flux.inflow_blocked = g_in <= 0.0 && q_in > 0.0;
+            flux.inflow_jet_speed_m_per_s = u;
+            self.inflow_jet_m_per_s = sc.dir.map(|d| (u * d) as f32);
+            for (m, b) in self.inflow.iter().enumerate() {
+                let v = sc.dir.map(|d| (share(m) * u * d) as f32);
+                self.wall_velocity[b.cell as usize] = v;
+                let _ = solver.grid_mut().set_velocity(coords(b), v);
+            }
+            // Outflow holes: -u r_hat, u = Q_out / G_out.
+            let mut g_out = 0.0;
+            for b in &self.outflow {
+                let r = radial(&sc, cells.centre_m_of(b.cell));
+                g_out += face_weight(b.faces, r) * h2;
+            }
+            let u = if g_out > 0.0 { q_out / g_out } else { 0.0 };
+            flux.outflow_blocked = g_out <= 0.0 && q_out > 0.0;
+            for b in &self.outflow {
+                let r = radial(&sc, cells.centre_m_of(b.cell));
+                let v = r.map(|c| (-u * c) as f32);
+                self.wall_velocity[b.cell as usize] = v;
+                let _ = solver.grid_mut().set_velocity(coords(b), v);
+            }
+        } else {
+            flux.inflow_blocked = q_in > 0.0;
+            flux.outflow_blocked = q_out > 0.0;
+            flux.inflow_jet_speed_m_per_s = 0.0;
+            self.inflow_jet_m_per_s = [0.0; 3];
+        }
+        // Walls: dx/dp dp/dt at the owning triangle, scaled so that the flux into the walls is
+        // dV/dt exactly.
+        let tris = surface.triangles();
+        let dxdp = surface.dxdp_m_per_pa();
+        let mut raw_out = 0.0; // flux out of the fluid into the walls, raw
+        for b in &self.walls {
+            let t = owners[b.cell as usize];
+            let v = if t == NO_TRIANGLE {
+                [0.0; 3]
+            } else {
+                let [a, bb, c] = tris[t as usize].map(|i| dxdp[i as usize]);
+                std::array::from_fn(|x| (a[x] + bb[x] + c[x]) as f64 / 3.0 * dpdt)
+            };
+            // Out of the fluid = -(v . n_into_fluid).
+            raw_out -= face_weight(b.faces, v) * h2;
+            self.wall_velocity[b.cell as usize] = v.map(|x| x as f32);
+        }
+        let scale = if dvdt == 0.0 {
+            0.0
+        } else if raw_out * dvdt > 0.0 && (raw_out / dvdt).abs() > 1e-3 {
+            dvdt / raw_out
+        } else {
+            // The atlas's wall motion does not carry dV/dt's sign here (a staircase artefact or
+            // an external pressure jump): a uniform normal motion instead.
+            let mut area = 0.0;
+            for b in &self.walls {
+                let n = face_normal_sum(b.faces);
+                self.wall_velocity[b.cell as usize] = n.map(|x| -x as f32);
+                area += face_weight(b.faces, n) * h2;
+            }
+            if area > 0.0 {
+                dvdt / area
+            } else {
+                0.0
+            }
+        };
+        flux.wall_flux_scale = scale;
+        for b in &self.walls {
+            let v = self.wall_velocity[b.cell as usize].map(|x| (x as f64 * scale) as f32);
+            self.wall_velocity[b.cell as usize] = v;
+            let _ = solver.grid_mut().set_velocity(coords(b), v);
+        }
+        flux.hydraulic_inflow_m3_per_s = q_in;
+        flux.hydraulic_outflow_m3_per_s = q_out;
+        flux.hydraulic_losses_m3_per_s = flows.losses_m3_per_s;
+        flux.hydraulic_dvdt_m3_per_s = dvdt;
+    }
+
+    /// Measures the fluxes through the ports' and walls' fluid faces after a fluid step.
+    pub fn measure_fluxes(&self, solver: &FluidSolver, flux: &mut FluxBalance) {
+        let cells = self.cells;
+        let h2 = cells.spacing_m * cells.spacing_m;
+        // Flux out of the fluid into boundary cell b.
+        let out_of_fluid = |b: &BoundaryCell| -> f64 {
+            let c = b.at.map(|x| x as usize);
+            let mut s = 0.0;
+            for f in 0..6 {
+                if b.faces >> f & 1 == 1 {
+                    // Face f of the boundary cell; its normal points into the fluid.
+                    let u = solver.cell_face_velocity_m_s(c, f) as f64;
+                    let sign = if f % 2 == 1 { 1.0 } else { -1.0 };
+                    s -= sign * u * h2;
+                }
+            }
+            s
+        };
+        flux.fluid_inflow_m3_per_s = -self.inflow.iter().map(out_of_fluid).sum::<f64>();
+        flux.fluid_outflow_m3_per_s = self.outflow.iter().map(out_of_fluid).sum();
+        flux.fluid_wall_m3_per_s = self.walls.iter().map(out_of_fluid).sum();
+        flux.fluid_open_m3_per_s = self.open.iter().map(out_of_fluid).sum();
+    }
+}
+
+/// Replaces the entries of `list` (by cell index) in the rows `rows` (sorted) with `fresh` (the
+/// rows' new entries, by cell index), through the scratch `next`: the rows' runs are found by
+/// bisection and the rest is copied in runs.
+fn splice_rows(
+    list: &mut Vec<BoundaryCell>,
+    next: &mut Vec<BoundaryCell>,
+    fresh: &[BoundaryCell],
+    rows: &[u32],
+    nx: usize,
+) {
+    next.clear();
+    let (mut from, mut f) = (0, 0);
+    for &row in rows {
+        let (start, end) = (row as usize * nx, (row as usize + 1) * nx);
+        let a = from + list[from..].partition_point(|b| (b.cell as usize) < start);
+        let b = a + list[a..].partition_point(|b| (b.cell as usize) < end);
+        let g = f + fresh[f..].partition_point(|b| (b.cell as usize) < end);
+        next.extend_from_slice(&list[from..a]);
+        next.extend_from_slice(&fresh[f..g]);
+        (from, f) = (b, g);
+    }
+    next.extend_from_slice(&list[from..]);
+    std::mem::swap(list, next);
+}
+
+/// Adds `row` to `rows` unless `marks` says it is there already.
+fn mark_row(row: usize, marks: &mut [bool], rows: &mut Vec<u32>) {
+    if !marks[row] {
+        marks[row] = true;
+        rows.push(row as u32);
+    }
+}
+
+/// Sum over the set faces of `v . n` (n: the face's unit normal from the cell into the fluid).
+fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
+    let mut s = 0.0;
+    for (f, n) in FACE_NORMALS.iter().enumerate() {
+        if faces >> f & 1 == 1 {
+            s += v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+        }
+    }
+    s
+}
+
+/// Sum of the unit normals of the set faces.
+fn face_normal_sum(faces: u8) -> [f64; 3] {
+    let mut s = [0.0; 3];
+    for (f, n) in FACE_NORMALS.iter().enumerate() {
+        if faces >> f & 1 == 1 {
+            for a in 0..3 {
+                s[a] += n[a];
+            }
+        }
+    }
+    s
+}
+
+/// Unit vector from the scope's axis to `p` (perpendicular to the axis).
+fn radial(sc: &ScopeGeometry, p: [f64; 3]) -> [f64; 3] {
+    let q: [f64; 3] = std::array::from_fn(|a| p[a] - sc.tip_m[a]);
+    let s = q[0] * sc.dir[0] + q[1] * sc.dir[1] + q[2] * sc.dir[2];
+    let r: [f64; 3] = std::array::from_fn(|a| q[a] - s * sc.dir[a]);
+    unit(r).unwrap_or([0.0; 3])
+}
+
+/// Cell `n` (at `at`) moves no fluid: its prescribed velocity is zeroed where it had one (a cell
+/// that left the ports or the walls; those that are ports or walls get theirs in
+/// `set_boundary_velocities` each step).
+fn still(
+    wall_velocity: &mut [[f32; 3]],
+    grid: &mut FluidGrid,
+    n: usize,
+    at: [usize; 3],
+) -> Result<(), FluidError> {
+    if wall_velocity[n] != [0.0; 3] {
+        wall_velocity[n] = [0.0; 3];
+        grid.set_velocity(at, [0.0; 3])?;
+    }
+    Ok(())
 }

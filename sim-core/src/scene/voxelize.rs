@@ -23,6 +23,10 @@
 //! same function of the voxel positions, the result equals [`Voxelizer::full`] of those positions
 //! after any sequence of moves (tested).
 
+use std::time::Instant;
+
+use super::counters::StageCounters;
+
 /// Widening of the band test, in cells.
 pub const EPS: f64 = 1e-6;
 
@@ -39,33 +43,7 @@ pub mod state {
 /// No triangle.
 pub const NO_TRIANGLE: u32 = u32::MAX;
 
-/// A box of cubic cells: cell `(i, j, k)` spans `origin + h [i, i+1) x [j, j+1) x [k, k+1)`.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct VoxelBox {
-    /// Cells per axis.
-    pub dims: [usize; 3],
-    /// Lower corner of cell (0, 0, 0), m.
-    pub origin_m: [f64; 3],
-    /// Cell edge, m.
-    pub spacing_m: f64,
-}
-
-impl VoxelBox {
-    /// Number of cells.
-    pub fn cell_count(&self) -> usize {
-        self.dims[0] * self.dims[1] * self.dims[2]
-    }
-    /// Linear index, x fastest.
-    #[inline]
-    pub fn index(&self, i: usize, j: usize, k: usize) -> usize {
-        i + self.dims[0] * (j + self.dims[1] * k)
-    }
-    /// Centre of a cell, m.
-    pub fn centre_m(&self, i: usize, j: usize, k: usize) -> [f64; 3] {
-        let c = [i, j, k];
-        std::array::from_fn(|a| self.origin_m[a] + (c[a] as f64 + 0.5) * self.spacing_m)
-    }
-}
+pub use super::types::VoxelBox;
 
 /// What one call did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -347,6 +325,33 @@ impl Voxelizer {
         stats.moved_vertices = moved_vertices;
         stats.moved_triangles = moved_triangles;
         stats
+    }
+
+    /// The voxelize stage of a scene step: [`Voxelizer::update`] with the surface's
+    /// `positions_m` when it was deformed (`None`: no vertex can have moved since the last update,
+    /// and the scan over every vertex is skipped, the scene at rest). Returns the rows whose cell
+    /// states changed (empty when none did).
+    pub fn step(
+        &mut self,
+        deformed: Option<&[[f32; 3]]>,
+        threshold_m: f64,
+        counters: &mut StageCounters,
+    ) -> &[u32] {
+        let t = Instant::now();
+        let stats = match deformed {
+            Some(positions_m) => self.update(positions_m, threshold_m),
+            None => VoxelizeStats::default(),
+        };
+        if stats.moved_vertices > 0 {
+            counters.ran_since(t);
+        } else {
+            counters.skipped();
+        }
+        if stats.moved_vertices > 0 && stats.changed_cells > 0 {
+            &self.changed_rows
+        } else {
+            &[]
+        }
     }
 
     fn process_rows(&mut self) -> VoxelizeStats {

@@ -14,8 +14,9 @@
 
 use std::arch::x86_64::*;
 
-use super::{lane, ClassSums, Kernel, VoxelKind, BLOCK, KEEP, SUBSTEP_CELLS};
-use crate::fluid::V4;
+use super::kernel::{ClassSums, Cone, Kernel, BLOCK, KEEP, SUBSTEP_CELLS};
+use crate::scene::VoxelKind;
+use crate::simd::{v4, v4 as lane, V4};
 
 /// Eight lanes of the one-at-a-time path's 0, 1/2, dt, dt/2 and grid constants.
 struct Consts {
@@ -132,7 +133,7 @@ pub(super) fn run(
                     // (a slide, or the outlet's fate), as the substeps would end.
                     let at = |v: &[[f32; BLOCK]; 3]| lane::new4(v[0][l], v[1][l], v[2][l], 0.0);
                     let (end, f) = k.land(at(&p), at(&q));
-                    let e = crate::fluid::v4::lanes(end);
+                    let e = v4::lanes(end);
                     let e = [e[0], e[1], e[2]];
                     if let (Some(pl), Some(fl)) = (pos.get_mut(g + l), fate.get_mut(g + l)) {
                         (*pl, *fl) = (e, f);
@@ -238,7 +239,7 @@ fn substeps(
             // `Kernel::land` past its fluid case: an outlet, or a slide along the wall.
             let (pl, ql) = (w.lane(l, &w.p), w.lane(l, &q));
             let (end, f) = k.land(pl, ql);
-            let e = crate::fluid::v4::lanes(end);
+            let e = v4::lanes(end);
             for a in 0..3 {
                 w.p[a][l] = e[a];
             }
@@ -317,7 +318,7 @@ impl Consts {
     /// cell's kind), as bits.
     #[inline(always)]
     fn in_fluid(&self, k: &Kernel<'_>, q: [__m256; 3]) -> u32 {
-        // SAFETY (the intrinsics): the caller has AVX2 (inlined into `run`).
+        // SAFETY: (the intrinsics) the caller has AVX2 (inlined into `run`).
         let (inside, cells) = unsafe {
             // In [0, dims) along every axis (a NaN fails).
             let mut inside = _mm256_cmp_ps::<_CMP_GE_OQ>(q[0], self.zero);
@@ -381,7 +382,7 @@ fn class_factors(k: &Kernel<'_>, cb: &[u8]) -> ([__m256; 3], __m256, __m256) {
 /// closures here: those would be compiled without them.)
 #[inline(always)]
 fn sample(c: &Consts, k: &Kernel<'_>, p: [__m256; 3], active: u32) -> [__m256; 3] {
-    // SAFETY (all intrinsics here): the caller has AVX2 and FMA (a `target_feature` function).
+    // SAFETY: (all intrinsics here) the caller has AVX2 and FMA (a `target_feature` function).
     unsafe {
         // `lane::locate`: s clamped to [0, smax] (max returns its second operand for a NaN),
         // its lower sample index at most imax, the weight s - i.
@@ -458,10 +459,10 @@ fn index<const SHIFT: i32>(c: &Consts, i: [__m256i; 3]) -> [u32; BLOCK] {
     out
 }
 
-/// [`super::Cone::weight`] of eight positions (the same operations).
+/// [`Cone::weight`] of eight positions (the same operations).
 #[target_feature(enable = "avx2,fma")]
 #[inline]
-fn cone_weights(cone: &super::Cone, p: [__m256; 3]) -> [f32; BLOCK] {
+fn cone_weights(cone: &Cone, p: [__m256; 3]) -> [f32; BLOCK] {
     let d: [__m256; 3] = std::array::from_fn(|a| _mm256_sub_ps(p[a], _mm256_set1_ps(cone.tip[a])));
     let dot = |b: [__m256; 3]| {
         _mm256_add_ps(

@@ -1,11 +1,14 @@
 //! One Rankine vortex in closed form ([`Vortex`]) and the vortices' vector potential on the grid
-//! nodes (`docs/particles.md`; the field of many in [`super::vortices`]): each vortex adds `g(s) Psi(r) n` at the nodes of its support, four
+//! nodes (`docs/particles.md`; the field of many in [`super::VortexField`]): each vortex adds `g(s) Psi(r) n` at the nodes of its support, four
 //! consecutive nodes of a row at a time (SSE2, the x86-64 baseline; element-wise elsewhere).
 //!
 //! A vortex touches a few dozen nodes in short rows (a core of one or two cells), so the work is
 //! per row, not per node: a row is skipped or narrowed to the support by one quadratic, and its
 //! nodes go through one branch-free four-lane kernel whose lanes outside the row, the support or
 //! `node_mask` add zero.
+
+use crate::mesh::{cross, dot};
+use crate::simd::v4 as lane;
 
 /// Rankine's profile holds exactly out to this many core radii.
 pub const RANKINE_EXACT_CORES: f64 = 1.5;
@@ -83,21 +86,6 @@ impl Vortex {
         self.axis
             .map(|n| l * n.abs() + r * (1.0 - n * n).max(0.0).sqrt())
     }
-}
-
-#[inline]
-pub(super) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
-/// The cross product.
-#[inline]
-pub(super) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 /// Intervals of the potential's table over `q = r^2 / R^2` in `[0, CUTOFF_CORES^2]` (a power of
@@ -294,7 +282,7 @@ impl Slab<'_> {
         pot: [&mut [f32]; 3],
     ) -> usize {
         #[cfg(target_arch = "x86_64")]
-        if crate::fluid::avx2::available() && pot[0].len() >= 8 {
+        if crate::simd::avx2_fma() && pot[0].len() >= 8 {
             // SAFETY: the CPU has AVX2 and FMA (checked above).
             return unsafe { self.potential_avx2(layers, offset, pot) };
         }
@@ -402,15 +390,15 @@ struct Out<'a> {
 struct Kernel<'a> {
     support: &'a Support,
     table: &'a Table,
-    nx: lane::V,
+    nx: lane::V4,
     offset_x: f32,
-    amp_axis: [lane::V; 3],
-    inv_core2: lane::V,
-    qmax: lane::V,
-    flat: lane::V,
-    end: lane::V,
-    inv_taper: lane::V,
-    tscale: lane::V,
+    amp_axis: [lane::V4; 3],
+    inv_core2: lane::V4,
+    qmax: lane::V4,
+    flat: lane::V4,
+    end: lane::V4,
+    inv_taper: lane::V4,
+    tscale: lane::V4,
 }
 
 impl<'a> Kernel<'a> {
@@ -460,12 +448,19 @@ impl<'a> Kernel<'a> {
     /// The four nodes from `at` (the first at `x0` from the centre along the row), the lanes
     /// `keep` only.
     #[inline(always)]
-    fn group(&self, out: &mut Out<'_>, at: usize, x0: f32, [s0, e0]: [lane::V; 2], keep: lane::V) {
+    fn group(
+        &self,
+        out: &mut Out<'_>,
+        at: usize,
+        x0: f32,
+        [s0, e0]: [lane::V4; 2],
+        keep: lane::V4,
+    ) {
         let [p0, p1, p2] = &mut out.pot;
         if at + 4 > out.node_mask.len() || at + 4 > p0.len().min(p1.len()).min(p2.len()) {
             return;
         }
-        // SAFETY (the loads and stores below): `at + 4` is within the mask and the three
+        // SAFETY: (the loads and stores below) `at + 4` is within the mask and the three
         // potentials (checked above).
         let mask = unsafe { lane::nonzero_at(out.node_mask, at) };
         let x = lane::add(lane::ramp(), lane::splat(x0));
@@ -503,6 +498,7 @@ impl<'a> Kernel<'a> {
         let psi = lane::lookup(self.table, tq);
         let phi = lane::and(inside, lane::mul(g, psi));
         for (p, an) in [p0, p1, p2].into_iter().zip(self.amp_axis) {
+            // SAFETY: `at + 4` is within the three potentials (checked at the top).
             unsafe {
                 let v = lane::add(lane::load_at(p, at), lane::mul(phi, an));
                 lane::store_at(p, at, v);
@@ -552,7 +548,7 @@ mod avx2 {
             if at + 8 > out.node_mask.len() || at + 8 > p0.len().min(p1.len()).min(p2.len()) {
                 return;
             }
-            // SAFETY (the loads and stores below): `at + 8` is within the mask and the three
+            // SAFETY: (the loads and stores below) `at + 8` is within the mask and the three
             // potentials (checked above); the table's index is masked to its size.
             let bytes = unsafe {
                 out.node_mask
@@ -608,6 +604,8 @@ mod avx2 {
                 );
                 let i2 = _mm256_slli_epi32::<1>(i);
                 let tp = kernel.table.as_ptr().cast::<f32>();
+                // SAFETY: the CPU has AVX2 (this function's contract); `i2` indexes value and
+                // slope of entries below TABLE_SIZE (masked above), inside the table.
                 let (v, d) = unsafe {
                     (
                         _mm256_i32gather_ps::<4>(tp, i2),
@@ -616,6 +614,7 @@ mod avx2 {
                 };
                 let phi = _mm256_and_ps(inside, _mm256_mul_ps(g, _mm256_fmadd_ps(f, d, v)));
                 for (p, an) in [p0, p1, p2].into_iter().zip(b.amp_axis) {
+                    // SAFETY: `at + 8` is within the three potentials (checked above).
                     unsafe {
                         let ptr = p.as_mut_ptr().add(at);
                         let v = _mm256_fmadd_ps(phi, splat(an), _mm256_loadu_ps(ptr));
@@ -650,7 +649,7 @@ pub(super) fn curl_run(
     let (a00, a10, a01, a11) = (w(na, 0), w(na, sa), w(na, sb), w(na, sa + sb));
     let (b00, b10, b01, b11) = (w(nb, 0), w(nb, sa), w(nb, sb), w(nb, sa + sb));
     let inv = lane::splat(inv);
-    let face = |l: &dyn Fn(&[f32]) -> lane::V| {
+    let face = |l: &dyn Fn(&[f32]) -> lane::V4| {
         use lane::{add, sub};
         let db = sub(sub(add(l(b10), l(b11)), l(b00)), l(b01));
         let da = sub(sub(add(l(a01), l(a11)), l(a00)), l(a10));
@@ -673,219 +672,6 @@ pub(super) fn curl_run(
     } else {
         let u = lane::lanes(face(&lane::load_padded));
         out.copy_from_slice(&u[..n]);
-    }
-}
-
-/// The four-lane operations of the node kernel: SSE2 (the x86-64 baseline).
-#[cfg(target_arch = "x86_64")]
-mod lane {
-    use std::arch::x86_64::*;
-
-    use super::{Table, TABLE_SIZE};
-
-    // SAFETY (every `unsafe` below): SSE2 is part of the x86-64 baseline, and the intrinsics take
-    // no pointers but those of `load` and `store` (from a reference to four floats).
-
-    /// Four lanes; a mask has every bit of a true lane set.
-    pub type V = __m128;
-    pub use crate::fluid::v4::{add, lanes, mul, splat, sub, zero};
-
-    /// `[0, 1, 2, 3]`.
-    #[inline(always)]
-    pub fn ramp() -> V {
-        unsafe { _mm_set_ps(3.0, 2.0, 1.0, 0.0) }
-    }
-    /// The second operand where either is NaN.
-    #[inline(always)]
-    pub fn max(a: V, b: V) -> V {
-        unsafe { _mm_max_ps(a, b) }
-    }
-    /// The second operand where either is NaN.
-    #[inline(always)]
-    pub fn min(a: V, b: V) -> V {
-        unsafe { _mm_min_ps(a, b) }
-    }
-    #[inline(always)]
-    pub fn abs(a: V) -> V {
-        unsafe { _mm_and_ps(a, _mm_castsi128_ps(_mm_set1_epi32(0x7fff_ffff))) }
-    }
-    /// Mask of `a < b`.
-    #[inline(always)]
-    pub fn lt(a: V, b: V) -> V {
-        unsafe { _mm_cmplt_ps(a, b) }
-    }
-    /// Mask of `a <= b`.
-    #[inline(always)]
-    pub fn le(a: V, b: V) -> V {
-        unsafe { _mm_cmple_ps(a, b) }
-    }
-    /// Bitwise and (of masks, or a mask and a value).
-    #[inline(always)]
-    pub fn and(a: V, b: V) -> V {
-        unsafe { _mm_and_ps(a, b) }
-    }
-    /// Mask of `lo <= [0, 1, 2, 3] <= hi`.
-    #[inline(always)]
-    pub fn between(lo: f32, hi: f32) -> V {
-        and(le(splat(lo), ramp()), le(ramp(), splat(hi)))
-    }
-    /// Mask of the non-zero bytes of the four from `i`.
-    ///
-    /// # Safety
-    /// `i + 4 <= b.len()`.
-    #[inline(always)]
-    pub unsafe fn nonzero_at(b: &[u8], i: usize) -> V {
-        // SAFETY: the caller's (an unaligned read of four bytes).
-        let w = unsafe { b.as_ptr().add(i).cast::<i32>().read_unaligned() };
-        unsafe {
-            let z = _mm_setzero_si128();
-            let v = _mm_cvtsi32_si128(i32::from_le(w));
-            let v = _mm_unpacklo_epi16(_mm_unpacklo_epi8(v, z), z);
-            _mm_castsi128_ps(_mm_xor_si128(_mm_cmpeq_epi32(v, z), _mm_set1_epi32(-1)))
-        }
-    }
-    /// One bit per lane (bit `l` of lane `l`'s sign).
-    #[inline(always)]
-    pub fn bits(m: V) -> u32 {
-        unsafe { _mm_movemask_ps(m) as u32 }
-    }
-    #[inline(always)]
-    pub fn load(p: &[f32; 4]) -> V {
-        unsafe { _mm_loadu_ps(p.as_ptr()) }
-    }
-    /// The four floats of `s` from `i`.
-    ///
-    /// # Safety
-    /// `i + 4 <= s.len()`.
-    #[inline(always)]
-    pub unsafe fn load_at(s: &[f32], i: usize) -> V {
-        // SAFETY: the caller's.
-        unsafe { _mm_loadu_ps(s.as_ptr().add(i)) }
-    }
-    /// Writes the four floats of `s` from `i`.
-    ///
-    /// # Safety
-    /// `i + 4 <= s.len()`.
-    #[inline(always)]
-    pub unsafe fn store_at(s: &mut [f32], i: usize, v: V) {
-        // SAFETY: the caller's.
-        unsafe { _mm_storeu_ps(s.as_mut_ptr().add(i), v) }
-    }
-    /// The first (up to) four floats of `s`, zero beyond its end.
-    #[inline(always)]
-    pub fn load_padded(s: &[f32]) -> V {
-        load(&std::array::from_fn(|l| s.get(l).copied().unwrap_or(0.0)))
-    }
-    /// Linear interpolation in the table at `t` (in `[0, TABLE_SIZE]`, or NaN: then entry 0).
-    #[inline(always)]
-    pub fn lookup(table: &Table, t: V) -> V {
-        unsafe {
-            // t >= 0: truncation floors; the last interval takes t = TABLE_SIZE at its end.
-            let i = _mm_min_ps(
-                _mm_cvtepi32_ps(_mm_cvttps_epi32(t)),
-                _mm_set1_ps((TABLE_SIZE - 1) as f32),
-            );
-            let f = _mm_sub_ps(t, i);
-            let i = _mm_cvttps_epi32(i);
-            let at = |l: __m128i| (_mm_cvtsi128_si32(l) as u32 as usize) & (TABLE_SIZE - 1);
-            let pair = |n: usize| _mm_castsi128_ps(_mm_cvtsi64_si128(bytemuck::cast(table[n])));
-            let p0 = pair(at(i));
-            let p1 = pair(at(_mm_shuffle_epi32::<0b01>(i)));
-            let p2 = pair(at(_mm_shuffle_epi32::<0b10>(i)));
-            let p3 = pair(at(_mm_shuffle_epi32::<0b11>(i)));
-            // [v0 v1 d0 d1], [v2 v3 d2 d3] -> [v0 v1 v2 v3], [d0 d1 d2 d3].
-            let (a, b) = (_mm_unpacklo_ps(p0, p1), _mm_unpacklo_ps(p2, p3));
-            let (v, d) = (_mm_movelh_ps(a, b), _mm_movehl_ps(b, a));
-            _mm_add_ps(v, _mm_mul_ps(f, d))
-        }
-    }
-}
-
-/// The four-lane operations of the node kernel (portable fallback).
-#[cfg(not(target_arch = "x86_64"))]
-mod lane {
-    use super::{Table, TABLE_SIZE};
-
-    /// Four lanes; a mask has every bit of a true lane set.
-    pub type V = [f32; 4];
-    pub use crate::fluid::v4::{add, lanes, mul, splat, sub, zero};
-
-    fn map2(a: V, b: V, f: impl Fn(f32, f32) -> f32) -> V {
-        std::array::from_fn(|l| f(a[l], b[l]))
-    }
-    fn mask(t: bool) -> f32 {
-        f32::from_bits(if t { u32::MAX } else { 0 })
-    }
-    /// `[0, 1, 2, 3]`.
-    pub fn ramp() -> V {
-        [0.0, 1.0, 2.0, 3.0]
-    }
-    /// The second operand where either is NaN.
-    pub fn max(a: V, b: V) -> V {
-        map2(a, b, |a, b| if a > b { a } else { b })
-    }
-    /// The second operand where either is NaN.
-    pub fn min(a: V, b: V) -> V {
-        map2(a, b, |a, b| if a < b { a } else { b })
-    }
-    pub fn abs(a: V) -> V {
-        a.map(f32::abs)
-    }
-    /// Mask of `a < b`.
-    pub fn lt(a: V, b: V) -> V {
-        map2(a, b, |a, b| mask(a < b))
-    }
-    /// Mask of `a <= b`.
-    pub fn le(a: V, b: V) -> V {
-        map2(a, b, |a, b| mask(a <= b))
-    }
-    /// Bitwise and (of masks, or a mask and a value).
-    pub fn and(a: V, b: V) -> V {
-        map2(a, b, |a, b| f32::from_bits(a.to_bits() & b.to_bits()))
-    }
-    /// Mask of `lo <= [0, 1, 2, 3] <= hi`.
-    pub fn between(lo: f32, hi: f32) -> V {
-        and(le(splat(lo), ramp()), le(ramp(), splat(hi)))
-    }
-    /// Mask of the non-zero bytes of the four from `i`.
-    ///
-    /// # Safety
-    /// `i + 4 <= b.len()` (checked here anyway).
-    pub unsafe fn nonzero_at(b: &[u8], i: usize) -> V {
-        std::array::from_fn(|l| mask(b[i + l] != 0))
-    }
-    /// One bit per lane.
-    pub fn bits(m: V) -> u32 {
-        (0..4).map(|l| (m[l].to_bits() >> 31) << l).sum()
-    }
-    pub fn load(p: &[f32; 4]) -> V {
-        *p
-    }
-    /// The four floats of `s` from `i`.
-    ///
-    /// # Safety
-    /// `i + 4 <= s.len()` (checked here anyway).
-    pub unsafe fn load_at(s: &[f32], i: usize) -> V {
-        std::array::from_fn(|l| s[i + l])
-    }
-    /// Writes the four floats of `s` from `i`.
-    ///
-    /// # Safety
-    /// `i + 4 <= s.len()` (checked here anyway).
-    pub unsafe fn store_at(s: &mut [f32], i: usize, v: V) {
-        s[i..i + 4].copy_from_slice(&v);
-    }
-    /// The first (up to) four floats of `s`, zero beyond its end.
-    pub fn load_padded(s: &[f32]) -> V {
-        std::array::from_fn(|l| s.get(l).copied().unwrap_or(0.0))
-    }
-    /// Linear interpolation in the table at `t` (in `[0, TABLE_SIZE]`, or NaN: then entry 0).
-    pub fn lookup(table: &Table, t: V) -> V {
-        t.map(|t| {
-            let i = (t as usize).min(TABLE_SIZE - 1);
-            let [v, d] = table[i];
-            v + (t - i as f32) * d
-        })
     }
 }
 

@@ -1,4 +1,7 @@
-//! Voxelized benchmark cavities with a scope: the stand-in geometry until the voxelizer exists.
+//! Analytic cavities voxelized with a scope: the geometry of the fluid benchmark (`hydrometra fluid
+//! bench`, `benches/fluid.rs`) and of the fluid tests. Not the product's cavity, which comes from
+//! the anatomy and the voxelizer (`scene::voxelize`); a test or benchmark harness, built with the
+//! `harness` feature only.
 //!
 //! Both cavities are centred at the origin with the long axis along x, from the cervix at -x to the
 //! fundus at +x. A scope of radius [`SCOPE_RADIUS_M`] enters along the x axis from the cervix; its tip
@@ -18,7 +21,7 @@
 //!   3 mm of the -x end and more than 2.5 mm off-axis), kept for the tests that use it; its counts at
 //!   1.2 mm are 14 % above the paper's.
 
-use super::{CellLabel, FluidError, FluidGrid};
+use crate::fluid::{CellLabel, FluidError, FluidGrid};
 
 /// Semi-axes (m) of the ellipsoidal cavity: 18 x 12 x 8.4 mm (volume 7.6 ml).
 pub const CAVITY_SEMI_AXES_M: [f64; 3] = [0.018, 0.012, 0.0084];

@@ -1,141 +1,12 @@
-//! Rankine vortices superimposed on the resolved flow: the paper's turbulent look at high flow
-//! rates (`docs/particles.md` specifies the model; the paper's section 3, "vortices").
-//!
-//! Each vortex has a centre `c`, a unit axis `n` (the curl of the resolved velocity at `c`), a core
-//! radius `R` and a circulation `Gamma`. Its velocity is `g(s) v_theta(r) e_theta` with
-//! `s = (x - c).n`, `r` the distance from the axis and `e_theta = n x r_hat`: exactly
-//! divergence-free for any radial profile and axial window. `v_theta` is Rankine's
-//! (`Gamma r / (2 pi R^2)` inside the core, `Gamma / (2 pi r)` outside) out to `1.5 R`, tapered
-//! to zero at `2.5 R`; `g` is 1 for `|s| <= R` and tapers to zero at `2 R`, so a vortex touches only
-//! a few cells. On the MAC grid the field is the discrete curl of an edge-centred vector potential
-//! `A = g(s) Psi(r) n` (`Psi' = -v_theta`), zero on every edge that touches a non-fluid cell: the
-//! face velocities are then discretely divergence-free in every cell (div curl = 0 identically)
-//! and no flux crosses a wall, a port or the open os.
-//!
-//! Two modes: `overlay` keeps the solver's state untouched and offers the field to the particles
-//! and the display; `injected` adds, each step, the change of the field (new minus last injected)
-//! to the solver's face velocities, so the solver carries and dissipates it.
+//! The vortices on one MAC grid ([`VortexField`]): moved with the resolved flow, respawned in the
+//! fluid, oriented by its curl, and their field as discretely divergence-free face velocities
+//! (the curl of the node potential of [`super::potential`]).
 
-use serde::{Deserialize, Serialize};
-
-use super::random::SeededRng;
-use super::vortex_potential::{self, curl_run, dot, Slab, Support, Table};
-pub use super::vortex_potential::{
-    Vortex, AXIAL_END_CORES, AXIAL_FLAT_CORES, CUTOFF_CORES, RANKINE_EXACT_CORES,
-};
-use super::Scene;
+use super::potential::{self, curl_run, Slab, Support, Table, Vortex};
+use super::spec::VortexSpec;
 use crate::fluid::{CellLabel, FluidSolver};
-
-/// Where the vortices act.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
-#[serde(rename_all = "snake_case")]
-pub enum VortexMode {
-    /// Display and particles only: the solver's state is untouched.
-    #[default]
-    Overlay,
-    /// Added to the solver's face velocities (discretely divergence-free).
-    Injected,
-}
-
-/// The `[vortices]` table of a scene.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct VortexSpec {
-    /// Most vortices at once (the paper: up to 100).
-    pub max_count: usize,
-    /// Overlay or injected.
-    pub mode: VortexMode,
-    /// No vortices below this inflow, ml/min.
-    pub threshold_ml_min: f64,
-    /// `max_count` vortices from this inflow, ml/min; linear in between.
-    pub full_flow_ml_min: f64,
-    /// Core radius, mm (raised to `min_core_voxels` voxels).
-    pub core_radius_mm: f64,
-    /// Smallest core radius in voxels (a core the grid cannot resolve is invisible).
-    pub min_core_voxels: f64,
-    /// Peak tangential speed (at `r = R`) over the resolved speed at the centre.
-    pub intensity: f64,
-    /// Upper bound of the peak tangential speed, m/s.
-    pub max_peak_speed_m_s: f64,
-    /// Seed of the placement.
-    pub seed: u64,
-}
-
-impl Default for VortexSpec {
-    fn default() -> Self {
-        Self {
-            max_count: 100,
-            mode: VortexMode::Overlay,
-            threshold_ml_min: 100.0,
-            full_flow_ml_min: 400.0,
-            core_radius_mm: 1.2,
-            min_core_voxels: 1.0,
-            intensity: 0.5,
-            max_peak_speed_m_s: 1.0,
-            seed: 1,
-        }
-    }
-}
-
-impl VortexSpec {
-    /// Checks every range; the message names the key.
-    pub fn validate(&self) -> Result<(), String> {
-        let pos = |v: f64| v.is_finite() && v > 0.0;
-        if self.max_count > 10_000 {
-            return Err(format!(
-                "`vortices.max_count` = {}: expected at most 10000",
-                self.max_count
-            ));
-        }
-        if !(self.threshold_ml_min.is_finite() && self.threshold_ml_min >= 0.0) {
-            return Err(format!(
-                "`vortices.threshold_ml_min` = {}: expected a flow >= 0",
-                self.threshold_ml_min
-            ));
-        }
-        if !(self.full_flow_ml_min.is_finite() && self.full_flow_ml_min > self.threshold_ml_min) {
-            return Err(format!(
-                "`vortices.full_flow_ml_min` = {}: expected a finite flow above `threshold_ml_min` ({})",
-                self.full_flow_ml_min, self.threshold_ml_min
-            ));
-        }
-        for (key, v) in [
-            ("core_radius_mm", self.core_radius_mm),
-            ("min_core_voxels", self.min_core_voxels),
-            ("max_peak_speed_m_s", self.max_peak_speed_m_s),
-        ] {
-            if !pos(v) {
-                return Err(format!(
-                    "`vortices.{key}` = {v}: expected a finite value > 0"
-                ));
-            }
-        }
-        if !(self.intensity.is_finite() && self.intensity >= 0.0) {
-            return Err(format!(
-                "`vortices.intensity` = {}: expected a finite value >= 0",
-                self.intensity
-            ));
-        }
-        Ok(())
-    }
-
-    /// Vortices wanted at an inflow of `inflow_m3_per_s`: none below the threshold, `max_count`
-    /// from the full flow, linear in between (rounded).
-    pub fn target_count(&self, inflow_m3_per_s: f64) -> usize {
-        let q = inflow_m3_per_s * 6e7;
-        if !(q.is_finite() && q > self.threshold_ml_min) {
-            return 0;
-        }
-        let f = ((q - self.threshold_ml_min) / (self.full_flow_ml_min - self.threshold_ml_min))
-            .clamp(0.0, 1.0);
-        (f * self.max_count as f64).round() as usize
-    }
-
-    /// The core radius on a grid of spacing `h_m`, m.
-    pub fn core_radius_m(&self, h_m: f64) -> f64 {
-        (self.core_radius_mm * 1e-3).max(self.min_core_voxels * h_m)
-    }
-}
+use crate::mesh::dot;
+use crate::scene::random::SeededRng;
 
 /// What the last [`VortexField::step`] did.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -237,7 +108,7 @@ impl VortexField {
             pot: std::array::from_fn(|_| vec![0.0; nodes]),
             injected: faces.clone(),
             faces,
-            table: vortex_potential::table(),
+            table: potential::table(),
             stats: VortexStats::default(),
         })
     }
@@ -619,72 +490,6 @@ impl VortexField {
                 let lo = cell[0] + fd[0] * (cell[1] + fd[1] * cell[2]);
                 let stride = [1, fd[0], fd[0] * fd[1]][c];
                 out[n][c] += 0.5 * (self.faces[c][lo] + self.faces[c][lo + stride]);
-            }
-        }
-    }
-}
-
-/// The vortex stage of a scene.
-#[derive(Debug, Clone, Default)]
-pub struct Vortices {
-    spec: VortexSpec,
-    field: Option<VortexField>,
-}
-
-impl Vortices {
-    /// The stage for a scene's `[vortices]` table.
-    pub fn new(spec: VortexSpec) -> Self {
-        Self { spec, field: None }
-    }
-
-    /// The vortices and their field, once the stage has run.
-    pub fn field(&self) -> Option<&VortexField> {
-        self.field.as_ref()
-    }
-
-    /// The display-only field's face velocities (overlay mode), for the particles.
-    pub(crate) fn overlay_faces(&self) -> Option<[&[f32]; 3]> {
-        let f = self.field.as_ref()?;
-        (self.spec.mode == VortexMode::Overlay && !f.vortices.is_empty())
-            .then(|| std::array::from_fn(|c| f.face_velocities(c)))
-    }
-
-    /// Advances the vortices after the fluid step; returns whether the stage ran (not below the
-    /// flow-rate threshold with no vortex left).
-    pub(crate) fn step(&mut self, scene: &mut Scene, dt_s: f64) -> bool {
-        let target = self
-            .spec
-            .target_count(scene.hydraulic_state.flows.inflow_m3_per_s);
-        let Some(solver) = scene.fluid.as_mut() else {
-            return false;
-        };
-        if target == 0 && self.field.as_ref().is_none_or(|f| f.vortices.is_empty()) {
-            return false;
-        }
-        if self.field.is_none() {
-            match VortexField::new(self.spec.clone(), solver) {
-                Ok(f) => self.field = Some(f),
-                Err(e) => {
-                    tracing::warn!("vortices disabled: {e}");
-                    return false;
-                }
-            }
-        }
-        let Some(field) = self.field.as_mut() else {
-            return false;
-        };
-        field.step(solver, target, dt_s);
-        if self.spec.mode == VortexMode::Injected {
-            field.inject(solver);
-        }
-        true
-    }
-
-    /// Adds the display-only overlay to cell-centred velocities (x fastest, one per cell).
-    pub(crate) fn overlay_into(&self, _scene: &Scene, out: &mut [[f32; 3]]) {
-        if self.spec.mode == VortexMode::Overlay {
-            if let Some(f) = &self.field {
-                f.overlay_into(out);
             }
         }
     }

@@ -1,0 +1,628 @@
+//! The fluid of a box of cells as layers of closed surfaces (the cavity, the scope's sheath, the
+//! regions of a case file), each marking what it encloses as fluid or solid over what lies
+//! below it; with the small-cell rule applied.
+
+use super::fractions::{FractionStats, SurfaceFractions};
+use super::small::{self, NO_TARGET};
+use super::{check_box, CutCellError, Orientation};
+use crate::scene::voxelize::VoxelBox;
+
+/// What a layer's enclosed region (or the background) is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Phase {
+    /// Fluid.
+    Fluid,
+    /// Solid.
+    Solid,
+}
+
+impl Phase {
+    fn fraction(self) -> f64 {
+        match self {
+            Phase::Fluid => 1.0,
+            Phase::Solid => 0.0,
+        }
+    }
+}
+
+/// One closed surface of a [`CutCells`].
+#[derive(Debug, Clone)]
+pub struct Layer {
+    /// Its name, for errors.
+    pub name: String,
+    /// Its triangles (closed, consistently oriented).
+    pub triangles: Vec<[u32; 3]>,
+    /// How many vertices its positions hold.
+    pub vertex_count: usize,
+    /// Which way its normals point.
+    pub orientation: Orientation,
+    /// What its enclosed region becomes.
+    pub inside: Phase,
+}
+
+/// The small-fraction rule's parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SmallCellParams {
+    /// Cells with a fluid volume fraction in `(0, this)` are merged into a neighbour
+    /// ([`super::small`]).
+    pub min_volume_fraction: f64,
+    /// Fractions within this of 0 or 1 are rounding (the exact fractions carry about 1e-16 of it
+    /// where a surface passes a cell's corner or lies in a face): in the stabilised output such
+    /// faces are 0 or 1, and such cells empty (their dust of volume, at most this much per cell,
+    /// is dropped rather than merged).
+    pub round_off_fraction: f64,
+}
+
+impl Default for SmallCellParams {
+    fn default() -> Self {
+        Self {
+            min_volume_fraction: 0.1,
+            round_off_fraction: 1e-12,
+        }
+    }
+}
+
+/// What one call did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct CutCellStats {
+    /// The layers' work, summed.
+    pub layers: FractionStats,
+    /// Rows whose fractions were combined anew.
+    pub rows_combined: usize,
+    /// Rows whose small-cell rule was applied anew.
+    pub rows_stabilised: usize,
+    /// Rows in which anything published changed ([`CutCells::changed_rows`]).
+    pub changed_rows: usize,
+    /// Cells cut by more than one layer's surface (their fractions are approximate), now.
+    pub approximate_cells: usize,
+    /// Small cells merged into a neighbour, now.
+    pub merged_cells: usize,
+    /// Small cells with no neighbour to merge into, now.
+    pub unmerged_small_cells: usize,
+}
+
+// Row stages, as bits of `row_flags`.
+const COMBINE: u8 = 1;
+const INTERFACE: u8 = 2;
+const DECIDE: u8 = 4;
+const STABILISE: u8 = 8;
+const CHANGED: u8 = 16;
+
+const NOT_SMALL: u8 = 0;
+const MERGED: u8 = 1;
+const UNMERGED: u8 = 2;
+
+/// The fluid fractions of a box of cells bounded by layers of closed surfaces, incremental.
+///
+/// The fluid indicator starts as the background and each layer in order makes what it encloses
+/// fluid (union) or solid (subtraction). Per layer the fractions are exact
+/// ([`SurfaceFractions`]); they combine per cell and per face as `max(phi, f)` (fluid) or
+/// `max(0, phi - f)` (solid), which is exact wherever at most one of the two is fractional,
+/// i.e. in every cell no more than one surface cuts. Where two surfaces cut the same cell the
+/// result assumes the two pieces nested and the cell is counted in
+/// [`CutCellStats::approximate_cells`] (the error is at most that cell's smaller fraction; such
+/// cells line the curve where the surfaces cross, so their total error falls as `h^2`).
+#[derive(Debug, Clone)]
+pub struct CutCells {
+    cells: VoxelBox,
+    background: Phase,
+    params: SmallCellParams,
+    layers: Vec<(SurfaceFractions, Phase)>,
+    volume: Vec<f64>,
+    faces: [Vec<f64>; 3],
+    interface: Vec<[f64; 3]>,
+    approximate: Vec<bool>,
+    approximate_count: usize,
+    targets: Vec<u32>,
+    /// Per cell: [`NOT_SMALL`], [`MERGED`] or [`UNMERGED`] (for the counts).
+    small_state: Vec<u8>,
+    merged_count: usize,
+    unmerged_count: usize,
+    stabilised_volume: Vec<f64>,
+    stabilised_faces: [Vec<f64>; 3],
+    row_flags: Vec<u8>,
+    stage_rows: [Vec<u32>; 4],
+    changed_rows: Vec<u32>,
+    /// Strips to combine: `[y-strips, z-strips]`.
+    strip_flags: [Vec<bool>; 2],
+    strips: [Vec<u32>; 2],
+    initialised: bool,
+}
+
+impl CutCells {
+    /// Fractions on `cells` for `layers` over `background`; nothing is computed until the first
+    /// [`CutCells::update`] or [`CutCells::full`].
+    pub fn new(
+        cells: VoxelBox,
+        background: Phase,
+        layers: Vec<Layer>,
+        params: SmallCellParams,
+    ) -> Result<Self, CutCellError> {
+        check_box(&cells)?;
+        if !(params.min_volume_fraction >= 0.0 && params.min_volume_fraction <= 1.0) {
+            return Err(CutCellError::Box(format!(
+                "min_volume_fraction = {}: expected a value in [0, 1]",
+                params.min_volume_fraction
+            )));
+        }
+        if !(params.round_off_fraction >= 0.0 && params.round_off_fraction < 0.5) {
+            return Err(CutCellError::Box(format!(
+                "round_off_fraction = {}: expected a value in [0, 0.5)",
+                params.round_off_fraction
+            )));
+        }
+        let layers = layers
+            .into_iter()
+            .map(|l| {
+                SurfaceFractions::new(&l.name, cells, l.triangles, l.vertex_count, l.orientation)
+                    .map(|f| (f, l.inside))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let [nx, ny, nz] = cells.dims;
+        let n = cells.cell_count();
+        let b = background.fraction();
+        let faces = [
+            vec![b; (nx + 1) * ny * nz],
+            vec![b; nx * (ny + 1) * nz],
+            vec![b; nx * ny * (nz + 1)],
+        ];
+        let rows = ny * nz;
+        Ok(Self {
+            cells,
+            background,
+            params,
+            layers,
+            volume: vec![b; n],
+            stabilised_faces: faces.clone(),
+            faces,
+            interface: vec![[0.0; 3]; n],
+            approximate: vec![false; n],
+            approximate_count: 0,
+            targets: vec![NO_TARGET; n],
+            small_state: vec![NOT_SMALL; n],
+            merged_count: 0,
+            unmerged_count: 0,
+            stabilised_volume: vec![b; n],
+            row_flags: vec![0; rows],
+            stage_rows: std::array::from_fn(|_| Vec::with_capacity(rows)),
+            changed_rows: Vec::with_capacity(rows),
+            strip_flags: [vec![false; (ny + 1) * nz], vec![false; ny * (nz + 1)]],
+            strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
+            initialised: false,
+        })
+    }
+
+    /// The box.
+    pub fn cells(&self) -> &VoxelBox {
+        &self.cells
+    }
+    /// The layers' own exact fractions, in order.
+    pub fn layer(&self, l: usize) -> &SurfaceFractions {
+        &self.layers[l].0
+    }
+    /// How many layers.
+    pub fn layer_count(&self) -> usize {
+        self.layers.len()
+    }
+    /// The small-cell parameters.
+    pub fn params(&self) -> &SmallCellParams {
+        &self.params
+    }
+    /// Per cell (x fastest), the exact fluid volume fraction in `[0, 1]`.
+    pub fn volume_fractions(&self) -> &[f64] {
+        &self.volume
+    }
+    /// Per face normal to `axis`, the exact open (fluid) area fraction in `[0, 1]`; face
+    /// `(i, j, k)` lies between cells `(i-1, j, k)` and `(i, j, k)` along the axis, x fastest,
+    /// `dims[axis] + 1` faces along it (the box's boundary faces included).
+    pub fn face_fractions(&self, axis: usize) -> &[f64] {
+        &self.faces[axis]
+    }
+    /// Per cell, the area vector of the fluid's boundary inside it (the walls), `integral of n dA
+    /// / h^2` with `n` out of the fluid: `-sum over faces of +-A_f e_f`, so every cell's faces and
+    /// walls close exactly.
+    pub fn wall_areas(&self) -> &[[f64; 3]] {
+        &self.interface
+    }
+    /// Per cell, whether more than one layer's surface cuts it (its fractions are approximate).
+    pub fn approximate(&self) -> &[bool] {
+        &self.approximate
+    }
+    /// Per cell, the cell it is merged into ([`NO_TARGET`]: none) by the small-cell rule.
+    pub fn merge_targets(&self) -> &[u32] {
+        &self.targets
+    }
+    /// Per cell, the fluid volume fraction after the small-cell rule: 0 for a merged cell or one
+    /// holding only rounding (at most `round_off_fraction`), its own plus what merged into it
+    /// otherwise (may exceed 1). Sums to the exact fractions' sum less that rounding.
+    pub fn stabilised_volume_fractions(&self) -> &[f64] {
+        &self.stabilised_volume
+    }
+    /// The face fractions with rounding removed (below `round_off_fraction` 0, above `1 -
+    /// round_off_fraction` 1).
+    pub fn stabilised_face_fractions(&self, axis: usize) -> &[f64] {
+        &self.stabilised_faces[axis]
+    }
+    /// The rows `j + ny k` in which the last call changed any cell's or face's value.
+    pub fn changed_rows(&self) -> &[u32] {
+        &self.changed_rows
+    }
+
+    /// Computes everything from the layers' positions (one slice per layer).
+    pub fn full(&mut self, positions_m: &[&[[f32; 3]]]) -> Result<CutCellStats, CutCellError> {
+        self.check(positions_m)?;
+        let mut stats = CutCellStats::default();
+        for (l, p) in self.layers.iter_mut().zip(positions_m) {
+            add(&mut stats.layers, l.0.full(p)?);
+        }
+        self.initialised = true;
+        let [_, ny, nz] = self.cells.dims;
+        for r in 0..ny * nz {
+            self.flag_row(r, COMBINE | INTERFACE);
+        }
+        for s in 0..2 {
+            for u in 0..self.strip_flags[s].len() {
+                mark(u, &mut self.strip_flags[s], &mut self.strips[s]);
+            }
+        }
+        self.finish(&mut stats);
+        Ok(stats)
+    }
+
+    /// Moves the layers to new positions (one slice per layer; see
+    /// [`SurfaceFractions::update`] for `threshold_m`) and updates what their moved triangles
+    /// reach. Bit for bit the result of [`CutCells::full`] at the held positions. Positions are
+    /// checked for every layer before anything changes.
+    pub fn update(
+        &mut self,
+        positions_m: &[&[[f32; 3]]],
+        threshold_m: f64,
+    ) -> Result<CutCellStats, CutCellError> {
+        if !self.initialised {
+            return self.full(positions_m);
+        }
+        self.check(positions_m)?;
+        let mut stats = CutCellStats::default();
+        for (l, p) in positions_m.iter().enumerate() {
+            let s = self.layers[l].0.update(p, threshold_m)?;
+            add(&mut stats.layers, s);
+            let f = &self.layers[l].0;
+            for &r in f.changed_rows() {
+                flag(
+                    &mut self.row_flags,
+                    &mut self.stage_rows,
+                    r as usize,
+                    COMBINE | INTERFACE,
+                );
+            }
+            for (s, changed) in [f.changed_ystrips(), f.changed_zstrips()]
+                .into_iter()
+                .enumerate()
+            {
+                for &u in changed {
+                    mark(u as usize, &mut self.strip_flags[s], &mut self.strips[s]);
+                }
+            }
+        }
+        self.finish(&mut stats);
+        Ok(stats)
+    }
+
+    fn check(&self, positions_m: &[&[[f32; 3]]]) -> Result<(), CutCellError> {
+        if positions_m.len() != self.layers.len() {
+            return Err(CutCellError::Box(format!(
+                "{} position sets for {} layers",
+                positions_m.len(),
+                self.layers.len()
+            )));
+        }
+        for (l, p) in self.layers.iter().zip(positions_m) {
+            l.0.check_positions(p)?;
+        }
+        Ok(())
+    }
+
+    fn flag_row(&mut self, r: usize, bits: u8) {
+        flag(&mut self.row_flags, &mut self.stage_rows, r, bits);
+    }
+
+    /// Combines the flagged rows and strips, then applies the small-cell rule around them.
+    fn finish(&mut self, stats: &mut CutCellStats) {
+        let [nx, ny, nz] = self.cells.dims;
+        self.changed_rows.clear();
+        // Strips: their faces, and the interfaces of the rows on both sides.
+        for axis in [1, 2] {
+            let strips = std::mem::take(&mut self.strips[axis - 1]);
+            // y-strip `j + (ny + 1) k`, z-strip `j + ny k`: the rows `row - step` and `row`
+            // lie on the two sides of the strip's plane.
+            let (width, step) = if axis == 1 { (ny + 1, 1) } else { (ny, ny) };
+            for &u in &strips {
+                self.strip_flags[axis - 1][u as usize] = false;
+                let (j, k) = (u as usize % width, u as usize / width);
+                if self.combine_faces(axis, nx * u as usize) {
+                    let (plane, extent) = if axis == 1 { (j, ny) } else { (k, nz) };
+                    let row = j + ny * k;
+                    if plane > 0 {
+                        self.flag_row(row - step, INTERFACE | CHANGED);
+                    }
+                    if plane < extent {
+                        self.flag_row(row, INTERFACE | CHANGED);
+                    }
+                }
+            }
+            self.strips[axis - 1] = strips;
+            self.strips[axis - 1].clear();
+        }
+        // Rows: volumes and x-faces.
+        let rows = std::mem::take(&mut self.stage_rows[0]);
+        for &r in &rows {
+            self.row_flags[r as usize] &= !COMBINE;
+            if self.combine_row(r as usize) {
+                self.row_flags[r as usize] |= CHANGED;
+            }
+        }
+        stats.rows_combined = rows.len();
+        self.stage_rows[0] = rows;
+        self.stage_rows[0].clear();
+        // Interfaces; the rows whose cells or neighbours changed decide their merges anew.
+        let rows = std::mem::take(&mut self.stage_rows[1]);
+        for &r in &rows {
+            self.row_flags[r as usize] &= !INTERFACE;
+            if self.interface_row(r as usize) {
+                self.row_flags[r as usize] |= CHANGED;
+            }
+            if self.row_flags[r as usize] & CHANGED != 0 {
+                self.flag_around(r as usize, DECIDE);
+            }
+        }
+        self.stage_rows[1] = rows;
+        self.stage_rows[1].clear();
+        let rows = std::mem::take(&mut self.stage_rows[2]);
+        for &r in &rows {
+            self.row_flags[r as usize] &= !DECIDE;
+            if self.decide_row(r as usize) {
+                self.row_flags[r as usize] |= CHANGED;
+            }
+            self.flag_around(r as usize, STABILISE);
+        }
+        self.stage_rows[2] = rows;
+        self.stage_rows[2].clear();
+        let rows = std::mem::take(&mut self.stage_rows[3]);
+        for &r in &rows {
+            self.row_flags[r as usize] &= !STABILISE;
+            if self.stabilise_row(r as usize) {
+                self.row_flags[r as usize] |= CHANGED;
+            }
+        }
+        stats.rows_stabilised = rows.len();
+        self.stage_rows[3] = rows;
+        self.stage_rows[3].clear();
+        for r in 0..self.row_flags.len() {
+            // Only rows touched above can carry the bit; the scan is over one byte per row.
+            if self.row_flags[r] & CHANGED != 0 {
+                self.row_flags[r] &= !CHANGED;
+                self.changed_rows.push(r as u32);
+            }
+        }
+        stats.changed_rows = self.changed_rows.len();
+        stats.approximate_cells = self.approximate_count;
+        stats.merged_cells = self.merged_count;
+        stats.unmerged_small_cells = self.unmerged_count;
+    }
+
+    /// Flags row `r` and its four neighbour rows for `stage`.
+    fn flag_around(&mut self, r: usize, stage: u8) {
+        let [_, ny, nz] = self.cells.dims;
+        let (j, k) = (r % ny, r / ny);
+        self.flag_row(r, stage);
+        if j > 0 {
+            self.flag_row(r - 1, stage);
+        }
+        if j + 1 < ny {
+            self.flag_row(r + 1, stage);
+        }
+        if k > 0 {
+            self.flag_row(r - ny, stage);
+        }
+        if k + 1 < nz {
+            self.flag_row(r + ny, stage);
+        }
+    }
+
+    /// Combines the `nx` faces normal to `axis` from `base`; whether any changed.
+    fn combine_faces(&mut self, axis: usize, base: usize) -> bool {
+        let nx = self.cells.dims[0];
+        let eps = self.params.round_off_fraction;
+        let mut changed = false;
+        for f in base..base + nx {
+            let (v, _) = self.combined(|l| l.face_fractions(axis)[f]);
+            changed |= store(&mut self.faces[axis][f], v);
+            changed |= store(&mut self.stabilised_faces[axis][f], round_off(v, eps));
+        }
+        changed
+    }
+
+    /// Combines row `r`'s volumes and its `nx + 1` x-faces; whether any changed.
+    fn combine_row(&mut self, r: usize) -> bool {
+        let nx = self.cells.dims[0];
+        let mut changed = self.combine_faces(0, (nx + 1) * r);
+        // The x-faces of a row are `nx + 1`: the last one too.
+        let last = (nx + 1) * r + nx;
+        let (v, _) = self.combined(|l| l.face_fractions(0)[last]);
+        changed |= store(&mut self.faces[0][last], v);
+        changed |= store(
+            &mut self.stabilised_faces[0][last],
+            round_off(v, self.params.round_off_fraction),
+        );
+        for n in nx * r..nx * (r + 1) {
+            let (v, approx) = self.combined(|l| l.volume_fractions()[n]);
+            changed |= store(&mut self.volume[n], v);
+            if approx != self.approximate[n] {
+                self.approximate[n] = approx;
+                if approx {
+                    self.approximate_count += 1;
+                } else {
+                    self.approximate_count -= 1;
+                }
+                changed = true;
+            }
+        }
+        changed
+    }
+
+    /// The combination of the layers' values `value(layer)` over the background, and whether it
+    /// is approximate (a fractional layer over a fractional value).
+    #[inline]
+    fn combined(&self, value: impl Fn(&SurfaceFractions) -> f64) -> (f64, bool) {
+        let mut phi = self.background.fraction();
+        let mut approx = false;
+        for (l, phase) in &self.layers {
+            let f = value(l);
+            approx |= (phi > 0.0 && phi < 1.0) && (f > 0.0 && f < 1.0);
+            phi = match phase {
+                Phase::Fluid => phi.max(f),
+                Phase::Solid => (phi - f).max(0.0),
+            };
+        }
+        (phi, approx)
+    }
+
+    /// The walls of row `r`'s cells from their faces; whether any changed.
+    fn interface_row(&mut self, r: usize) -> bool {
+        let [nx, ny, _] = self.cells.dims;
+        let (j, k) = (r % ny, r / ny);
+        let (fx, fy, fz) = (&self.faces[0], &self.faces[1], &self.faces[2]);
+        let mut changed = false;
+        for i in 0..nx {
+            let x = i + (nx + 1) * r;
+            let y = i + nx * (j + (ny + 1) * k);
+            let z = i + nx * r;
+            let s = [
+                -(fx[x + 1] - fx[x]),
+                -(fy[y + nx] - fy[y]),
+                -(fz[z + nx * ny] - fz[z]),
+            ];
+            let slot = &mut self.interface[nx * r + i];
+            if slot.map(f64::to_bits) != s.map(f64::to_bits) {
+                *slot = s;
+                changed = true;
+            }
+        }
+        changed
+    }
+
+    /// The merge targets of row `r`'s cells, and the counts; whether any changed.
+    fn decide_row(&mut self, r: usize) -> bool {
+        let [nx, ny, _] = self.cells.dims;
+        let (j, k) = (r % ny, r / ny);
+        let theta = self.params.min_volume_fraction;
+        let dust = self.params.round_off_fraction;
+        let mut changed = false;
+        for i in 0..nx {
+            let n = nx * r + i;
+            let t = small::target(
+                &self.cells,
+                &self.volume,
+                &self.faces,
+                theta,
+                dust,
+                (i, j, k),
+            );
+            changed |= t != self.targets[n];
+            self.targets[n] = t;
+            let v = self.volume[n];
+            let state = if !(v > dust && v < theta) {
+                NOT_SMALL
+            } else if t == NO_TARGET {
+                UNMERGED
+            } else {
+                MERGED
+            };
+            let old = self.small_state[n];
+            if state != old {
+                match old {
+                    MERGED => self.merged_count -= 1,
+                    UNMERGED => self.unmerged_count -= 1,
+                    _ => {}
+                }
+                match state {
+                    MERGED => self.merged_count += 1,
+                    UNMERGED => self.unmerged_count += 1,
+                    _ => {}
+                }
+                self.small_state[n] = state;
+            }
+        }
+        changed
+    }
+
+    fn stabilise_row(&mut self, r: usize) -> bool {
+        let [nx, ny, _] = self.cells.dims;
+        let (j, k) = (r % ny, r / ny);
+        let mut changed = false;
+        for i in 0..nx {
+            let v = small::stabilised(
+                &self.cells,
+                &self.volume,
+                &self.targets,
+                self.params.round_off_fraction,
+                (i, j, k),
+            );
+            changed |= store(&mut self.stabilised_volume[nx * r + i], v);
+        }
+        changed
+    }
+}
+
+#[inline]
+fn round_off(v: f64, eps: f64) -> f64 {
+    if v < eps {
+        0.0
+    } else if v > 1.0 - eps {
+        1.0
+    } else {
+        v
+    }
+}
+
+#[inline]
+fn store(slot: &mut f64, v: f64) -> bool {
+    if slot.to_bits() != v.to_bits() {
+        *slot = v;
+        true
+    } else {
+        false
+    }
+}
+
+fn mark(u: usize, flags: &mut [bool], list: &mut Vec<u32>) {
+    if !flags[u] {
+        flags[u] = true;
+        list.push(u as u32);
+    }
+}
+
+/// Sets `bits` on row `r`, listing it for each stage bit newly set.
+fn flag(flags: &mut [u8], lists: &mut [Vec<u32>; 4], r: usize, bits: u8) {
+    for (s, bit) in [COMBINE, INTERFACE, DECIDE, STABILISE]
+        .into_iter()
+        .enumerate()
+    {
+        if bits & bit != 0 && flags[r] & bit == 0 {
+            lists[s].push(r as u32);
+        }
+    }
+    flags[r] |= bits;
+}
+
+fn add(sum: &mut FractionStats, s: FractionStats) {
+    sum.moved_vertices += s.moved_vertices;
+    sum.moved_triangles += s.moved_triangles;
+    sum.rows += s.rows;
+    sum.strips += s.strips;
+    sum.changed_cells += s.changed_cells;
+    sum.changed_faces += s.changed_faces;
+}

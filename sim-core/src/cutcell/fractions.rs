@@ -1,0 +1,707 @@
+//! The exact fractions of one closed surface on a box of cells, recomputed row by row.
+//!
+//! Three kinds of work unit, each a pure function of the positions of the triangles that can
+//! reach it, visited in triangle order (so an incremental update equals a full recomputation bit
+//! for bit):
+//! - the **row** `(j, k)` (the prism `y in (j, j+1]`, `z in (k, k+1]`, all x): its cells' volumes,
+//!   interface area vectors and the x-faces between them;
+//! - the **z-strip** `(j, k)` (plane `z = k`, `y in (j, j+1]`): the z-faces `(i, j, k)`;
+//! - the **y-strip** `(j, k)` (plane `y = j`, `z in (k, k+1]`): the y-faces `(i, j, k)`.
+//!
+//! In a row, each triangle is clipped to the prism and cut along x into cells. With outward
+//! normals `n`, the divergence theorem for the field `(x - x_i, 0, 0)` on the part of cell `i`
+//! inside the surface gives its volume as the pieces' `integral of (x - x_i) n_x dA` plus `h` times
+//! the inside area of the cell's right face; for the field `(1, 0, 0)` on the part of the row left
+//! of a face, that face's inside area is minus the pieces' `integral of n_x dA` left of it (the
+//! pieces left of the box included). A strip is the same one dimension lower: the triangles'
+//! cross-section with the plane, clipped to the strip, gives each face as `integral of (x - x_i)
+//! n_x dl` plus `h` times the inside length of the face's right edge, that length being minus the
+//! cross-section's `integral of n_x dl` left of it. Everything is exact for the polygonal surface
+//! up to rounding; the tie rule of [`super::clip`] decides what lies exactly on a grid plane.
+
+use super::clip::{self, cell_of, Polygon, Segment, P3};
+use super::{CutCellError, Orientation};
+use crate::scene::voxelize::VoxelBox;
+
+/// Rows (and planes) per side of a bin of the triangle index.
+const BIN: usize = 4;
+
+/// How far from the box a vertex may lie, in cells (beyond, positions are refused: the clipping
+/// arithmetic stays far from overflow and its rounding far below the cells' size).
+pub const MAX_CELLS_AWAY: f64 = 1e6;
+
+/// Per triangle, per axis, the cells `ceil(min) - 1 ..= ceil(max) - 1` its box reaches, clamped
+/// to `[-1, n]`; the planes it straddles are `lo + 1 ..= hi`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Reach {
+    lo: [i32; 3],
+    hi: [i32; 3],
+}
+
+impl Reach {
+    const NONE: Reach = Reach {
+        lo: [0; 3],
+        hi: [-1; 3],
+    };
+}
+
+/// What one call did.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct FractionStats {
+    /// Vertices taken at new positions.
+    pub moved_vertices: usize,
+    /// Triangles with a moved vertex.
+    pub moved_triangles: usize,
+    /// Rows recomputed.
+    pub rows: usize,
+    /// Strips (y and z) recomputed.
+    pub strips: usize,
+    /// Cells whose volume fraction or interface changed.
+    pub changed_cells: usize,
+    /// Faces whose open fraction changed.
+    pub changed_faces: usize,
+}
+
+/// The exact fractions of the region enclosed by one closed, consistently oriented triangle
+/// surface: per cell the enclosed volume fraction and interface area vector, per MAC face the
+/// enclosed area fraction; incremental in the vertices' moves.
+#[derive(Debug, Clone)]
+pub struct SurfaceFractions {
+    name: String,
+    cells: VoxelBox,
+    triangles: Vec<[u32; 3]>,
+    /// +1 for outward normals, -1 for inward.
+    sign: f64,
+    /// Held positions in cell units (relative to the box's corner), and the metres they came from.
+    pos: Vec<P3>,
+    pos_m: Vec<[f32; 3]>,
+    initialised: bool,
+    reach: Vec<Reach>,
+    bins_dims: [usize; 2],
+    /// Per bin of `BIN x BIN` (row or plane) indices `(j, k)`, the triangles reaching it, sorted.
+    bins: Vec<Vec<u32>>,
+    volume: Vec<f64>,
+    interface: Vec<[f64; 3]>,
+    faces: [Vec<f64>; 3],
+    row_dirty: Vec<bool>,
+    dirty_rows: Vec<u32>,
+    changed_rows: Vec<u32>,
+    /// The same for the strips: `[y-strips, z-strips]`.
+    strip_dirty: [Vec<bool>; 2],
+    dirty_strips: [Vec<u32>; 2],
+    changed_strips: [Vec<u32>; 2],
+    // Scratch, reused.
+    moved: Vec<bool>,
+    candidates: Vec<u32>,
+    acc_moment: Vec<f64>,
+    acc_area: Vec<[f64; 3]>,
+}
+
+#[inline]
+fn unit(x: f64) -> f64 {
+    // NaN to 0 (it cannot arise from validated positions, but a fraction is never NaN).
+    if x > 0.0 {
+        x.min(1.0)
+    } else {
+        0.0
+    }
+}
+
+#[inline]
+fn store(slot: &mut f64, value: f64) -> usize {
+    if slot.to_bits() != value.to_bits() {
+        *slot = value;
+        1
+    } else {
+        0
+    }
+}
+
+impl SurfaceFractions {
+    /// The fractions of the surface `triangles` (indices into the positions later passed, which
+    /// hold `vertex_count` vertices) on `cells`; `name` appears in errors. The surface must be
+    /// closed and consistently oriented (every directed edge `a -> b` matched by a `b -> a`);
+    /// `orientation` says whether its normals point out of the enclosed region or into it.
+    /// Nothing is computed until the first [`SurfaceFractions::update`] or
+    /// [`SurfaceFractions::full`].
+    pub fn new(
+        name: &str,
+        cells: VoxelBox,
+        triangles: Vec<[u32; 3]>,
+        vertex_count: usize,
+        orientation: Orientation,
+    ) -> Result<Self, CutCellError> {
+        super::check_box(&cells)?;
+        super::mesh::check_closed(&triangles, vertex_count).map_err(|what| {
+            CutCellError::Surface {
+                surface: name.to_string(),
+                what,
+            }
+        })?;
+        let [nx, ny, nz] = cells.dims;
+        let n = cells.cell_count();
+        let bins_dims = [(ny + 1).div_ceil(BIN), (nz + 1).div_ceil(BIN)];
+        let t = triangles.len();
+        Ok(Self {
+            name: name.to_string(),
+            cells,
+            sign: match orientation {
+                Orientation::Outward => 1.0,
+                Orientation::Inward => -1.0,
+            },
+            pos: vec![[0.0; 3]; vertex_count],
+            pos_m: vec![[0.0; 3]; vertex_count],
+            initialised: false,
+            reach: vec![Reach::NONE; t],
+            bins_dims,
+            bins: vec![Vec::new(); bins_dims[0] * bins_dims[1]],
+            volume: vec![0.0; n],
+            interface: vec![[0.0; 3]; n],
+            faces: [
+                vec![0.0; (nx + 1) * ny * nz],
+                vec![0.0; nx * (ny + 1) * nz],
+                vec![0.0; nx * ny * (nz + 1)],
+            ],
+            row_dirty: vec![false; ny * nz],
+            dirty_rows: Vec::with_capacity(ny * nz),
+            changed_rows: Vec::with_capacity(ny * nz),
+            strip_dirty: [vec![false; (ny + 1) * nz], vec![false; ny * (nz + 1)]],
+            dirty_strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
+            changed_strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
+            moved: vec![false; vertex_count],
+            candidates: Vec::with_capacity(t),
+            acc_moment: vec![0.0; nx],
+            acc_area: vec![[0.0; 3]; nx],
+            triangles,
+        })
+    }
+
+    /// The surface's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+    /// The box.
+    pub fn cells(&self) -> &VoxelBox {
+        &self.cells
+    }
+    /// The triangles.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+    /// The positions (m) the fractions were computed from.
+    pub fn positions_m(&self) -> &[[f32; 3]] {
+        &self.pos_m
+    }
+    /// Per cell (x fastest), the fraction of its volume the surface encloses, in `[0, 1]`.
+    pub fn volume_fractions(&self) -> &[f64] {
+        &self.volume
+    }
+    /// Per cell, the area vector of the surface inside it, `integral of n dA / h^2` with `n` the
+    /// normal pointing out of the enclosed region (for every cell, the enclosed areas of its
+    /// faces and this close: `sum over faces of +-A_f e_f + S = 0`).
+    pub fn interface_areas(&self) -> &[[f64; 3]] {
+        &self.interface
+    }
+    /// The enclosed area fractions of the faces normal to `axis` (0, 1, 2): face `(i, j, k)` lies
+    /// between cells `(i-1, j, k)` and `(i, j, k)` along the axis (`dims[axis] + 1` faces along it,
+    /// the box's boundary faces included), x fastest.
+    pub fn face_fractions(&self, axis: usize) -> &[f64] {
+        &self.faces[axis]
+    }
+    /// The rows `j + ny k` whose cells' volumes, interfaces or x-faces the last call changed.
+    pub fn changed_rows(&self) -> &[u32] {
+        &self.changed_rows
+    }
+    /// The y-strips `j + (ny + 1) k` (y-faces `(., j, k)`) the last call changed.
+    pub fn changed_ystrips(&self) -> &[u32] {
+        &self.changed_strips[0]
+    }
+    /// The z-strips `j + ny k` (z-faces `(., j, k)`) the last call changed.
+    pub fn changed_zstrips(&self) -> &[u32] {
+        &self.changed_strips[1]
+    }
+
+    fn to_cells(&self, p: [f32; 3]) -> P3 {
+        let h = self.cells.spacing_m;
+        std::array::from_fn(|a| (p[a] as f64 - self.cells.origin_m[a]) / h)
+    }
+
+    /// Refuses positions that are the wrong number, not finite or implausibly far.
+    pub(crate) fn check_positions(&self, positions_m: &[[f32; 3]]) -> Result<(), CutCellError> {
+        if positions_m.len() != self.pos.len() {
+            return Err(CutCellError::Surface {
+                surface: self.name.clone(),
+                what: format!(
+                    "{} positions for {} vertices",
+                    positions_m.len(),
+                    self.pos.len()
+                ),
+            });
+        }
+        for (v, p) in positions_m.iter().enumerate() {
+            let c = self.to_cells(*p);
+            let far = (0..3).any(|a| {
+                !(c[a] >= -MAX_CELLS_AWAY && c[a] <= self.cells.dims[a] as f64 + MAX_CELLS_AWAY)
+            });
+            if far {
+                return Err(CutCellError::Vertex {
+                    surface: self.name.clone(),
+                    vertex: v,
+                    position_m: *p,
+                    what: if p.iter().all(|x| x.is_finite()) {
+                        format!("more than {MAX_CELLS_AWAY:e} cells from the box")
+                    } else {
+                        "not a finite position".to_string()
+                    },
+                });
+            }
+        }
+        Ok(())
+    }
+
+    fn reach_of(&self, t: usize) -> Reach {
+        let v = self.triangles[t].map(|i| self.pos[i as usize]);
+        let mut r = Reach::NONE;
+        for a in 0..3 {
+            let lo = v[0][a].min(v[1][a]).min(v[2][a]);
+            let hi = v[0][a].max(v[1][a]).max(v[2][a]);
+            // A triangle in a grid plane with the region above also reaches the cell above
+            // (where it belongs) and the plane (whose face it closes).
+            let hi = if clip::flat_below_region(&v, a, self.sign).is_some() {
+                hi + 1.0
+            } else {
+                hi
+            };
+            let n = self.cells.dims[a] as f64;
+            r.lo[a] = cell_of(lo).clamp(-1.0, n) as i32;
+            r.hi[a] = cell_of(hi).clamp(-1.0, n) as i32;
+        }
+        r
+    }
+
+    /// The bins a reach covers: rows and planes `lo ..= hi` in y and z; none when the triangle
+    /// lies right of the box or beyond it in y or z.
+    fn bin_span(&self, r: &Reach) -> Option<([usize; 2], [usize; 2])> {
+        let [nx, ny, nz] = self.cells.dims.map(|d| d as i32);
+        let j0 = r.lo[1].max(0);
+        let j1 = r.hi[1].min(ny);
+        let k0 = r.lo[2].max(0);
+        let k1 = r.hi[2].min(nz);
+        if r.lo[0] >= nx || j0 > j1 || k0 > k1 {
+            return None;
+        }
+        let b = BIN as i32;
+        Some((
+            [(j0 / b) as usize, (k0 / b) as usize],
+            [(j1 / b) as usize, (k1 / b) as usize],
+        ))
+    }
+
+    fn unbin(&mut self, t: usize) {
+        if let Some((lo, hi)) = self.bin_span(&self.reach[t]) {
+            for bk in lo[1]..=hi[1] {
+                for bj in lo[0]..=hi[0] {
+                    let bin = &mut self.bins[bj + self.bins_dims[0] * bk];
+                    if let Ok(at) = bin.binary_search(&(t as u32)) {
+                        bin.remove(at);
+                    }
+                }
+            }
+        }
+    }
+
+    fn bin(&mut self, t: usize) {
+        if let Some((lo, hi)) = self.bin_span(&self.reach[t]) {
+            for bk in lo[1]..=hi[1] {
+                for bj in lo[0]..=hi[0] {
+                    let bin = &mut self.bins[bj + self.bins_dims[0] * bk];
+                    if let Err(at) = bin.binary_search(&(t as u32)) {
+                        bin.insert(at, t as u32);
+                    }
+                }
+            }
+        }
+    }
+
+    /// Marks every unit a triangle of reach `r` can touch.
+    fn mark(&mut self, r: Reach) {
+        let [nx, ny, nz] = self.cells.dims.map(|d| d as i32);
+        if r.lo[0] >= nx {
+            return;
+        }
+        let rows_j = (r.lo[1].max(0), r.hi[1].min(ny - 1));
+        let rows_k = (r.lo[2].max(0), r.hi[2].min(nz - 1));
+        let planes_j = ((r.lo[1] + 1).max(0), r.hi[1].min(ny));
+        let planes_k = ((r.lo[2] + 1).max(0), r.hi[2].min(nz));
+        let ny = ny as usize;
+        for k in rows_k.0..=rows_k.1 {
+            for j in rows_j.0..=rows_j.1 {
+                mark_unit(
+                    j as usize + ny * k as usize,
+                    &mut self.row_dirty,
+                    &mut self.dirty_rows,
+                );
+            }
+            for j in planes_j.0..=planes_j.1 {
+                mark_unit(
+                    j as usize + (ny + 1) * k as usize,
+                    &mut self.strip_dirty[0],
+                    &mut self.dirty_strips[0],
+                );
+            }
+        }
+        for k in planes_k.0..=planes_k.1 {
+            for j in rows_j.0..=rows_j.1 {
+                mark_unit(
+                    j as usize + ny * k as usize,
+                    &mut self.strip_dirty[1],
+                    &mut self.dirty_strips[1],
+                );
+            }
+        }
+    }
+
+    /// Computes everything from scratch at `positions_m` (one per vertex).
+    pub fn full(&mut self, positions_m: &[[f32; 3]]) -> Result<FractionStats, CutCellError> {
+        self.check_positions(positions_m)?;
+        for (v, p) in positions_m.iter().enumerate() {
+            self.pos[v] = self.to_cells(*p);
+            self.pos_m[v] = *p;
+        }
+        for bin in &mut self.bins {
+            bin.clear();
+        }
+        for t in 0..self.triangles.len() {
+            self.reach[t] = self.reach_of(t);
+            self.bin(t);
+        }
+        // Room for the bins to grow as the surface moves, so updates do not allocate.
+        for bin in &mut self.bins {
+            let more = bin.len() + 8;
+            bin.reserve(more);
+        }
+        self.initialised = true;
+        let [ystrips, zstrips] = &mut self.strip_dirty;
+        let [ylist, zlist] = &mut self.dirty_strips;
+        for (flags, list) in [
+            (&mut self.row_dirty, &mut self.dirty_rows),
+            (ystrips, ylist),
+            (zstrips, zlist),
+        ] {
+            let units = flags.len();
+            list.clear();
+            for (u, f) in flags.iter_mut().enumerate().take(units) {
+                *f = true;
+                list.push(u as u32);
+            }
+        }
+        let mut stats = self.process();
+        stats.moved_vertices = positions_m.len();
+        stats.moved_triangles = self.triangles.len();
+        Ok(stats)
+    }
+
+    /// Takes the new position of every vertex that moved more than `threshold_m` from its held
+    /// position (any move when `threshold_m <= 0`) and recomputes the units the moved triangles'
+    /// old and new reaches cover. The first call computes everything. Positions that are not
+    /// finite or lie more than [`MAX_CELLS_AWAY`] cells from the box are refused (nothing changes).
+    pub fn update(
+        &mut self,
+        positions_m: &[[f32; 3]],
+        threshold_m: f64,
+    ) -> Result<FractionStats, CutCellError> {
+        if !self.initialised {
+            return self.full(positions_m);
+        }
+        self.check_positions(positions_m)?;
+        let t2 = threshold_m * threshold_m;
+        let mut moved_vertices = 0;
+        for (v, p) in positions_m.iter().enumerate() {
+            let q = self.pos_m[v];
+            let d2: f64 = (0..3).map(|a| (p[a] as f64 - q[a] as f64).powi(2)).sum();
+            let m = if threshold_m > 0.0 { d2 > t2 } else { *p != q };
+            self.moved[v] = m;
+            moved_vertices += m as usize;
+        }
+        self.changed_rows.clear();
+        self.changed_strips.iter_mut().for_each(Vec::clear);
+        if moved_vertices == 0 {
+            return Ok(FractionStats::default());
+        }
+        let mut moved_triangles = 0;
+        for t in 0..self.triangles.len() {
+            if self.triangles[t].iter().any(|&v| self.moved[v as usize]) {
+                moved_triangles += 1;
+                let old = self.reach[t];
+                self.mark(old);
+                self.unbin(t);
+            }
+        }
+        for (v, p) in positions_m.iter().enumerate() {
+            if self.moved[v] {
+                self.pos[v] = self.to_cells(*p);
+                self.pos_m[v] = *p;
+            }
+        }
+        for t in 0..self.triangles.len() {
+            if self.triangles[t].iter().any(|&v| self.moved[v as usize]) {
+                self.reach[t] = self.reach_of(t);
+                self.bin(t);
+                let new = self.reach[t];
+                self.mark(new);
+            }
+        }
+        let mut stats = self.process();
+        stats.moved_vertices = moved_vertices;
+        stats.moved_triangles = moved_triangles;
+        Ok(stats)
+    }
+
+    fn process(&mut self) -> FractionStats {
+        let mut stats = FractionStats::default();
+        self.changed_rows.clear();
+        let [_, ny, _] = self.cells.dims;
+        let rows = std::mem::take(&mut self.dirty_rows);
+        for &u in &rows {
+            self.row_dirty[u as usize] = false;
+            let (cells, faces) = self.process_row(u as usize % ny, u as usize / ny);
+            if cells + faces > 0 {
+                self.changed_rows.push(u);
+            }
+            stats.changed_cells += cells;
+            stats.changed_faces += faces;
+        }
+        stats.rows = rows.len();
+        self.dirty_rows = rows;
+        self.dirty_rows.clear();
+        // y-strips (`j + (ny + 1) k`), then z-strips (`j + ny k`).
+        for s in 0..2 {
+            self.changed_strips[s].clear();
+            let width = if s == 0 { ny + 1 } else { ny };
+            let strips = std::mem::take(&mut self.dirty_strips[s]);
+            for &u in &strips {
+                self.strip_dirty[s][u as usize] = false;
+                let faces = self.process_strip(s + 1, u as usize % width, u as usize / width);
+                if faces > 0 {
+                    self.changed_strips[s].push(u);
+                }
+                stats.changed_faces += faces;
+            }
+            stats.strips += strips.len();
+            self.dirty_strips[s] = strips;
+            self.dirty_strips[s].clear();
+        }
+        stats
+    }
+
+    /// The triangles of the bin of `(j, k)` whose reach passes `keep`, in index order.
+    fn gather(&mut self, j: usize, k: usize, keep: impl Fn(&Reach) -> bool) {
+        self.candidates.clear();
+        let bin = &self.bins[j / BIN + self.bins_dims[0] * (k / BIN)];
+        for &t in bin {
+            if keep(&self.reach[t as usize]) {
+                self.candidates.push(t);
+            }
+        }
+    }
+
+    /// Recomputes row `(j, k)`; returns how many cells and faces changed.
+    fn process_row(&mut self, j: usize, k: usize) -> (usize, usize) {
+        let [nx, ny, _] = self.cells.dims;
+        let (ji, ki, nxi) = (j as i32, k as i32, nx as i32);
+        self.gather(j, k, |r| {
+            r.lo[1] <= ji && ji <= r.hi[1] && r.lo[2] <= ki && ki <= r.hi[2] && r.lo[0] < nxi
+        });
+        self.acc_moment.fill(0.0);
+        self.acc_area.fill([0.0; 3]);
+        let mut left = 0.0;
+        let (y0, z0) = (j as f64, k as f64);
+        let sign = self.sign;
+        for n in 0..self.candidates.len() {
+            let t = self.candidates[n] as usize;
+            let v = self.triangles[t].map(|i| self.pos[i as usize]);
+            let mut poly = Polygon::triangle(v[0], v[1], v[2]);
+            // A triangle in a y- or z-plane with the region above belongs to the row above.
+            match clip::flat_below_region(&v, 1, sign) {
+                Some(m) if m != y0 => continue,
+                Some(_) => {}
+                None => clip::clip_slab(&mut poly, 1, y0, y0 + 1.0),
+            }
+            if poly.n == 0 {
+                continue;
+            }
+            match clip::flat_below_region(&v, 2, sign) {
+                Some(m) if m != z0 => continue,
+                Some(_) => {}
+                None => clip::clip_slab(&mut poly, 2, z0, z0 + 1.0),
+            }
+            if poly.n == 0 {
+                continue;
+            }
+            let forced = clip::flat_below_region(&v, 0, sign);
+            clip::split_along_x(poly, nx, forced, |c, piece| {
+                if piece.n < 3 {
+                    return;
+                }
+                if c < 0 {
+                    left += piece.area_and_x_moment(0.0).0[0];
+                    return;
+                }
+                let (s, moment) = piece.area_and_x_moment(c as f64);
+                let a = &mut self.acc_area[c as usize];
+                a[0] += s[0];
+                a[1] += s[1];
+                a[2] += s[2];
+                self.acc_moment[c as usize] += moment;
+            });
+        }
+        let sign = self.sign;
+        let base = self.cells.index(0, j, k);
+        let fbase = (nx + 1) * (j + ny * k);
+        let (mut cells, mut faces) = (0, 0);
+        let fx = &mut self.faces[0];
+        // The face at x = 0: what the pieces left of the box leave open.
+        let mut face = -left;
+        faces += store(&mut fx[fbase], unit(sign * face));
+        for i in 0..nx {
+            let s = self.acc_area[i];
+            let next = face - s[0];
+            let volume = self.acc_moment[i] + next;
+            face = next;
+            faces += store(&mut fx[fbase + i + 1], unit(sign * next));
+            let mut changed = store(&mut self.volume[base + i], unit(sign * volume));
+            let s = s.map(|x| sign * x);
+            let slot = &mut self.interface[base + i];
+            if slot.map(f64::to_bits) != s.map(f64::to_bits) {
+                *slot = s;
+                changed = 1;
+            }
+            cells += changed;
+        }
+        (cells, faces)
+    }
+
+    /// Recomputes the strip `(a, b)` normal to `axis`: for axis 1 the y-strip on plane `y = a`
+    /// across `z in (b, b+1]`, for axis 2 the z-strip on plane `z = b` across `y in (a, a+1]`;
+    /// returns how many faces changed.
+    fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> usize {
+        let [nx, ny, _] = self.cells.dims;
+        let nxi = nx as i32;
+        // (plane, the strip's row index across it, the axis across).
+        let (plane, across, across_axis) = if axis == 1 { (a, b, 2) } else { (b, a, 1) };
+        let (pi, ci) = (plane as i32, across as i32);
+        // The bin of the unit's (j, k).
+        self.gather(a, b, |r| {
+            r.lo[axis] < pi
+                && pi <= r.hi[axis]
+                && r.lo[across_axis] <= ci
+                && ci <= r.hi[across_axis]
+                && r.lo[0] < nxi
+        });
+        self.acc_moment.fill(0.0);
+        // Per face: `acc_area[i][0]`, the x-component of the outward normal times length of the
+        // cross-section; `acc_area[i][1]`, the (raw, negative outward) area of the triangles in
+        // the plane with the region above, which close the face (the tie rule's exception).
+        for s in &mut self.acc_area {
+            s[0] = 0.0;
+            s[1] = 0.0;
+        }
+        let mut left = 0.0;
+        let m = plane as f64;
+        let lo = across as f64;
+        let nxf = nx as f64;
+        // In the plane's coordinates (axis + 1, axis + 2) the region lies left of a section
+        // `p -> q`: its outward normal times length is (d_(axis+2), -d_(axis+1)). The x-component:
+        // plane z (x, y): d_y; plane y (z, x): -d_z.
+        let nx_dl = |s: &Segment| -> f64 {
+            if axis == 2 {
+                s.q[1] - s.p[1]
+            } else {
+                -(s.q[2] - s.p[2])
+            }
+        };
+        for n in 0..self.candidates.len() {
+            let t = self.candidates[n] as usize;
+            let ids = self.triangles[t];
+            let v = ids.map(|i| self.pos[i as usize]);
+            if clip::flat_below_region(&v, axis, self.sign) == Some(m) {
+                let mut poly = Polygon::triangle(v[0], v[1], v[2]);
+                clip::clip_slab(&mut poly, across_axis, lo, lo + 1.0);
+                if poly.n < 3 {
+                    continue;
+                }
+                clip::split_along_x(poly, nx, None, |c, piece| {
+                    if c >= 0 && piece.n >= 3 {
+                        self.acc_area[c as usize][1] += piece.area_and_x_moment(0.0).0[axis];
+                    }
+                });
+                continue;
+            }
+            let Some(seg) = clip::plane_section(&ids, &v, axis, m) else {
+                continue;
+            };
+            let Some(seg) = clip::clip_segment(&seg, across_axis, lo, lo + 1.0) else {
+                continue;
+            };
+            let (xa, xb) = (seg.p[0].min(seg.q[0]), seg.p[0].max(seg.q[0]));
+            let c0 = cell_of(xa);
+            let c1 = cell_of(xb);
+            if c0 >= nxf {
+                continue;
+            }
+            if c1 < 0.0 {
+                left += nx_dl(&seg);
+                continue;
+            }
+            if c0 == c1 {
+                let l = nx_dl(&seg);
+                self.acc_area[c0 as usize][0] += l;
+                self.acc_moment[c0 as usize] += l * (0.5 * (seg.p[0] + seg.q[0]) - c0);
+                continue;
+            }
+            if c0 < 0.0 {
+                if let Some(piece) = clip::clip_segment(&seg, 0, f64::NEG_INFINITY, 0.0) {
+                    left += nx_dl(&piece);
+                }
+            }
+            let mut c = c0.max(0.0);
+            while c <= c1 && c < nxf {
+                if let Some(piece) = clip::clip_segment(&seg, 0, c, c + 1.0) {
+                    let l = nx_dl(&piece);
+                    self.acc_area[c as usize][0] += l;
+                    self.acc_moment[c as usize] += l * (0.5 * (piece.p[0] + piece.q[0]) - c);
+                }
+                c += 1.0;
+            }
+        }
+        let sign = self.sign;
+        let fbase = if axis == 1 {
+            nx * (plane + (ny + 1) * across)
+        } else {
+            nx * (across + ny * plane)
+        };
+        let f = &mut self.faces[axis];
+        let mut faces = 0;
+        let mut edge = -left;
+        for i in 0..nx {
+            let next = edge - self.acc_area[i][0];
+            let area = self.acc_moment[i] + next + self.acc_area[i][1];
+            edge = next;
+            faces += store(&mut f[fbase + i], unit(sign * area));
+        }
+        faces
+    }
+}
+
+fn mark_unit(u: usize, flags: &mut [bool], list: &mut Vec<u32>) {
+    if !flags[u] {
+        flags[u] = true;
+        list.push(u as u32);
+    }
+}
