@@ -389,7 +389,7 @@ fn python_mcap_reads_a_recording_and_decodes_status_with_the_ipc_md_layout() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
     let out = std::process::Command::new(&python)
-        .arg(root.join("daemon/examples/python/read_recording.py"))
+        .arg(root.join("record/examples/python/read_recording.py"))
         .arg(&file)
         .arg("--ipc-doc")
         .arg(root.join("docs/ipc.md"))

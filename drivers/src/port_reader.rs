@@ -39,13 +39,14 @@ impl PortReader {
         // SAFETY: termios is plain data that tcgetattr fills; the descriptor is open.
         let mut termios: libc::termios = unsafe { std::mem::zeroed() };
         check(
+            // SAFETY: `termios` is a valid, writable termios; the descriptor is open.
             unsafe { libc::tcgetattr(port_fd, &mut termios) },
             "tcgetattr",
         )?;
         termios.c_cc[libc::VMIN] = 0;
         termios.c_cc[libc::VTIME] = 0;
-        // SAFETY: `termios` is a valid termios for this descriptor.
         check(
+            // SAFETY: `termios` is a valid termios for this descriptor.
             unsafe { libc::tcsetattr(port_fd, libc::TCSANOW, &termios) },
             "tcsetattr",
         )?;
@@ -61,9 +62,9 @@ impl PortReader {
             events: (libc::EPOLLIN | libc::EPOLLET) as u32,
             u64: 0,
         };
-        // SAFETY: both descriptors are open; `event` is a valid epoll_event. Bytes already
-        // waiting make the port ready at once.
+        // Bytes already waiting make the port ready at once.
         check(
+            // SAFETY: both descriptors are open; `event` is a valid epoll_event.
             unsafe { libc::epoll_ctl(epoll.as_raw_fd(), libc::EPOLL_CTL_ADD, port_fd, &mut event) },
             "epoll_ctl",
         )?;

@@ -954,6 +954,8 @@ fn device_gid(path: &str) -> Option<u32> {
 
 /// The name of a group id, from the system's group database.
 pub fn group_name(gid: u32) -> Option<String> {
+    // SAFETY: `group` is plain C data (integers and pointers) that getgrgid_r fills; all zeros is
+    // a valid value of it.
     let mut group: libc::group = unsafe { std::mem::zeroed() };
     let mut buf = vec![0 as libc::c_char; 4096];
     let mut result: *mut libc::group = std::ptr::null_mut();

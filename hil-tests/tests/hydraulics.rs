@@ -105,8 +105,11 @@ fn default_scenario_distends_perforates_terminates_survives_a_crash_and_resets()
     assert!((ml(terminated.deficit_limit_m3) - 300.0).abs() < 1e-6);
     assert!(ml(terminated.deficit_m3) >= 300.0);
     assert!(terminated.alarm_bits & alarms::DEFICIT_LIMIT != 0);
-    assert!(terminated.alarm_bits & alarms::DEFICIT_WARNING_75 != 0);
-    assert!(terminated.deficit_warning_stage >= 3);
+    // The default three warning stages, each with its bit (docs/ipc.md, "Alarm bits").
+    assert_eq!(terminated.deficit_warning_stage, 3);
+    let stage_bits =
+        alarms::DEFICIT_WARNING_50 | alarms::DEFICIT_WARNING_75 | alarms::DEFICIT_WARNING_90;
+    assert_eq!(terminated.alarm_bits & stage_bits, stage_bits);
     assert_ne!(terminated.hydraulic_flags & PUMP_STOPPED, 0);
     let still = last(
         reader.until("the pump stopped", Duration::from_secs(2), |s| {

@@ -73,7 +73,7 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         println!(
             "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml",
             h.sim_time_s,
-            h.cavity_pressure_pa / 133.322,
+            h.cavity_pressure_pa / hydrometra_units::PA_PER_MMHG,
             h.vertex_count,
             triangles.len() / 3,
             volume * 1e6

@@ -484,6 +484,7 @@ mod tests {
     #[test]
     fn type_name_carries_the_schema_version() {
         use iceoryx2::prelude::ZeroCopySend;
+        // SAFETY: only reads the name; the layout it vouches for is checked by the layout test.
         let name = unsafe { <Status as ZeroCopySend>::type_name() };
         assert_eq!(
             name,

@@ -43,6 +43,7 @@ macro_rules! layout {
         }
         assert_eq!(end, size_of::<$t>(), "{}: fields do not cover the struct", stringify!($t));
         Layout {
+            // SAFETY: only reads the name; this test is what checks the layout it vouches for.
             type_name: unsafe { <$t as ZeroCopySend>::type_name() }.to_string(),
             size: size_of::<$t>(),
             align: align_of::<$t>(),
@@ -202,7 +203,7 @@ fn layouts() -> Vec<Layout> {
 
 /// Parses the table that follows `<!-- layout: NAME size=N -->` in docs/ipc.md and the caption
 /// that heads it, `` `NAME` (N B, align A): ``: (size, alignment, rows). The marker keeps its
-/// plain form: `daemon/examples/python/read_recording.py` reads the Status table by it.
+/// plain form: `record/examples/python/read_recording.py` reads the Status table by it.
 fn doc_layout(doc: &str, type_name: &str) -> (usize, usize, Vec<Row>) {
     let marker = format!("<!-- layout: {type_name} size=");
     let start = doc

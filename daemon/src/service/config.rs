@@ -299,9 +299,7 @@ impl Default for HydraulicsConfig {
 impl HydraulicsConfig {
     /// The record path: `record`, else `<state_dir>/procedure.rec`, else none.
     pub fn record_path(&self, paths: &PathsConfig) -> Option<PathBuf> {
-        self.record
-            .clone()
-            .or_else(|| paths.state_dir.as_ref().map(|d| d.join("procedure.rec")))
+        hydrometra_sim::hydraulics::record_path(self.record.as_deref(), paths.state_dir.as_deref())
     }
 }
 

@@ -2,7 +2,7 @@
 //! alarms into status, persists the procedure record on its own thread (file I/O never runs on the
 //! sim thread) and applies reset requests. See docs/hydraulics.md.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
 use std::sync::Arc;
@@ -13,32 +13,39 @@ use anyhow::Context;
 use hydrometra_drivers::emulator::Scenario;
 use hydrometra_ipc::{alarms, hydraulic_flags, Status};
 use hydrometra_sim::hydraulics::{
-    CaseScript, HydraulicInputs, HydraulicModel, HydraulicParams, ProcedureInfo, ProcedureRecord,
+    reset_request_path, CaseScript, DeficitStatus, HydraulicInputs, HydraulicModel,
+    HydraulicParams, ProcedureInfo, ProcedureRecord, MAX_WARNING_STAGES,
 };
 
 use super::sim::{SimInputs, Stage};
 
-/// A scenario (resolved by [`Scenario::resolve`]: a built-in name, else a file) with the hydraulic
-/// case script of its `[hydraulics]` table (empty without one).
-pub fn load_scenario(spec: &str) -> anyhow::Result<(Scenario, CaseScript)> {
-    let scenario = Scenario::resolve(spec)?;
-    let case = case_script(&scenario)?;
-    Ok((scenario, case))
-}
-
 /// The hydraulic case script of a scenario's `[hydraulics]` table (empty without one).
 pub fn case_script(scenario: &Scenario) -> anyhow::Result<CaseScript> {
-    Ok(match &scenario.hydraulics {
-        Some(table) => CaseScript::from_table(table, &scenario.origin)?,
-        None => CaseScript::default(),
-    })
+    Ok(CaseScript::from_scenario_table(
+        scenario.hydraulics.as_ref(),
+        &scenario.origin,
+    )?)
 }
 
-/// The file whose presence asks the daemon to start a new procedure: `<record>.reset`.
-pub fn reset_request_path(record: &Path) -> PathBuf {
-    let mut name = record.as_os_str().to_owned();
-    name.push(".reset");
-    PathBuf::from(name)
+// Every stage the configuration may ask for has its status bit (the configuration is validated
+// against MAX_WARNING_STAGES).
+const _: () = assert!(alarms::DEFICIT_WARNING_STAGES.len() == MAX_WARNING_STAGES);
+
+/// The status alarm bits of the deficit (docs/ipc.md, "Alarm bits"): the stage bits follow the
+/// configured warning stages reached, so they cannot disagree with `deficit_warning_stage`.
+pub fn deficit_alarm_bits(d: &DeficitStatus) -> u64 {
+    let mut bits = alarms::deficit_warning_bits(usize::from(d.warning_stage));
+    for (on, bit) in [
+        (d.limit_reached(), alarms::DEFICIT_LIMIT),
+        (d.rate_alarm, alarms::DEFICIT_RATE),
+        (d.terminated, alarms::PROCEDURE_TERMINATED),
+        (d.overpressure, alarms::OVERPRESSURE),
+    ] {
+        if on {
+            bits |= bit;
+        }
+    }
+    bits
 }
 
 fn now_unix_ms() -> u64 {
@@ -174,7 +181,7 @@ pub struct HydraulicsStage {
     persister: Option<Persister>,
     save_interval_s: f64,
     since_save_s: f64,
-    last_alarm_bits: u32,
+    last_alarm_bits: u64,
     reset: Arc<AtomicBool>,
     scene: Option<Arc<super::scene::SceneFeed>>,
     control: Arc<ProcedureControl>,
@@ -264,7 +271,7 @@ impl HydraulicsStage {
                 });
             }
         }
-        let last_alarm_bits = model.state().deficit.alarm_bits();
+        let last_alarm_bits = deficit_alarm_bits(&model.state().deficit);
         setup
             .control
             .publish(model.procedure().id, model.state().deficit.deficit_m3);
@@ -333,7 +340,7 @@ impl Stage for HydraulicsStage {
             pump_set_pressure_pa: inputs.pump_set_pressure_pa,
             perforation: self.case.perforated_at(case_t),
         };
-        let bits = self.model.step(&h, dt_s).deficit.alarm_bits();
+        let bits = deficit_alarm_bits(&self.model.step(&h, dt_s).deficit);
         self.control.publish(
             self.model.procedure().id,
             self.model.state().deficit.deficit_m3,
@@ -390,19 +397,7 @@ impl Stage for HydraulicsStage {
             flags |= hydraulic_flags::PUMP_FLOW_LIMITED;
         }
         status.hydraulic_flags = flags;
-        let fraction = d.fraction_of_limit();
-        for (on, bit) in [
-            (fraction >= 0.5, alarms::DEFICIT_WARNING_50),
-            (fraction >= 0.75, alarms::DEFICIT_WARNING_75),
-            (fraction >= 1.0, alarms::DEFICIT_LIMIT),
-            (d.rate_alarm, alarms::DEFICIT_RATE),
-            (d.terminated, alarms::PROCEDURE_TERMINATED),
-            (d.overpressure, alarms::OVERPRESSURE),
-        ] {
-            if on {
-                status.alarm_bits |= bit;
-            }
-        }
+        status.alarm_bits |= deficit_alarm_bits(d);
     }
 }
 
@@ -416,5 +411,150 @@ impl Drop for HydraulicsStage {
                 let _ = t.join();
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::service::config::Config;
+    use crate::service::sim::INITIAL_SCOPE;
+    use hydrometra_units::mmhg_to_pa;
+
+    /// Runs a perforated cavity to termination under `deficit_toml` (a `[hydraulics.params.deficit]`
+    /// table with a 100 ml limit) and returns, per alarm bit, the deficit fractions of the limit
+    /// on the tick before and the tick on which the published bit first came on.
+    fn first_published(deficit_toml: &str) -> Vec<(u64, Option<(f64, f64)>)> {
+        let config = Config::from_toml_str(
+            &format!(
+                "[hydraulics.params.deficit]\nlimit = \"custom\"\ncustom_limit_ml = 100.0\n\
+                 {deficit_toml}"
+            ),
+            "test",
+        )
+        .expect("config");
+        let mut stage = HydraulicsStage::start(HydraulicsSetup {
+            params: config.hydraulics.params.clone(),
+            case: CaseScript {
+                perforation_at_s: Some(0.0),
+                params: None,
+            },
+            case_period_s: None,
+            record: None,
+            save_interval: Duration::from_millis(200),
+            new_procedure: true,
+            scene: None,
+            control: Arc::new(ProcedureControl::default()),
+        })
+        .expect("hydraulics stage");
+        let inputs = SimInputs {
+            valve_in_opening: 1.0,
+            valve_out_opening: 0.0,
+            pump_set_pressure_pa: mmhg_to_pa(100.0),
+            scope: INITIAL_SCOPE,
+            safe_state: false,
+            sample_received_at: None,
+        };
+        let watched = [
+            alarms::DEFICIT_WARNING_50,
+            alarms::DEFICIT_WARNING_75,
+            alarms::DEFICIT_WARNING_90,
+            alarms::DEFICIT_LIMIT,
+        ];
+        let mut first: Vec<(u64, Option<(f64, f64)>)> =
+            watched.iter().map(|&b| (b, None)).collect();
+        let mut previous = (0.0, 0u64);
+        for _ in 0..600_000 {
+            stage.step(&inputs, 1e-3);
+            let mut status = Status::default();
+            stage.write_status(&mut status);
+            let fraction = status.deficit_m3 / status.deficit_limit_m3;
+            let bits = status.alarm_bits;
+            for (bit, at) in &mut first {
+                if bits & *bit != 0 && at.is_none() {
+                    *at = Some((previous.0, fraction));
+                }
+            }
+            // Within a procedure the deficit bits never clear.
+            assert_eq!(previous.1 & !bits & watched.iter().fold(0, |a, b| a | b), 0);
+            assert_eq!(
+                alarms::deficit_warning_bits(status.deficit_warning_stage as usize),
+                bits & (alarms::DEFICIT_WARNING_50
+                    | alarms::DEFICIT_WARNING_75
+                    | alarms::DEFICIT_WARNING_90),
+                "the stage bits and deficit_warning_stage agree"
+            );
+            previous = (fraction, bits);
+            if bits & alarms::PROCEDURE_TERMINATED != 0 {
+                return first;
+            }
+        }
+        panic!("the perforated cavity never reached the 100 ml limit in 600 s");
+    }
+
+    /// Asserts that each bit came on exactly on the tick the deficit crossed its fraction (or
+    /// never, for `None`).
+    fn assert_thresholds(deficit_toml: &str, want: [(u64, Option<f64>); 4]) {
+        let got = first_published(deficit_toml);
+        for ((bit, at), (want_bit, threshold)) in got.into_iter().zip(want) {
+            assert_eq!(bit, want_bit);
+            let name = alarms::names(bit).join("");
+            match (at, threshold) {
+                (None, None) => {}
+                (Some((before, on)), Some(t)) => assert!(
+                    before < t && on >= t,
+                    "{deficit_toml}: {name} came on between {before} and {on} of the limit, \
+                     not when crossing {t}"
+                ),
+                (at, t) => panic!("{deficit_toml}: {name} came on at {at:?}, want {t:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn deficit_alarm_bits_come_on_at_the_configured_warning_fractions() {
+        use alarms::{DEFICIT_LIMIT, DEFICIT_WARNING_50, DEFICIT_WARNING_75, DEFICIT_WARNING_90};
+        assert_thresholds(
+            "warning_fractions = [0.3, 0.9]\n",
+            [
+                (DEFICIT_WARNING_50, Some(0.3)),
+                (DEFICIT_WARNING_75, Some(0.9)),
+                (DEFICIT_WARNING_90, None),
+                (DEFICIT_LIMIT, Some(1.0)),
+            ],
+        );
+        // The default stages: the bits where their names say.
+        assert_thresholds(
+            "",
+            [
+                (DEFICIT_WARNING_50, Some(0.5)),
+                (DEFICIT_WARNING_75, Some(0.75)),
+                (DEFICIT_WARNING_90, Some(0.9)),
+                (DEFICIT_LIMIT, Some(1.0)),
+            ],
+        );
+        assert_thresholds(
+            "warning_fractions = []\n",
+            [
+                (DEFICIT_WARNING_50, None),
+                (DEFICIT_WARNING_75, None),
+                (DEFICIT_WARNING_90, None),
+                (DEFICIT_LIMIT, Some(1.0)),
+            ],
+        );
+    }
+
+    #[test]
+    fn a_configuration_cannot_ask_for_more_warning_stages_than_alarm_bits() {
+        let e = Config::from_toml_str(
+            "[hydraulics.params.deficit]\nwarning_fractions = [0.2, 0.4, 0.6, 0.8]\n",
+            "hm.toml",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("hm.toml") && e.contains("deficit.warning_fractions"),
+            "{e}"
+        );
     }
 }

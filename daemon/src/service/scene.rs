@@ -506,7 +506,7 @@ fn run_scene(
         log.atlas_levels_done.store(done as u64, Ordering::Relaxed);
         tracing::info!(
             "building the atlas: level {done}/{total}, {:.1} mmHg, cavity {:.2} ml",
-            p_pa / 133.322,
+            hydrometra_sim::units::pa_to_mmhg(p_pa),
             v_m3 * 1e6
         );
     };

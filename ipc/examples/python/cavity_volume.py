@@ -19,6 +19,7 @@ import time
 import iceoryx2 as iox2
 
 import hydrometra_scene as hs
+from status_subscriber import PA_PER_MMHG
 
 
 def main() -> int:
@@ -61,7 +62,7 @@ def main() -> int:
                                   "triangles": len(tris), "topology_revision": revision,
                                   "volume_m3": volume}), flush=True)
             else:
-                print(f"t={h.sim_time_s:.3f} s  {h.cavity_pressure_pa / 133.322:6.1f} mmHg  "
+                print(f"t={h.sim_time_s:.3f} s  {h.cavity_pressure_pa / PA_PER_MMHG:6.1f} mmHg  "
                       f"{len(verts)} vertices, {len(tris)} triangles  enclosed volume {volume * 1e6:.3f} ml",
                       flush=True)
             printed += 1

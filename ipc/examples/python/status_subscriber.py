@@ -19,7 +19,7 @@ import time
 
 import iceoryx2 as iox2
 
-PA_PER_MMHG = 133.322387415  # hydrometra_units::PA_PER_MMHG
+PA_PER_MMHG = 133.322387415  # hydrometra_units::PA_PER_MMHG (ipc/tests/python_constants.rs)
 LINK_STATES = ["disconnected", "handshaking", "connected", "stale", "incompatible"]
 EVENT_STATUS = 1  # event id: a new status was published
 EVENT_SHUTDOWN = 15  # event id: the daemon is stopping

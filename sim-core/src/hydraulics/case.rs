@@ -47,6 +47,18 @@ impl CaseScript {
         Ok(script)
     }
 
+    /// The script of a scenario whose `[hydraulics]` table was parsed already (the rig emulator's
+    /// `Scenario::hydraulics`): no table, the empty script.
+    pub fn from_scenario_table(
+        table: Option<&toml::Table>,
+        origin: &str,
+    ) -> Result<Self, ParamsError> {
+        match table {
+            Some(table) => Self::from_table(table, origin),
+            None => Ok(Self::default()),
+        }
+    }
+
     /// Reads an already parsed `[hydraulics]` table (errors name the key, not the line).
     pub fn from_table(table: &toml::Table, origin: &str) -> Result<Self, ParamsError> {
         let script: CaseScript =

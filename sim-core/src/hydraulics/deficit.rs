@@ -9,14 +9,10 @@ use serde::{Deserialize, Serialize};
 use super::params::DeficitParams;
 use crate::units::{ml_per_min_to_m3_per_s, ml_to_m3, mmhg_to_pa};
 
-/// Alarm bit: warning stage `i` (0-based, up to 8 stages) reached: `1 << i`.
-pub const ALARM_WARNING_STAGE_0: u32 = 1 << 0;
-/// Alarm bit: the averaged deficit rate is above `deficit.rate_alarm_ml_per_min`.
-pub const ALARM_DEFICIT_RATE: u32 = 1 << 8;
-/// Alarm bit: the deficit reached its limit; the procedure is terminated until reset.
-pub const ALARM_TERMINATED: u32 = 1 << 9;
-/// Alarm bit: cavity pressure above `deficit.overpressure_mmhg`.
-pub const ALARM_OVERPRESSURE: u32 = 1 << 10;
+/// The most warning stages `deficit.warning_fractions` may configure: the status publishes one
+/// alarm bit per stage (docs/ipc.md, "Alarm bits"), and a stage without a bit would be an alarm no
+/// renderer sees.
+pub const MAX_WARNING_STAGES: usize = 3;
 
 /// The monitor's state; also what the procedure record persists.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
@@ -49,22 +45,9 @@ impl DeficitStatus {
         }
     }
 
-    /// The alarm bit field (see the `ALARM_*` constants; documented in docs/hydraulics.md).
-    pub fn alarm_bits(&self) -> u32 {
-        let mut bits = 0;
-        for stage in 0..self.warning_stage.min(8) {
-            bits |= ALARM_WARNING_STAGE_0 << stage;
-        }
-        if self.rate_alarm {
-            bits |= ALARM_DEFICIT_RATE;
-        }
-        if self.terminated {
-            bits |= ALARM_TERMINATED;
-        }
-        if self.overpressure {
-            bits |= ALARM_OVERPRESSURE;
-        }
-        bits
+    /// The deficit reached the limit (the step that does so terminates the procedure).
+    pub fn limit_reached(&self) -> bool {
+        self.fraction_of_limit() >= 1.0
     }
 }
 
@@ -100,7 +83,9 @@ impl DeficitMonitor {
         } else {
             0.0
         };
-        monitor.status.warning_stage = saved.warning_stage;
+        // A record written under more stages than are configured now keeps only those.
+        let configured = u8::try_from(monitor.params.warning_fractions.len()).unwrap_or(u8::MAX);
+        monitor.status.warning_stage = saved.warning_stage.min(configured);
         monitor.status.rate_alarm = saved.rate_alarm;
         monitor.status.terminated = saved.terminated;
         monitor.status.terminated_at_s = saved.terminated_at_s;
@@ -153,7 +138,7 @@ impl DeficitMonitor {
             .filter(|&&w| fraction >= w)
             .count() as u8;
         self.status.warning_stage = self.status.warning_stage.max(reached);
-        if fraction >= 1.0 && !self.status.terminated {
+        if self.status.limit_reached() && !self.status.terminated {
             self.status.terminated = true;
             self.status.terminated_at_s = Some(time_s);
         }
@@ -282,18 +267,28 @@ mod tests {
         m.reset();
         assert_eq!(m.status().deficit_m3, 0.0);
         assert!(!m.status().terminated);
-        assert_eq!(m.status().alarm_bits(), 0);
+        assert_eq!(m.status().warning_stage, 0);
+        assert!(!m.status().limit_reached());
     }
 
     #[test]
-    fn restore_keeps_the_latches_and_alarm_bits_follow_the_status() {
+    fn restore_keeps_the_latches_and_no_more_stages_than_configured() {
         let mut m = DeficitMonitor::new(params());
         m.update(ml_to_m3(800.0), 1.0, mmhg_to_pa(130.0), 5.0);
-        let bits = m.status().alarm_bits();
-        assert_eq!(bits, 0b11 | ALARM_DEFICIT_RATE | ALARM_OVERPRESSURE);
-        let r = DeficitMonitor::restore(params(), *m.status());
+        let s = *m.status();
+        assert!(s.warning_stage == 2 && s.rate_alarm && s.overpressure && !s.limit_reached());
+        let r = DeficitMonitor::restore(params(), s);
         assert!((m3_to_ml(r.status().deficit_m3) - 800.0).abs() < 1e-9);
         assert_eq!(r.status().warning_stage, 2);
         assert!(r.status().rate_alarm);
+        // Restored under a configuration with one stage: stage 1, not a stage that no longer exists.
+        let one_stage = DeficitParams {
+            warning_fractions: vec![0.95],
+            ..params()
+        };
+        assert_eq!(
+            DeficitMonitor::restore(one_stage, s).status().warning_stage,
+            1
+        );
     }
 }

@@ -38,10 +38,7 @@ pub use circuit::{Circuit, Flows};
 pub use compliance::{
     AnalyticCompliance, CavityCompliance, ComplianceError, LinearCompliance, TabulatedCompliance,
 };
-pub use deficit::{
-    DeficitMonitor, DeficitStatus, ALARM_DEFICIT_RATE, ALARM_OVERPRESSURE, ALARM_TERMINATED,
-    ALARM_WARNING_STAGE_0,
-};
+pub use deficit::{DeficitMonitor, DeficitStatus, MAX_WARNING_STAGES};
 pub use model::{HydraulicCounters, HydraulicInputs, HydraulicModel, HydraulicState};
 pub use params::{
     conductance_si, AbsorptionParams, CavityParams, CervixParams, DeficitLimit, DeficitParams,
@@ -49,7 +46,10 @@ pub use params::{
     PumpParams,
 };
 pub use procedure::{CumulativeVolumes, ProcedureInfo};
-pub use record::{ProcedureRecord, RecordError, RECORD_MAGIC, RECORD_VERSION};
+pub use record::{
+    record_path, reset_request_path, ProcedureRecord, RecordError, RECORD_FILE_NAME, RECORD_MAGIC,
+    RECORD_VERSION,
+};
 pub use valve::{sanitize_opening, ValveCurve};
 
 #[cfg(test)]

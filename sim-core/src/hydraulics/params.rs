@@ -9,6 +9,7 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::compliance::AnalyticCompliance;
+use super::deficit::MAX_WARNING_STAGES;
 use super::valve::ValveCurve;
 use crate::units::{ml_per_min_to_m3_per_s, ml_to_m3, mmhg_to_pa, PA_PER_MMHG};
 
@@ -324,8 +325,8 @@ pub struct DeficitParams {
     pub limit: DeficitLimit,
     /// The limit when `limit = "custom"`, ml.
     pub custom_limit_ml: f64,
-    /// Warning stages as fractions of the limit, strictly increasing in (0, 1).
-    /// Default [0.5, 0.75, 0.9]; reaching 1.0 terminates the procedure.
+    /// Warning stages as fractions of the limit, strictly increasing in (0, 1), at most
+    /// [`MAX_WARNING_STAGES`]. Default [0.5, 0.75, 0.9]; reaching 1.0 terminates the procedure.
     pub warning_fractions: Vec<f64>,
     /// Deficit rate that raises the rate alarm (suspected perforation), ml/min. Default 150.
     pub rate_alarm_ml_per_min: f64,
@@ -551,11 +552,13 @@ impl HydraulicParams {
             }
             last = w;
         }
-        if d.warning_fractions.len() > 8 {
+        // The message below spells the number out.
+        const _: () = assert!(MAX_WARNING_STAGES == 3);
+        if d.warning_fractions.len() > MAX_WARNING_STAGES {
             return Err(err(
                 "deficit.warning_fractions",
                 d.warning_fractions.len() as f64,
-                "at most 8 warning stages",
+                "at most 3 warning stages (one status alarm bit each)",
             ));
         }
         positive("deficit.rate_alarm_ml_per_min", d.rate_alarm_ml_per_min)?;
@@ -632,6 +635,20 @@ mod tests {
         assert!(
             e.contains("deficit.warning_fractions") && e.contains("0.4"),
             "{e}"
+        );
+        let e = HydraulicParams::from_toml_str(
+            "[deficit]\nwarning_fractions = [0.2, 0.4, 0.6, 0.8]\n",
+            "c",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.contains("deficit.warning_fractions") && e.contains("at most 3"),
+            "{e}"
+        );
+        assert!(
+            HydraulicParams::from_toml_str("[deficit]\nwarning_fractions = [0.3, 0.9]\n", "c")
+                .is_ok()
         );
         let e = HydraulicParams::from_toml_str("[outflow]\nsuction_pressure_mmhg = 20\n", "c")
             .unwrap_err()

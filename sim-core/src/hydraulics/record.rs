@@ -25,6 +25,25 @@ use super::procedure::{CumulativeVolumes, ProcedureInfo};
 pub const RECORD_MAGIC: &str = "hydrometra-procedure";
 /// Current format version.
 pub const RECORD_VERSION: u32 = 1;
+/// The record's file name inside a state directory (hydrometrad's `[paths] state_dir`).
+pub const RECORD_FILE_NAME: &str = "procedure.rec";
+
+/// Where the procedure record is: `record` if given, else [`RECORD_FILE_NAME`] in `state_dir`,
+/// else nowhere (the deficit is not persisted). hydrometrad's `[hydraulics] record` and
+/// `[paths] state_dir`, and the CLI reading that configuration, all go through this.
+pub fn record_path(record: Option<&Path>, state_dir: Option<&Path>) -> Option<PathBuf> {
+    record
+        .map(Path::to_path_buf)
+        .or_else(|| state_dir.map(|d| d.join(RECORD_FILE_NAME)))
+}
+
+/// The file whose presence asks the daemon to start a new procedure: `<record>.reset`
+/// (`hydrometra procedure reset` writes it; the daemon deletes it and resets).
+pub fn reset_request_path(record: &Path) -> PathBuf {
+    let mut name = record.as_os_str().to_owned();
+    name.push(".reset");
+    PathBuf::from(name)
+}
 
 /// Errors reading or writing a procedure record.
 #[derive(Debug, thiserror::Error)]
@@ -314,5 +333,24 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("deficit.deficit_m3"), "{e}");
+    }
+
+    #[test]
+    fn the_record_path_prefers_the_explicit_file_and_the_reset_request_sits_beside_it() {
+        let state = Path::new("/var/lib/hm");
+        let explicit = Path::new("/tmp/p.rec");
+        assert_eq!(
+            record_path(Some(explicit), Some(state)),
+            Some(explicit.to_path_buf())
+        );
+        assert_eq!(
+            record_path(None, Some(state)),
+            Some(PathBuf::from("/var/lib/hm/procedure.rec"))
+        );
+        assert_eq!(record_path(None, None), None);
+        assert_eq!(
+            reset_request_path(explicit),
+            PathBuf::from("/tmp/p.rec.reset")
+        );
     }
 }

@@ -22,8 +22,8 @@ use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
 use hydrometra_sim::vtk;
 use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
-use super::fluid::ForkJoinArg;
-use crate::service::hydraulics::load_scenario;
+use crate::fluid::ForkJoinArg;
+use crate::scenario::load_scenario;
 
 /// `hydrometra scene ...`
 #[derive(Subcommand, Debug)]

@@ -444,6 +444,8 @@ fn connect(
                 "{} exists but carries another payload type than {} (schema v{}): the daemon \
                  speaks another schema version",
                 names.full("status"),
+                // SAFETY: only reads the name to print it; the layout it vouches for is the ipc
+                // crate's (checked against docs/ipc.md by its layout test).
                 unsafe { <Status as ZeroCopySend>::type_name() },
                 hydrometra_ipc::SCHEMA_VERSION
             ),

@@ -3,7 +3,7 @@
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use crate::service::hydraulics::load_scenario;
+use crate::scenario::load_scenario;
 use anyhow::{bail, Context, Result};
 use clap::{Args, Subcommand};
 use hydrometra_sim::hydraulics::{
@@ -166,7 +166,7 @@ fn csv_header() -> &'static str {
      inflow_ml_per_min,outflow_ml_per_min,leak_ml_per_min,absorption_ml_per_min,\
      perforation_ml_per_min,inflow_port_m_per_s,outflow_port_m_per_s,total_in_ml,\
      total_collected_ml,deficit_ml,deficit_rate_ml_per_min,warning_stage,rate_alarm,terminated,\
-     pump_stopped,alarm_bits"
+     pump_stopped,overpressure"
 }
 
 fn csv_row(r: &Row) -> String {
@@ -197,7 +197,7 @@ fn csv_row(r: &Row) -> String {
         u8::from(s.deficit.rate_alarm),
         u8::from(s.deficit.terminated),
         u8::from(s.pump_stopped),
-        s.deficit.alarm_bits(),
+        u8::from(s.deficit.overpressure),
     )
 }
 

@@ -3,7 +3,7 @@
 decodes its statuses with the layout table of docs/ipc.md.
 
     pip install mcap        # with lz4 (a dependency of mcap)
-    python3 daemon/examples/python/read_recording.py RECORDING.mcap --ipc-doc docs/ipc.md --json
+    python3 record/examples/python/read_recording.py RECORDING.mcap --ipc-doc docs/ipc.md --json
 
 Prints the channel counts and the first and last status (every field of the table) as JSON. The
 layout is read from the `<!-- layout: hydrometra.v1.Status size=N -->` table of docs/ipc.md, so
@@ -19,6 +19,8 @@ import sys
 
 from mcap.reader import make_reader
 
+# 1 mmHg in Pa: hydrometra_units::PA_PER_MMHG (ipc/tests/python_constants.rs keeps them equal).
+PA_PER_MMHG = 133.322387415
 TYPES = {"u32": "I", "u64": "Q", "f64": "d", "i32": "i", "i64": "q", "f32": "f"}
 
 
@@ -96,7 +98,7 @@ def main():
         print(f"{args.recording}: profile {profile}, channels {counts}")
         if last:
             print(f"last status: sequence {last['sequence']}, deficit {last['deficit_m3'] * 1e6:.1f} ml, "
-                  f"cavity pressure {last['cavity_pressure_pa'] / 133.322:.1f} mmHg")
+                  f"cavity pressure {last['cavity_pressure_pa'] / PA_PER_MMHG:.1f} mmHg")
 
 
 if __name__ == "__main__":

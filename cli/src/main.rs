@@ -1,5 +1,18 @@
 //! `hydrometra`: the engineer's CLI (anatomy, precompute, rig tools, fluid cases, benchmarks).
 
+mod anatomy;
+mod control;
+mod fem;
+mod fluid;
+mod hydraulics;
+mod monitor;
+mod precompute;
+mod procedure;
+mod record;
+mod rig;
+mod scenario;
+mod scene;
+
 use anyhow::Result;
 use clap::{Parser, Subcommand};
 
@@ -17,37 +30,37 @@ enum Command {
     Version,
     /// Control a running hydrometrad: new procedure, load a scene, the recorder.
     #[command(subcommand)]
-    Control(hydrometra_daemon::cli::control::ControlCommand),
+    Control(control::ControlCommand),
     /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
-    Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
+    Monitor(monitor::MonitorArgs),
     /// Hydraulic model tools (offline simulation of a scenario).
     #[command(subcommand)]
-    Hydraulics(hydrometra_daemon::cli::hydraulics::HydraulicsCommand),
+    Hydraulics(hydraulics::HydraulicsCommand),
     /// The procedure's fluid deficit record: show it, or start a new procedure.
     #[command(subcommand)]
-    Procedure(hydrometra_daemon::cli::procedure::ProcedureCommand),
+    Procedure(procedure::ProcedureCommand),
     /// Rig tools: emulate the rig on a pseudo-terminal, probe a rig.
     #[command(subcommand)]
-    Rig(hydrometra_daemon::cli::rig::RigCommand),
+    Rig(rig::RigCommand),
     /// Procedure recordings: summarise one.
     #[command(subcommand)]
-    Record(hydrometra_daemon::cli::record::RecordCommand),
+    Record(record::RecordCommand),
     /// Debrief a recorded procedure: fluid-handling metrics (metrics.json) and a report with plots.
-    Debrief(hydrometra_daemon::cli::record::DebriefArgs),
+    Debrief(record::DebriefArgs),
     /// Fluid solver: run case files, benchmark, soak.
     #[command(subcommand)]
-    Fluid(hydrometra_daemon::cli::fluid::FluidCommand),
+    Fluid(fluid::FluidCommand),
     /// Generate a parametric uterus mesh (VTU, JSON summary, mesh JSON).
-    Anatomy(hydrometra_daemon::cli::anatomy::AnatomyArgs),
+    Anatomy(anatomy::AnatomyArgs),
     /// Run the FEM pressure sweep of an anatomy and write the deformation atlas, VTU/PVD series
     /// and P-V curve.
-    Precompute(hydrometra_daemon::cli::precompute::PrecomputeArgs),
+    Precompute(precompute::PrecomputeArgs),
     /// The coupled scene: print the default, prepare its atlas, run it offline, benchmark it.
     #[command(subcommand)]
-    Scene(hydrometra_daemon::cli::scene::SceneCommand),
+    Scene(scene::SceneCommand),
     /// FEM verification cases (thick sphere).
     #[command(subcommand)]
-    Fem(hydrometra_daemon::cli::fem::FemCommand),
+    Fem(fem::FemCommand),
 }
 
 fn main() -> Result<()> {
@@ -64,17 +77,17 @@ fn main() -> Result<()> {
             println!("hydrometra {}", env!("CARGO_PKG_VERSION"));
             Ok(())
         }
-        Command::Control(cmd) => hydrometra_daemon::cli::control::run(cmd),
-        Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
-        Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
-        Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
-        Command::Rig(cmd) => hydrometra_daemon::cli::rig::run(cmd),
-        Command::Record(cmd) => hydrometra_daemon::cli::record::run(cmd),
-        Command::Debrief(args) => hydrometra_daemon::cli::record::debrief(&args),
-        Command::Fluid(cmd) => hydrometra_daemon::cli::fluid::run(cmd),
-        Command::Anatomy(args) => hydrometra_daemon::cli::anatomy::run(&args),
-        Command::Precompute(args) => hydrometra_daemon::cli::precompute::run(&args),
-        Command::Fem(cmd) => hydrometra_daemon::cli::fem::run(&cmd),
-        Command::Scene(cmd) => hydrometra_daemon::cli::scene::run(cmd),
+        Command::Control(cmd) => control::run(cmd),
+        Command::Monitor(args) => monitor::run(&args),
+        Command::Hydraulics(command) => hydraulics::run(command),
+        Command::Procedure(command) => procedure::run(command),
+        Command::Rig(cmd) => rig::run(cmd),
+        Command::Record(cmd) => record::run(cmd),
+        Command::Debrief(args) => record::debrief(&args),
+        Command::Fluid(cmd) => fluid::run(cmd),
+        Command::Anatomy(args) => anatomy::run(&args),
+        Command::Precompute(args) => precompute::run(&args),
+        Command::Fem(cmd) => fem::run(&cmd),
+        Command::Scene(cmd) => scene::run(cmd),
     }
 }
