@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use hydrometra_ipc::Status;
 
 use super::format::{self, AlarmChange, ControlEvent};
+use super::scan::{self, Item};
 use super::RecordError;
 
 /// One received chunk of rig bytes.
@@ -85,20 +86,14 @@ impl Recording {
             path: path.to_path_buf(),
             ..Default::default()
         };
-        let options: mcap::read::Options = mcap::read::Options::IgnoreEndMagic;
-        // Metadata records sit between chunks: one linear pass over the top-level records.
-        if let Ok(records) = mcap::read::LinearReader::new_with_options(buf, options.into()) {
-            for r in records {
-                match r {
-                    Ok(mcap::records::Record::Metadata(m)) if m.name == format::METADATA_NAME => {
-                        rec.metadata = m.metadata;
-                    }
-                    Ok(_) => {}
-                    Err(_) => break,
+        let truncated = scan::for_each_item(buf, |item| {
+            let m = match item {
+                Item::Metadata(metadata) => {
+                    rec.metadata = metadata;
+                    return;
                 }
-            }
-        }
-        let truncated = for_each_message(buf, |m| {
+                Item::Message(m) => m,
+            };
             let topic = m.channel.topic.clone();
             let c = rec
                 .channels
@@ -170,103 +165,6 @@ impl Recording {
     }
 }
 
-/// A message's channel as the reader needs it.
-struct ChannelInfo {
-    topic: String,
-    schema: String,
-    encoding: String,
-}
-
-/// One message of the data section.
-struct MessageRef<'a> {
-    channel: &'a ChannelInfo,
-    log_time: u64,
-    data: &'a [u8],
-}
-
-/// The largest record accepted, bytes: the file's size (a record inside an LZ4 chunk can be
-/// larger than its compressed bytes, but not than a file that holds them and its headers), at
-/// least 1 MiB. A corrupt length field beyond it is an error, not an allocation.
-fn record_length_limit(file_len: usize) -> usize {
-    file_len.max(1 << 20)
-}
-
-/// Calls `on_message` for every message of the data section, in file order, chunks decompressed,
-/// up to the data end record; returns why reading stopped early, if it did (a file cut short by
-/// a kill, or corrupt).
-///
-/// `mcap::MessageStream` sets no record length limit, so a length field of a corrupt file made it
-/// reserve that many bytes (a capacity-overflow panic or an abort); this drives the library's
-/// sans-io reader with one.
-fn for_each_message(buf: &[u8], mut on_message: impl FnMut(MessageRef<'_>)) -> Option<String> {
-    use mcap::records::Record;
-    use mcap::sans_io::linear_reader::{LinearReadEvent, LinearReader, LinearReaderOptions};
-
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_skip_end_magic(true)
-            .with_record_length_limit(record_length_limit(buf.len())),
-    );
-    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
-    let mut channels: BTreeMap<u16, ChannelInfo> = BTreeMap::new();
-    let mut rest = buf;
-    while let Some(event) = reader.next_event() {
-        let (opcode, data) = match event {
-            Ok(LinearReadEvent::ReadRequest(need)) => {
-                let len = need.min(rest.len());
-                reader.insert(len).copy_from_slice(&rest[..len]);
-                reader.notify_read(len);
-                rest = &rest[len..];
-                continue;
-            }
-            Ok(LinearReadEvent::Record { data, opcode }) => (opcode, data),
-            Err(e) => return Some(e.to_string()),
-        };
-        match mcap::parse_record(opcode, data) {
-            Ok(Record::Schema { header, .. }) => {
-                schemas.insert(header.id, header.name);
-            }
-            Ok(Record::Channel(c)) => {
-                let schema = match (c.schema_id, schemas.get(&c.schema_id)) {
-                    (0, _) => String::new(),
-                    (_, Some(name)) => name.clone(),
-                    (id, None) => {
-                        return Some(format!(
-                            "channel {} ({}) refers to schema {id}, which is not defined",
-                            c.id, c.topic
-                        ))
-                    }
-                };
-                channels.insert(
-                    c.id,
-                    ChannelInfo {
-                        topic: c.topic,
-                        schema,
-                        encoding: c.message_encoding,
-                    },
-                );
-            }
-            Ok(Record::Message { header, data }) => {
-                let Some(channel) = channels.get(&header.channel_id) else {
-                    return Some(format!(
-                        "message on channel {}, which is not defined",
-                        header.channel_id
-                    ));
-                };
-                on_message(MessageRef {
-                    channel,
-                    log_time: header.log_time,
-                    data: &data,
-                });
-            }
-            Ok(Record::DataEnd(_)) => return None,
-            Ok(_) => {}
-            Err(e) => return Some(e.to_string()),
-        }
-    }
-    None
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -318,6 +216,43 @@ mod tests {
         let why = rec.truncated.expect("a truncation reason");
         assert!(why.contains("too large") || why.contains("record"), "{why}");
         assert!(rec.channels.is_empty());
+    }
+
+    // Found by fuzzing (fuzz target `recording`): a metadata record whose name claimed 64 MiB
+    // made mcap's parser reserve them (any u32 length, up to 4 GiB) for a 31 kB file.
+    #[test]
+    fn a_string_longer_than_its_record_stops_reading_with_a_reason() {
+        let mut bytes = mcap::MAGIC.to_vec();
+        let mut body = 0x0400_0000u32.to_le_bytes().to_vec(); // the name's length
+        body.extend_from_slice(b"hydrometra");
+        body.extend_from_slice(&0u32.to_le_bytes()); // an empty map
+        bytes.push(mcap::records::op::METADATA);
+        bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&body);
+        let rec = Recording::from_bytes(Path::new("long.mcap"), &bytes).unwrap();
+        let why = rec.truncated.expect("a truncation reason");
+        assert!(
+            why.contains("metadata name") && why.contains("runs past the record's 18 bytes"),
+            "{why}"
+        );
+        assert!(rec.metadata.is_empty());
+    }
+
+    #[test]
+    fn the_metadata_record_is_read_from_the_data_section() {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new().create(&mut out).unwrap();
+        let metadata = BTreeMap::from([("run_id".to_string(), "42".to_string())]);
+        w.write_metadata(&mcap::records::Metadata {
+            name: format::METADATA_NAME.into(),
+            metadata: metadata.clone(),
+        })
+        .unwrap();
+        w.finish().unwrap();
+        drop(w);
+        let rec = Recording::from_bytes(Path::new("meta.mcap"), &out.into_inner()).unwrap();
+        assert_eq!(rec.metadata, metadata);
+        assert_eq!(rec.truncated, None);
     }
 
     // Found by fuzzing: a record inside a chunk claiming more bytes than the file made the reader
