@@ -19,7 +19,7 @@ fn u32_at(b: &[u8], off: usize) -> u32 {
     u32::from_le_bytes([b[off], b[off + 1], b[off + 2], b[off + 3]])
 }
 
-fn fix_crc(bytes: &mut Vec<u8>) {
+fn fix_crc(bytes: &mut [u8]) {
     if bytes.len() >= 4 {
         let body = bytes.len() - 4;
         // The atlas format's checksum (docs/atlas-format.md), the crate sim-core uses.

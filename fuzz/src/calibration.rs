@@ -100,7 +100,7 @@ fn check_samples(cal: &Calibration, data: &[u8]) {
             valve_in_raw: raw,
             valve_out_raw: seeds[(i + b) % seeds.len()],
             pump_raw: seeds[(i + 2 * b) % seeds.len()],
-            pose_valid: b % 2 == 0,
+            pose_valid: b.is_multiple_of(2),
             position_mm: [floats[b % 7], floats[(b / 7) % 7], 10.0],
             orientation_wxyz: [floats[(b + 1) % 7], 0.0, floats[(b + 3) % 7], 0.0],
             buttons: 0,
