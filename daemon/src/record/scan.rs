@@ -48,6 +48,18 @@ fn record_length_limit(file_len: usize) -> usize {
 /// decompressed, up to the data end record; returns why reading stopped early, if it did (a file
 /// cut short by a kill, or corrupt).
 pub(crate) fn for_each_item(buf: &[u8], mut on_item: impl FnMut(Item<'_>)) -> Option<String> {
+    // mcap's reader subtracts an uncompressed chunk's record lengths from the chunk's size without
+    // a check (an overflow panic in a build with overflow checks, a misread otherwise): such a
+    // chunk, and what follows it, is not handed to it.
+    let (buf, bad_chunk) = match overrun_in_uncompressed_chunk(buf) {
+        Some((offset, why)) => (&buf[..offset], Some(why)),
+        None => (buf, None),
+    };
+    let why = read_records(buf, &mut on_item);
+    why.or(bad_chunk)
+}
+
+fn read_records(buf: &[u8], on_item: &mut impl FnMut(Item<'_>)) -> Option<String> {
     let mut reader = LinearReader::new_with_options(
         LinearReaderOptions::default()
             .with_skip_end_magic(true)
@@ -122,6 +134,79 @@ pub(crate) fn for_each_item(buf: &[u8], mut on_item: impl FnMut(Item<'_>)) -> Op
             Ok(_) => {}
             Err(e) => return Some(e.to_string()),
         }
+    }
+    None
+}
+
+/// The offset of the first top-level uncompressed chunk holding a record that runs past the
+/// chunk's records, and why; `None` if there is none (or the top level ends before one).
+fn overrun_in_uncompressed_chunk(buf: &[u8]) -> Option<(usize, String)> {
+    let mut at = mcap::MAGIC.len();
+    while let Some(header) = buf.get(at..at.checked_add(OPCODE_LEN)?) {
+        let len = usize::try_from(u64_le(&header[1..])).ok()?;
+        // mcap streams a chunk's records before its end is read: a chunk cut short by the end of
+        // the file is checked as far as it goes.
+        let end = (at + OPCODE_LEN).checked_add(len)?;
+        let body = &buf[at + OPCODE_LEN..end.min(buf.len())];
+        match header[0] {
+            op::CHUNK => {
+                if let Some(why) = chunk_record_overrun(body) {
+                    return Some((at, format!("chunk at offset {at}: {why}")));
+                }
+            }
+            op::DATA_END | op::FOOTER => return None,
+            _ => {}
+        }
+        if end >= buf.len() {
+            return None;
+        }
+        at = end;
+    }
+    None
+}
+
+/// A record's opcode and length, bytes.
+const OPCODE_LEN: usize = 9;
+
+fn u64_le(b: &[u8]) -> u64 {
+    let mut v = [0u8; 8];
+    v.copy_from_slice(&b[..8]);
+    u64::from_le_bytes(v)
+}
+
+/// In an uncompressed chunk's body (start and end times, uncompressed size and CRC, compression,
+/// records length, records), the first record that runs past the records' length.
+fn chunk_record_overrun(body: &[u8]) -> Option<String> {
+    let mut f = Fields { body, at: 0 };
+    f.skip(28, "chunk header").ok()?;
+    let compression_len = f.u32("compression").ok()?;
+    if compression_len != 0 {
+        return None; // decompressed by mcap with its own bounds
+    }
+    let start = f.at;
+    f.skip(8, "records length").ok()?;
+    let records_len = u64_le(&body[start..]);
+    let mut at = 0u64;
+    let mut rest = &body[f.at..];
+    while at < records_len {
+        let Some(header) = rest.get(..OPCODE_LEN) else {
+            return None; // a chunk cut short: mcap reports it
+        };
+        let len = u64_le(&header[1..]);
+        let end = at
+            .checked_add(OPCODE_LEN as u64)
+            .and_then(|e| e.checked_add(len));
+        match end {
+            Some(end) if end <= records_len => {}
+            _ => {
+                return Some(format!(
+                    "record 0x{:02x} of {len} bytes at offset {at} of its records runs past their {records_len} bytes",
+                    header[0]
+                ))
+            }
+        }
+        rest = rest.get(OPCODE_LEN + usize::try_from(len).ok()?..)?;
+        at += OPCODE_LEN as u64 + len;
     }
     None
 }
@@ -233,6 +318,48 @@ mod tests {
         channel.extend(string("hydrometra.status"));
         channel.extend(0u32.to_le_bytes());
         assert_eq!(strings_fit(op::CHANNEL, &channel), Ok(()));
+    }
+
+    // Found by fuzzing (fuzz target `recording`): a record inside an uncompressed chunk claiming
+    // more than the chunk's records underflowed mcap's count of the bytes left in the chunk.
+    #[test]
+    fn a_record_running_past_its_uncompressed_chunk_ends_reading_before_the_chunk() {
+        let mut message = vec![op::MESSAGE];
+        message.extend(22u64.to_le_bytes()); // claims 22 bytes: channel, sequence, times
+        message.extend([0u8; 22]);
+        let mut chunk = vec![0u8; 28]; // times, uncompressed size and CRC
+        chunk.extend(0u32.to_le_bytes()); // no compression
+        chunk.extend(20u64.to_le_bytes()); // records: 20 bytes, the message needs 31
+        chunk.extend(&message);
+        let mut file = mcap::MAGIC.to_vec();
+        file.push(op::CHUNK);
+        file.extend((chunk.len() as u64).to_le_bytes());
+        file.extend(&chunk);
+        let at = mcap::MAGIC.len();
+        let (offset, why) = overrun_in_uncompressed_chunk(&file).expect("the overrun");
+        assert_eq!(offset, at);
+        assert_eq!(
+            why,
+            format!(
+                "chunk at offset {at}: record 0x05 of 22 bytes at offset 0 of its records runs past their 20 bytes"
+            )
+        );
+        let mut messages = 0;
+        let stop = for_each_item(&file, |_| messages += 1);
+        assert_eq!(stop, Some(why));
+        assert_eq!(messages, 0);
+        // Cut short by the end of the file (the chunk claims more than follows): checked as far
+        // as it goes.
+        let mut cut = file.clone();
+        cut[at + 1..at + 9].copy_from_slice(&(1u64 << 20).to_le_bytes());
+        assert_eq!(
+            overrun_in_uncompressed_chunk(&cut).map(|(o, _)| o),
+            Some(at)
+        );
+        // The same chunk with a records length that holds the message passes the check.
+        let fixed_at = at + OPCODE_LEN + 32;
+        file[fixed_at..fixed_at + 8].copy_from_slice(&31u64.to_le_bytes());
+        assert_eq!(overrun_in_uncompressed_chunk(&file), None);
     }
 
     #[test]
