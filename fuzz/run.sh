@@ -6,6 +6,7 @@
 #   fuzz/run.sh <target|all> <executions>  fuzz each for that many executions; one result line each
 #   fuzz/run.sh smoke <seconds>            replay the committed corpus, then fuzz each for <seconds>
 #   fuzz/run.sh minimize <target|all>      merge new finds into fuzz/corpus/<target>, minimised
+#                                          (the smallest set of inputs covering every feature)
 #   fuzz/run.sh list                       the targets
 #
 # New inputs go to fuzz/targets/target/work/<target> (the committed corpus is read, not written),
@@ -85,7 +86,7 @@ case "$cmd" in
       new="$out/minimized/$t"
       mkdir -p "$out/work/$t"
       rm -rf "$new" && mkdir -p "$new"
-      "$bin_dir/$t" -merge=1 -timeout="$timeout_s" "$new" "$here/corpus/$t" "$out/work/$t" \
+      "$bin_dir/$t" -set_cover_merge=1 -timeout="$timeout_s" "$new" "$here/corpus/$t" "$out/work/$t" \
         >"$out/logs-merge-$t.log" 2>&1
       rm -rf "$here/corpus/$t" && mv "$new" "$here/corpus/$t"
       echo "$t: $(ls "$here/corpus/$t" | wc -l) inputs, $(du -sh "$here/corpus/$t" | cut -f1)"
