@@ -5,12 +5,14 @@
 //! - [`recorder`]: the recorder thread and its handle (start, stop, rotate), fed by non-blocking
 //!   taps on the rig I/O thread and the publisher.
 //! - [`reader`]: reads a recording back (also an unfinished one, e.g. after a kill -9).
+//! - `scan`: the reader's one pass over the MCAP records, every length checked first.
 //! - [`debrief`]: fluid-handling metrics and the instructor's report.
 
 pub mod debrief;
 pub mod format;
 pub mod reader;
 pub mod recorder;
+mod scan;
 
 /// A recording could not be written or read.
 #[derive(Debug, thiserror::Error)]

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 use hydrometra_ipc::Status;
 
 use super::format::{self, AlarmChange, ControlEvent};
+use super::scan::{self, Item};
 use super::RecordError;
 
 /// One received chunk of rig bytes.
@@ -85,32 +86,13 @@ impl Recording {
             path: path.to_path_buf(),
             ..Default::default()
         };
-        let options: mcap::read::Options = mcap::read::Options::IgnoreEndMagic;
-        // Metadata records sit between chunks: one linear pass over the top-level records.
-        if let Ok(records) = mcap::read::LinearReader::new_with_options(buf, options.into()) {
-            for r in records {
-                match r {
-                    Ok(mcap::records::Record::Metadata(m)) if m.name == format::METADATA_NAME => {
-                        rec.metadata = m.metadata;
-                    }
-                    Ok(_) => {}
-                    Err(_) => break,
+        let truncated = scan::for_each_item(buf, |item| {
+            let m = match item {
+                Item::Metadata(metadata) => {
+                    rec.metadata = metadata;
+                    return;
                 }
-            }
-        }
-        let stream = mcap::MessageStream::new_with_options(buf, options.into()).map_err(|e| {
-            RecordError::Mcap {
-                path: name.clone(),
-                message: e.to_string(),
-            }
-        })?;
-        for m in stream {
-            let m = match m {
-                Ok(m) => m,
-                Err(e) => {
-                    rec.truncated = Some(e.to_string());
-                    break;
-                }
+                Item::Message(m) => m,
             };
             let topic = m.channel.topic.clone();
             let c = rec
@@ -119,13 +101,8 @@ impl Recording {
                 .or_insert_with(|| ChannelSummary {
                     first_ns: m.log_time,
                     last_ns: m.log_time,
-                    schema: m
-                        .channel
-                        .schema
-                        .as_ref()
-                        .map(|s| s.name.clone())
-                        .unwrap_or_default(),
-                    encoding: m.channel.message_encoding.clone(),
+                    schema: m.channel.schema.clone(),
+                    encoding: m.channel.encoding.clone(),
                     ..Default::default()
                 });
             if c.messages > 0 {
@@ -139,7 +116,7 @@ impl Recording {
             c.first_ns = c.first_ns.min(m.log_time);
             c.last_ns = c.last_ns.max(m.log_time);
             let ok = match topic.as_str() {
-                format::TOPIC_RIG_RX => format::split_rx(&m.data).map(|(t, bytes)| {
+                format::TOPIC_RIG_RX => format::split_rx(m.data).map(|(t, bytes)| {
                     rec.rx.push(RxRecord {
                         log_time_ns: m.log_time,
                         host_monotonic_ns: t,
@@ -147,12 +124,12 @@ impl Recording {
                     })
                 }),
                 format::TOPIC_STATUS => {
-                    format::status_from_bytes(&m.data).map(|s| rec.statuses.push((m.log_time, s)))
+                    format::status_from_bytes(m.data).map(|s| rec.statuses.push((m.log_time, s)))
                 }
-                format::TOPIC_ALARMS => serde_json::from_slice::<AlarmChange>(&m.data)
+                format::TOPIC_ALARMS => serde_json::from_slice::<AlarmChange>(m.data)
                     .ok()
                     .map(|a| rec.alarms.push((m.log_time, a))),
-                format::TOPIC_EVENTS => serde_json::from_slice::<ControlEvent>(&m.data)
+                format::TOPIC_EVENTS => serde_json::from_slice::<ControlEvent>(m.data)
                     .ok()
                     .map(|e| rec.events.push((m.log_time, e))),
                 _ => None,
@@ -160,7 +137,8 @@ impl Recording {
             if ok.is_none() {
                 rec.skipped += 1;
             }
-        }
+        });
+        rec.truncated = truncated;
         // Chunks are written in time order per flush, but a late status may follow a chunk of
         // reads: order each stream by time.
         rec.rx.sort_by_key(|r| r.host_monotonic_ns);
@@ -184,5 +162,115 @@ impl Recording {
                 .iter()
                 .map(|r| (r.host_monotonic_ns, r.bytes.as_slice())),
         )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A file with one uncompressed chunk holding one message on `/events`.
+    fn one_message_file() -> Vec<u8> {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new()
+            .compression(None)
+            .create(&mut out)
+            .unwrap();
+        let schema = w
+            .add_schema(format::SCHEMA_EVENT, "jsonschema", b"{}")
+            .unwrap();
+        let none = BTreeMap::new();
+        let channel = w
+            .add_channel(schema, format::TOPIC_EVENTS, "json", &none)
+            .unwrap();
+        let data = br#"{"kind":"recording_started","detail":"t"}"#;
+        let header = mcap::records::MessageHeader {
+            channel_id: channel,
+            sequence: 0,
+            log_time: 7,
+            publish_time: 7,
+        };
+        w.write_to_known_channel(&header, data).unwrap();
+        w.finish().unwrap();
+        drop(w);
+        out.into_inner()
+    }
+
+    #[test]
+    fn a_well_formed_file_reads_whole() {
+        let rec = Recording::from_bytes(Path::new("ok.mcap"), &one_message_file()).unwrap();
+        assert_eq!(rec.events.len(), 1);
+        assert_eq!(rec.events[0].0, 7);
+        assert_eq!(rec.truncated, None);
+    }
+
+    // Found by fuzzing (fuzz target `recording`): the MCAP magic and a record claiming
+    // 2^64 - 1 bytes overflowed the library's length arithmetic and, as a capacity overflow,
+    // panicked `hydrometra record info`.
+    #[test]
+    fn a_top_level_record_longer_than_the_file_stops_reading_with_a_reason() {
+        let mut bytes = mcap::MAGIC.to_vec();
+        bytes.push(0x01);
+        bytes.extend_from_slice(&u64::MAX.to_le_bytes());
+        let rec = Recording::from_bytes(Path::new("huge.mcap"), &bytes).unwrap();
+        let why = rec.truncated.expect("a truncation reason");
+        assert!(why.contains("too large") || why.contains("record"), "{why}");
+        assert!(rec.channels.is_empty());
+    }
+
+    // Found by fuzzing (fuzz target `recording`): a metadata record whose name claimed 64 MiB
+    // made mcap's parser reserve them (any u32 length, up to 4 GiB) for a 31 kB file.
+    #[test]
+    fn a_string_longer_than_its_record_stops_reading_with_a_reason() {
+        let mut bytes = mcap::MAGIC.to_vec();
+        let mut body = 0x0400_0000u32.to_le_bytes().to_vec(); // the name's length
+        body.extend_from_slice(b"hydrometra");
+        body.extend_from_slice(&0u32.to_le_bytes()); // an empty map
+        bytes.push(mcap::records::op::METADATA);
+        bytes.extend_from_slice(&(body.len() as u64).to_le_bytes());
+        bytes.extend_from_slice(&body);
+        let rec = Recording::from_bytes(Path::new("long.mcap"), &bytes).unwrap();
+        let why = rec.truncated.expect("a truncation reason");
+        assert!(
+            why.contains("metadata name") && why.contains("runs past the record's 18 bytes"),
+            "{why}"
+        );
+        assert!(rec.metadata.is_empty());
+    }
+
+    #[test]
+    fn the_metadata_record_is_read_from_the_data_section() {
+        let mut out = std::io::Cursor::new(Vec::new());
+        let mut w = mcap::WriteOptions::new().create(&mut out).unwrap();
+        let metadata = BTreeMap::from([("run_id".to_string(), "42".to_string())]);
+        w.write_metadata(&mcap::records::Metadata {
+            name: format::METADATA_NAME.into(),
+            metadata: metadata.clone(),
+        })
+        .unwrap();
+        w.finish().unwrap();
+        drop(w);
+        let rec = Recording::from_bytes(Path::new("meta.mcap"), &out.into_inner()).unwrap();
+        assert_eq!(rec.metadata, metadata);
+        assert_eq!(rec.truncated, None);
+    }
+
+    // Found by fuzzing: a record inside a chunk claiming more bytes than the file made the reader
+    // reserve them (a capacity-overflow panic, or an abort for a size that fits usize).
+    #[test]
+    fn a_record_in_a_chunk_claiming_more_than_the_file_is_refused_without_allocating() {
+        let good = one_message_file();
+        // The message record inside the chunk: opcode 0x05, u64 length, channel id 1.
+        let at = good
+            .windows(11)
+            .position(|w| w[0] == 0x05 && w[9..11] == 1u16.to_le_bytes())
+            .expect("the message record");
+        for claimed in [u64::MAX, 1 << 40, good.len() as u64 * 4096] {
+            let mut bad = good.clone();
+            bad[at + 1..at + 9].copy_from_slice(&claimed.to_le_bytes());
+            let rec = Recording::from_bytes(Path::new("bad.mcap"), &bad).unwrap();
+            assert!(rec.truncated.is_some(), "length {claimed} accepted");
+            assert!(rec.events.is_empty());
+        }
     }
 }
