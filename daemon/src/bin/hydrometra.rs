@@ -18,6 +18,8 @@ enum Command {
     /// Control a running hydrometrad: new procedure, load a scene, the recorder.
     #[command(subcommand)]
     Control(hydrometra_daemon::cli::control::ControlCommand),
+    /// Serve the instructor's live web page of one or several rigs (docs/station.md).
+    Station(hydrometra_station::StationArgs),
     /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
     Monitor(hydrometra_daemon::cli::monitor::MonitorArgs),
     /// Hydraulic model tools (offline simulation of a scenario).
@@ -65,6 +67,7 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Control(cmd) => hydrometra_daemon::cli::control::run(cmd),
+        Command::Station(args) => Ok(hydrometra_station::run(args)?),
         Command::Monitor(args) => hydrometra_daemon::cli::monitor::run(&args),
         Command::Hydraulics(command) => hydrometra_daemon::cli::hydraulics::run(command),
         Command::Procedure(command) => hydrometra_daemon::cli::procedure::run(command),
