@@ -11,6 +11,7 @@ use bytes::{BufMut, Bytes, BytesMut};
 use hydrometra_ipc::mesh::{MeshPositionsHeader, MeshTopologyHeader};
 use hydrometra_ipc::particles::{Particle, ParticlesHeader};
 use hydrometra_ipc::Status;
+use hydrometra_remote::wire::{bytes_of, slice_bytes};
 
 /// Version of the frame layout, in every header.
 pub const VERSION: u8 = 1;
@@ -33,19 +34,6 @@ pub mod kind {
     pub const HISTORY: u8 = 6;
     /// Every kind, in the order a client is sent them (topology before positions).
     pub const ALL: [u8; 6] = [HISTORY, TOPOLOGY, POSITIONS, FLOW, PARTICLES, STATUS];
-}
-
-/// Raw bytes of a `repr(C)` value of the renderer contract.
-fn bytes_of<T: Copy>(value: &T) -> &[u8] {
-    // SAFETY: only called with the contract's repr(C) types, which have no padding (docs/ipc.md;
-    // ipc/tests/layout_matches_docs.rs), so every byte is initialised; the slice borrows `value`.
-    unsafe { core::slice::from_raw_parts((value as *const T).cast::<u8>(), size_of::<T>()) }
-}
-
-/// Raw bytes of a slice of `repr(C)` elements without padding (u32, f32, `Particle`).
-fn slice_bytes<T: Copy>(values: &[T]) -> &[u8] {
-    // SAFETY: as in `bytes_of`; the length is the slice's size in bytes.
-    unsafe { core::slice::from_raw_parts(values.as_ptr().cast::<u8>(), size_of_val(values)) }
 }
 
 fn header(kind: u8, rig: u16, origin_ns: u64, body_len: usize) -> BytesMut {
@@ -228,28 +216,10 @@ pub fn history(rig: u16, records: impl ExactSizeIterator<Item = HistoryRecord>) 
     b.freeze()
 }
 
-/// A copy of a contract value from bytes received elsewhere (zenoh), if the length is exact.
-pub fn read_exact<T: Copy>(bytes: &[u8]) -> Option<T> {
-    (bytes.len() == size_of::<T>()).then(|| {
-        // SAFETY: the length is checked; the contract's types are repr(C) plain data for which
-        // every bit pattern is valid (integers and floats); read_unaligned allows any alignment.
-        unsafe { core::ptr::read_unaligned(bytes.as_ptr().cast::<T>()) }
-    })
-}
-
-/// Elements of plain data (u32, f32, `Particle`) from bytes; `None` unless the length is a
-/// whole number of elements.
-pub fn read_slice<T: Copy>(bytes: &[u8]) -> Option<Vec<T>> {
-    let size = size_of::<T>();
-    if size == 0 || bytes.len() % size != 0 {
-        return None;
-    }
-    Some(bytes.chunks_exact(size).filter_map(read_exact).collect())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use hydrometra_remote::wire::{read_exact, read_slice};
 
     #[test]
     fn a_status_frame_is_the_header_then_the_ipc_record_byte_for_byte() {

@@ -12,6 +12,8 @@
 pub mod auth;
 pub mod bench;
 pub mod browser;
+pub mod classroom;
+pub mod feed;
 pub mod flow;
 pub mod frame;
 pub mod hub;
@@ -58,7 +60,7 @@ pub struct ServeArgs {
     #[arg(long, value_name = "ADDR:PORT", default_value = DEFAULT_LISTEN)]
     pub listen: SocketAddr,
     /// Show the hydrometrad on this machine with this iceoryx2 service prefix (repeat for
-    /// several daemons). Default: "hydrometra/v1".
+    /// several daemons). Default: "hydrometra/v1", unless --zenoh is given.
     #[arg(long, value_name = "PREFIX")]
     pub service_prefix: Vec<String>,
     /// The access token (control always needs it; viewing needs it off loopback). Prefer
@@ -75,6 +77,9 @@ pub struct ServeArgs {
     /// Rates and sizes of what the page is sent.
     #[command(flatten)]
     pub rates: Rates,
+    /// Rigs over zenoh (the classroom).
+    #[command(flatten)]
+    pub zenoh: classroom::ZenohArgs,
     /// Seconds of plot history kept per rig (a page opened later starts with it).
     #[arg(long, value_name = "SECS", default_value_t = 600.0)]
     pub history_s: f64,
@@ -200,7 +205,7 @@ pub fn serve(args: ServeArgs) -> Result<(), StationError> {
     let hub = hub::Hub::new(args.history_s);
     let state = server::AppState::new(hub.clone(), token.clone(), loopback);
     let stop = Arc::new(AtomicBool::new(false));
-    let prefixes = if args.service_prefix.is_empty() {
+    let prefixes = if args.service_prefix.is_empty() && !args.zenoh.zenoh {
         vec![hydrometra_ipc::DEFAULT_SERVICE_PREFIX.to_string()]
     } else {
         args.service_prefix.clone()
@@ -246,6 +251,16 @@ pub fn serve(args: ServeArgs) -> Result<(), StationError> {
             },
         );
     }
+    let _classroom = if args.zenoh.zenoh {
+        Some(classroom::start(
+            &args.zenoh,
+            hub.clone(),
+            state.clone(),
+            args.rates,
+        )?)
+    } else {
+        None
+    };
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_name("station-io")
@@ -260,7 +275,7 @@ pub fn serve(args: ServeArgs) -> Result<(), StationError> {
         // The one line a script or test reads: where the page is (the fragment never reaches a
         // server or a log).
         println!("station: http://{addr}/#token={}", token.reveal());
-        tracing::info!(%addr, rigs = prefixes.len(), "station serving");
+        tracing::info!(%addr, local_rigs = prefixes.len(), zenoh = args.zenoh.zenoh, "station serving");
         // Open WebSockets never end by themselves: stop serving at the signal, not after them.
         tokio::select! {
             r = axum::serve(listener, server::router(state)) => r.map_err(io("serving")),
@@ -286,4 +301,36 @@ async fn shutdown_signal() {
         _ => std::future::pending::<()>().await,
     }
     tracing::info!("station stopping");
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Cli {
+        #[command(subcommand)]
+        command: Top,
+    }
+
+    #[derive(clap::Subcommand)]
+    enum Top {
+        Station(StationArgs),
+    }
+
+    fn parse(args: &[&str]) -> StationArgs {
+        let Top::Station(s) = Cli::try_parse_from(args).unwrap().command;
+        s
+    }
+
+    #[test]
+    fn the_default_address_is_loopback_only() {
+        let s = parse(&["hydrometra", "station"]);
+        assert!(s.command.is_none());
+        assert_eq!(s.serve.listen, DEFAULT_LISTEN.parse().unwrap());
+        assert!(s.serve.listen.ip().is_loopback());
+        let b = parse(&["hydrometra", "station", "bench", "--pairs", "2"]);
+        assert!(matches!(b.command, Some(StationCommand::Bench(ref a)) if a.pairs == 2));
+    }
 }

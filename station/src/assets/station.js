@@ -47,6 +47,7 @@ function decodeStatus(dv, base) {
   // Exact 64-bit values where a double would round.
   s.procedure_id_text = dv.getBigUint64(base + S.layout.status.procedure_id.offset, true).toString();
   s.alarm_bits_big = dv.getBigUint64(base + S.layout.status.alarm_bits.offset, true);
+  s.run_id_text = dv.getBigUint64(base + S.layout.status.run_id.offset, true).toString();
   return s;
 }
 
