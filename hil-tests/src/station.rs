@@ -51,6 +51,30 @@ impl Station {
     }
 }
 
+/// A headless Chromium of `width` × `height` pixels showing `url`, and the runtime that drives it.
+pub fn open_page(
+    url: &str,
+    width: u32,
+    height: u32,
+) -> (
+    tokio::runtime::Runtime,
+    hydrometra_station::browser::Chromium,
+) {
+    let rt = tokio::runtime::Builder::new_current_thread()
+        .enable_all()
+        .build()
+        .expect("a tokio runtime");
+    let mut c = rt
+        .block_on(hydrometra_station::browser::Chromium::launch(
+            &chromium(),
+            width,
+            height,
+        ))
+        .expect("chromium");
+    rt.block_on(c.open(url)).expect("open the page");
+    (rt, c)
+}
+
 impl Drop for Station {
     fn drop(&mut self) {
         let _ = self.child.kill();

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use hydrometra_hil_tests::station::{artifacts, chromium, Station};
+use hydrometra_hil_tests::station::{artifacts, open_page, Station};
 use hydrometra_hil_tests::{temp_dir, unique_prefix, Daemon, StatusReader};
 use hydrometra_ipc::status::scene_state;
 use hydrometra_station::browser::Chromium;
@@ -159,14 +159,7 @@ fn the_page_shows_the_rig_live_in_a_real_browser_and_starts_a_new_procedure() {
     drop(reader);
     let recorder = Recorder::start(&prefix);
     let station = Station::start(&["--service-prefix", &prefix]);
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    let mut c = rt
-        .block_on(Chromium::launch(&chromium(), 1600, 1150))
-        .expect("chromium");
-    rt.block_on(c.open(&station.url)).expect("open the page");
+    let (rt, mut c) = open_page(&station.url, 1600, 1150);
     rt.block_on(c.wait_for(
         "(() => { const S = window.hydrometraStation; const r = S && S.rigs[0];
                   return S && S.webgl && S.statusFrames > 10 && r && r.topology && r.positions

@@ -7,7 +7,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use hydrometra_hil_tests::station::{artifacts, chromium, Station};
+use hydrometra_hil_tests::station::{artifacts, open_page, Station};
 use hydrometra_hil_tests::{temp_dir, unique_prefix, Daemon, StatusReader};
 use hydrometra_station::browser::Chromium;
 use serde_json::Value;
@@ -88,14 +88,7 @@ fn two_rigs_over_zenoh_are_shown_each_with_its_own_numbers() {
     let (mut seen_a, mut seen_b) = (BTreeMap::new(), BTreeMap::new());
     let (mut run_a, mut run_b) = (None, None);
 
-    let rt = tokio::runtime::Builder::new_current_thread()
-        .enable_all()
-        .build()
-        .unwrap();
-    let mut c = rt
-        .block_on(Chromium::launch(&chromium(), 1400, 900))
-        .expect("chromium");
-    rt.block_on(c.open(&station.url)).expect("open the page");
+    let (rt, mut c) = open_page(&station.url, 1400, 900);
     rt.block_on(c.wait_for(
         "document.querySelectorAll('.rig-card').length === 2 && \
          [...document.querySelectorAll('.rig-card .c-pressure')].every(e => e.dataset.seq)",
