@@ -26,7 +26,7 @@ pub fn read_exact<T: Copy>(bytes: &[u8]) -> Option<T> {
 /// Elements from bytes; `None` unless the length is a whole number of elements.
 pub fn read_slice<T: Copy>(bytes: &[u8]) -> Option<Vec<T>> {
     let size = size_of::<T>();
-    if size == 0 || bytes.len() % size != 0 {
+    if size == 0 || !bytes.len().is_multiple_of(size) {
         return None;
     }
     Some(bytes.chunks_exact(size).filter_map(read_exact).collect())

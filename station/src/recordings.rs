@@ -3,7 +3,7 @@
 //! unchanged. Only names listed in that directory are ever opened.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::sync::Mutex;
 use std::time::SystemTime;
 
@@ -96,10 +96,13 @@ pub fn list(dir: &Path) -> Result<Vec<Entry>, RecordingsError> {
     Ok(out)
 }
 
+/// A cached debrief: the file's size and modification time it was computed for, and it.
+type CachedDebrief = (u64, f64, std::sync::Arc<Debrief>);
+
 /// Debriefs kept per (name, size, modification time).
 #[derive(Default)]
 pub struct DebriefCache {
-    entries: Mutex<HashMap<String, (u64, f64, std::sync::Arc<Debrief>)>>,
+    entries: Mutex<HashMap<String, CachedDebrief>>,
 }
 
 impl DebriefCache {
@@ -131,7 +134,7 @@ impl DebriefCache {
     }
 }
 
-fn compute(path: &PathBuf, name: &str) -> Result<Debrief, RecordingsError> {
+fn compute(path: &Path, name: &str) -> Result<Debrief, RecordingsError> {
     let fail = |message: String| RecordingsError::Debrief {
         name: name.to_string(),
         message,
