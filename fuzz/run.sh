@@ -26,6 +26,11 @@ all_targets() {
 }
 
 build() {
+  # libfuzzer-sys compiles libFuzzer from its C++ source.
+  if ! command -v c++ >/dev/null 2>&1; then
+    echo "run.sh: no C++ compiler (c++) for libFuzzer: apt-get install g++" >&2
+    exit 2
+  fi
   # --target keeps the flags off build scripts and proc macros (as cargo fuzz does).
   RUSTFLAGS="-Cpasses=sancov-module -Cllvm-args=-sanitizer-coverage-level=4 \
 -Cllvm-args=-sanitizer-coverage-inline-8bit-counters -Cllvm-args=-sanitizer-coverage-pc-table \

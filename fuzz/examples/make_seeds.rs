@@ -9,9 +9,9 @@
 
 use std::path::{Path, PathBuf};
 
-use hydrometra_record::reader::Recording;
 use hydrometra_drivers::calibration::Calibration;
 use hydrometra_ipc::control::{command, ControlRequest};
+use hydrometra_record::reader::Recording;
 use hydrometra_sim::atlas::Atlas;
 
 fn write(out: &Path, target: &str, name: &str, bytes: &[u8]) {
