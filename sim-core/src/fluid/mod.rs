@@ -26,6 +26,7 @@
 
 mod advection;
 pub mod case;
+mod cut;
 mod grid;
 mod labels;
 mod multigrid;
@@ -37,6 +38,7 @@ mod topology;
 mod viscosity;
 
 pub use advection::AdvectionScheme;
+pub use cut::CutFractions;
 pub(crate) use grid::step_along;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;
