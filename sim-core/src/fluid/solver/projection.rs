@@ -114,20 +114,7 @@ fn set_cut_couplings(grid: &FluidGrid, l0: &mut Level) {
         }
         l0.wt = wt;
     }
-    let (sy, sz) = (l0.sy, l0.sz);
-    for &[j, k, i0, i1] in &l0.row_spans {
-        let (j, k) = (j as usize, k as usize);
-        for i in i0 as usize..i1 as usize {
-            let p = l0.pad(i, j, k);
-            if l0.mask[p] == 0.0 {
-                continue;
-            }
-            let w = &l0.wt;
-            let d = w[0][p] + w[0][p - 1] + w[1][p] + w[1][p - sy] + w[2][p] + w[2][p - sz];
-            l0.ddiag[p] = d;
-            l0.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
-        }
-    }
+    l0.diagonal_from_couplings();
 }
 
 impl FluidSolver {
