@@ -26,6 +26,7 @@
 
 mod advection;
 pub mod case;
+mod case_regions;
 mod cut;
 mod grid;
 mod labels;

@@ -75,33 +75,18 @@ fn tilted_box(half_m: [f64; 3], axis: [f64; 3], angle: f64, centre_m: [f64; 3]) 
         let kdp = k[0] * p[0] + k[1] * p[1] + k[2] * p[2];
         std::array::from_fn(|a| p[a] * c + kxp[a] * s + k[a] * kdp * (1.0 - c))
     };
-    let positions: Vec<[f32; 3]> = (0..8)
-        .map(|v| {
-            let p: [f64; 3] = std::array::from_fn(|a| {
-                if v >> a & 1 == 1 {
-                    half_m[a]
-                } else {
-                    -half_m[a]
-                }
-            });
-            let r: [f64; 3] = rotate(p);
-            std::array::from_fn(|a| (r[a] + centre_m[a]) as f32)
-        })
-        .collect();
-    // Two triangles per face, outward (ClosedMesh turns an inward mesh outward anyway).
-    let quads = [
-        [0, 2, 6, 4],
-        [1, 5, 7, 3],
-        [0, 4, 5, 1],
-        [2, 3, 7, 6],
-        [0, 1, 3, 2],
-        [4, 6, 7, 5],
-    ];
-    let triangles = quads
-        .iter()
-        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
-        .collect();
-    ClosedMesh::new("tilted box", positions, triangles).unwrap()
+    let corners = std::array::from_fn(|v| {
+        let p: [f64; 3] = std::array::from_fn(|a| {
+            if v >> a & 1 == 1 {
+                half_m[a]
+            } else {
+                -half_m[a]
+            }
+        });
+        let r: [f64; 3] = rotate(p);
+        std::array::from_fn(|a| r[a] + centre_m[a])
+    });
+    shapes::hexahedron("tilted box", corners).unwrap()
 }
 
 /// The three analytic solids at `cells` cells across their largest extent: (name, mesh, the
