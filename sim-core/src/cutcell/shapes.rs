@@ -234,3 +234,22 @@ fn volume(p: &[[f64; 3]], triangles: &[[u32; 3]]) -> f64 {
         .sum::<f64>()
         / 6.0
 }
+
+/// The hexahedron of eight corners (corner `v` is on the upper side along axis `a` where bit `a`
+/// of `v` is set: a box, or a box turned or sheared), two triangles per face, outward.
+pub fn hexahedron(origin: &str, corners_m: [[f64; 3]; 8]) -> Result<ClosedMesh, MeshError> {
+    let positions = corners_m.iter().map(|c| c.map(|x| x as f32)).collect();
+    let quads = [
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+    ];
+    let triangles = quads
+        .iter()
+        .flat_map(|q| [[q[0], q[1], q[2]], [q[0], q[2], q[3]]])
+        .collect();
+    ClosedMesh::new(origin, positions, triangles)
+}

@@ -26,6 +26,8 @@
 
 mod advection;
 pub mod case;
+mod case_regions;
+mod cut;
 mod grid;
 mod labels;
 mod multigrid;
@@ -37,6 +39,7 @@ mod topology;
 mod viscosity;
 
 pub use advection::AdvectionScheme;
+pub use cut::CutFractions;
 pub(crate) use grid::step_along;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;

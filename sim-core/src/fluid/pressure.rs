@@ -102,11 +102,11 @@ pub(crate) const SPLIT_DIVISOR: usize = 12;
 fn matvec(l: &Level, x: &[f64], y: &mut [f64], parallel: bool) {
     let n_rows = x.len();
     let row_op = |row: usize, x: &[f64]| {
-        let nb = l.nbr[row];
+        let (nb, nw) = (l.nbr[row], l.nbr_w[row]);
         let mut s = l.diag[row] as f64 * x[row];
-        for &n in &nb {
+        for (&n, &w) in nb.iter().zip(&nw) {
             if (n as usize) < n_rows {
-                s -= x[n as usize];
+                s -= w as f64 * x[n as usize];
             }
         }
         s
@@ -311,6 +311,7 @@ impl PressureSolver {
             // The warm start's residual in f64, rounded once to f32, and its largest value.
             let (sy, sz) = (l0.sy, l0.sz);
             let mut r0 = take(&mut l0.b);
+            let wt = l0.couplings();
             let l0max = for_spans(l0, &mut r0, |spans, out, off| {
                 let mut m = 0.0f32;
                 for &[s, e] in spans {
@@ -321,10 +322,26 @@ impl PressureSolver {
                     let (zm, zp) = (&dq[s - sz..e - sz], &dq[s + sz..e + sz]);
                     let (q0, b, d, mk) = (&dq[s..e], &bd[s..e], &l0.ddiag[s..e], &l0.mask[s..e]);
                     let out = &mut out[s - off..e - off];
+                    let Some([w0, w1, w2]) = wt else {
+                        for i in 0..n {
+                            let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
+                            out[i] = mk[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
+                            // Not f32::max: a plain comparison vectorizes (NaN is skipped by both).
+                            let a = out[i].abs();
+                            m = if a > m { a } else { m };
+                        }
+                        continue;
+                    };
+                    // Cut cells: the neighbours weighted by the couplings of their faces.
+                    let (wxm, wxp) = (&w0[s - 1..e - 1], &w0[s..e]);
+                    let (wym, wyp) = (&w1[s - sy..e - sy], &w1[s..e]);
+                    let (wzm, wzp) = (&w2[s - sz..e - sz], &w2[s..e]);
+                    let w = |w: &[f32], i: usize| w[i] as f64;
                     for i in 0..n {
-                        let nsum = (xm[i] + xp[i]) + (ym[i] + yp[i]) + (zm[i] + zp[i]);
+                        let nsum = (w(wxm, i) * xm[i] + w(wxp, i) * xp[i])
+                            + (w(wym, i) * ym[i] + w(wyp, i) * yp[i])
+                            + (w(wzm, i) * zm[i] + w(wzp, i) * zp[i]);
                         out[i] = mk[i] * (b[i] - (d[i] as f64 * q0[i] - nsum)) as f32;
-                        // Not f32::max: a plain comparison vectorizes (NaN is skipped by both).
                         let a = out[i].abs();
                         m = if a > m { a } else { m };
                     }
@@ -532,9 +549,9 @@ impl PressureSolver {
                 }
                 let row = row as usize;
                 let mut s = self.b[row];
-                for &nb in &l.nbr[row] {
+                for (&nb, &w) in l.nbr[row].iter().zip(&l.nbr_w[row]) {
                     if (nb as usize) < n_rows {
-                        s += self.q[nb as usize];
+                        s += w as f64 * self.q[nb as usize];
                     }
                 }
                 self.q[row] = s * l.inv_diag[row] as f64;

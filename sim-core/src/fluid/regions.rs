@@ -71,6 +71,12 @@ impl Regions {
     pub fn build(&mut self, level: &Level) {
         let [nx, ny, nz] = level.dims;
         let (label, rows) = (&level.label, &level.row_ext);
+        // Cut cells: a face whose coupling is zero joins nothing (its weight is stored at the
+        // lower cell's padded index).
+        let wt = level.couplings();
+        let open_face = |a: usize, i: usize, j: usize, k: usize| {
+            wt.is_none_or(|w| w[a][level.pad(i, j, k)] > 0.0)
+        };
         self.runs.clear();
         self.row_runs.clear();
         self.row_runs.resize(ny * nz, [0, 0]);
@@ -84,7 +90,9 @@ impl Regions {
                     continue;
                 }
                 let start = i;
-                while i < b as usize && row[i] == L_FLUID {
+                let (j, k) = (r % ny, r / ny);
+                i += 1;
+                while i < b as usize && row[i] == L_FLUID && open_face(0, i - 1, j, k) {
                     i += 1;
                 }
                 self.runs.push([r as u32, start as u32, i as u32]);
@@ -103,18 +111,24 @@ impl Regions {
             if level.periodic[0]
                 && runs[s as usize][1] == 0
                 && runs[e as usize - 1][2] as usize == nx
+                && open_face(0, nx - 1, r % ny, r / ny)
             {
                 union(parent, s, e - 1);
             }
             // The +y and +z neighbour rows (the relation is symmetric; wrapped on a periodic
             // axis): runs that overlap along x touch.
             let [_, yp, _, zp] = level.neighbour_rows(r % ny, r / ny);
-            for other in [yp, zp].into_iter().flatten() {
+            for (axis, other) in [(1, yp), (2, zp)] {
+                let Some(other) = other else { continue };
                 let [mut y, t] = self.row_runs[other / nx];
                 let mut x = s;
                 while x < e && y < t {
                     let (a, b) = (runs[x as usize], runs[y as usize]);
-                    if a[1] < b[2] && b[1] < a[2] {
+                    let (lo, hi) = (a[1].max(b[1]), a[2].min(b[2]));
+                    if lo < hi
+                        && (wt.is_none()
+                            || (lo..hi).any(|i| open_face(axis, i as usize, r % ny, r / ny)))
+                    {
                         union(parent, x, y);
                     }
                     if a[2] < b[2] {
@@ -135,8 +149,15 @@ impl Regions {
                 if label[ci] != L_OPEN {
                     continue;
                 }
-                for g in level.neighbour_cells([i, j, k], ci) {
+                for (slot, g) in level.neighbour_cells([i, j, k], ci).into_iter().enumerate() {
                     if g == usize::MAX || label[g] != L_FLUID {
+                        continue;
+                    }
+                    // The face's weight sits at its lower cell: this open cell for a +a
+                    // neighbour, the fluid one for a -a neighbour.
+                    let lower = if slot % 2 == 1 { ci } else { g };
+                    let (li, lr) = (lower % nx, lower / nx);
+                    if !open_face(slot / 2, li, lr % ny, lr / ny) {
                         continue;
                     }
                     let (gr, gi) = ((g / nx) as u32, (g % nx) as u32);

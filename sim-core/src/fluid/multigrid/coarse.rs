@@ -69,18 +69,24 @@ impl Level {
                 }
             }
         }
-        let (sy, sz) = (coarse.sy, coarse.sz);
-        for &[j, k, i0, i1] in &coarse.row_spans {
+        coarse.diagonal_from_couplings();
+    }
+
+    /// The diagonal of every fluid cell as the sum of its six face couplings (`wt`, periodic
+    /// ghost layers filled), and its inverse on the cell's colour.
+    pub(crate) fn diagonal_from_couplings(&mut self) {
+        let (sy, sz) = (self.sy, self.sz);
+        for &[j, k, i0, i1] in &self.row_spans {
             let (j, k) = (j as usize, k as usize);
             for i in i0 as usize..i1 as usize {
-                let p = coarse.pad(i, j, k);
-                if coarse.mask[p] == 0.0 {
+                let p = pad_index(sy, sz, i, j, k);
+                if self.mask[p] == 0.0 {
                     continue;
                 }
-                let w = &coarse.wt;
+                let w = &self.wt;
                 let d = w[0][p] + w[0][p - 1] + w[1][p] + w[1][p - sy] + w[2][p] + w[2][p - sz];
-                coarse.ddiag[p] = d;
-                coarse.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
+                self.ddiag[p] = d;
+                self.inv[(i + j + k) % 2][p] = if d > 0.0 { 1.0 / d } else { 0.0 };
             }
         }
     }

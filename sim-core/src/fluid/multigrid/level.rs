@@ -54,6 +54,9 @@ pub(crate) struct Level {
     pub cell_of_row: Vec<u32>,
     /// Neighbour rows, order -x +x -y +y -z +z; a wall or open neighbour is `rows()` (level 0 only).
     pub nbr: Vec<[u32; 6]>,
+    /// The coupling to each neighbour in `nbr` (the face's weight: 1 without cut cells; level 0
+    /// only).
+    pub nbr_w: Vec<[f32; 6]>,
     /// Number of fluid or open neighbours, per row (level 0 only).
     pub diag: Vec<f32>,
     pub inv_diag: Vec<f32>,
@@ -99,7 +102,7 @@ pub(crate) struct Level {
 
 impl Level {
     /// The face couplings the kernels weight the neighbours by (`None`: unit couplings).
-    pub(super) fn couplings(&self) -> Option<[&[f32]; 3]> {
+    pub(crate) fn couplings(&self) -> Option<[&[f32]; 3]> {
         let [a, b, c] = &self.wt;
         (!a.is_empty()).then_some([&a[..], &b[..], &c[..]])
     }
@@ -286,6 +289,7 @@ impl Level {
             }
         }
         self.nbr.clear();
+        self.nbr_w.clear();
         self.diag.clear();
         self.inv_diag.clear();
         self.pad_of_row.clear();
@@ -300,21 +304,32 @@ impl Level {
                     continue;
                 }
                 let mut nb = [zero_slot; 6];
+                let mut nw = [0.0f32; 6];
                 let mut diag = 0.0f32;
-                for (slot, g) in nb.iter_mut().zip(self.neighbour_cells([i, j, k], ci)) {
-                    if g == usize::MAX {
+                let weighted = !self.wt[0].is_empty();
+                let p = pad_index(sy, sz, i, j, k);
+                for (s, g) in self.neighbour_cells([i, j, k], ci).into_iter().enumerate() {
+                    if g == usize::MAX || self.label[g] == L_SOLID {
                         continue;
                     }
-                    match self.label[g] {
-                        L_FLUID => {
-                            *slot = self.row_of_cell[g];
-                            diag += 1.0;
-                        }
-                        L_OPEN => diag += 1.0,
-                        _ => {}
+                    // The face's coupling: stored at the cell for its +a face, at the neighbour
+                    // for its -a face.
+                    let w = if !weighted {
+                        1.0
+                    } else if s % 2 == 1 {
+                        self.wt[s / 2][p]
+                    } else {
+                        let (gi, gr) = (g % nx, g / nx);
+                        self.wt[s / 2][pad_index(sy, sz, gi, gr % ny, gr / ny)]
+                    };
+                    if self.label[g] == L_FLUID {
+                        nb[s] = self.row_of_cell[g];
+                        nw[s] = w;
                     }
+                    diag += w;
                 }
                 self.nbr.push(nb);
+                self.nbr_w.push(nw);
                 self.diag.push(diag);
                 self.inv_diag
                     .push(if diag > 0.0 { 1.0 / diag } else { 0.0 });

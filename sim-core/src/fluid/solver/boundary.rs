@@ -60,6 +60,17 @@ impl FluidSolver {
             for &idx in &self.faces[c].dropped {
                 self.u[c][idx as usize] = 0.0;
             }
+            self.cut_closed[c].clear();
+            if let Some(cut) = self.grid.cut_fractions() {
+                let closed = self.faces[c]
+                    .active
+                    .iter()
+                    .filter(|&&idx| cut.face[c][idx as usize] == 0.0);
+                self.cut_closed[c].extend(closed);
+                for &idx in &self.cut_closed[c] {
+                    self.u[c][idx as usize] = 0.0;
+                }
+            }
         }
         self.find_outflow_faces();
         let [f0, f1, f2] = &self.faces;

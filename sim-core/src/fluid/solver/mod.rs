@@ -23,6 +23,8 @@ use super::FluidError;
 
 mod advect;
 mod boundary;
+#[cfg(test)]
+mod cut_tests;
 mod params;
 mod projection;
 mod sampling;
@@ -85,6 +87,9 @@ pub struct FluidSolver {
     /// Padded (level 0) index of the upper cell of the first face of each active run
     /// (`FaceSet::runs`), for the pressure-gradient update.
     run_cells: [Vec<u32>; 3],
+    /// Active faces (full indices) whose open area fraction is 0: walls between two cut fluid
+    /// cells, held at zero velocity.
+    cut_closed: [Vec<u32>; 3],
     /// Open-cell x range of every cell row (scratch of the topology rebuild).
     open_rows: Vec<[u32; 2]>,
     /// The cells whose centred velocity can be non-zero (None on a periodic grid: all of them).
@@ -129,6 +134,7 @@ impl FluidSolver {
             lagged_applied: false,
             pressure_from_step: false,
             run_cells: Default::default(),
+            cut_closed: Default::default(),
             open_rows: Vec::new(),
             centred_rows,
             label_diff: topology::LabelDiff::default(),

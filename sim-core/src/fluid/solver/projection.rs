@@ -3,7 +3,7 @@
 //! from the labels after a relabelling.
 
 use super::super::grid::FluidGrid;
-use super::super::multigrid::{for_spans, max_abs_spans, L_FLUID, L_OPEN, L_SOLID};
+use super::super::multigrid::{for_spans, max_abs_spans, Level, L_FLUID, L_OPEN, L_SOLID};
 use super::super::pressure::PressureSolver;
 use super::super::CellLabel;
 use super::{FluidSolver, StepStats};
@@ -30,6 +30,7 @@ pub(super) fn build_pressure_levels(
         _ => L_SOLID,
     });
     l0.build_in_extents();
+    set_cut_couplings(grid, l0);
     // The pressure is zero outside the fluid cells, so only the previous spans can hold stale
     // values.
     let len = l0.mask.len();
@@ -52,6 +53,70 @@ pub(super) fn build_pressure_levels(
     pressure.resize();
 }
 
+/// Level 0's face couplings from the grid's cut fractions (the open area fraction of every face
+/// between a fluid cell and a fluid or open one) and the diagonal their sum; without cut cells
+/// the couplings stay empty (unit, the unweighted kernels).
+fn set_cut_couplings(grid: &FluidGrid, l0: &mut Level) {
+    let Some(cut) = grid.cut_fractions() else {
+        for w in &mut l0.wt {
+            w.clear();
+        }
+        return;
+    };
+    let len = l0.mask.len();
+    for w in &mut l0.wt {
+        w.clear();
+        w.resize(len, 0.0);
+    }
+    let dims = grid.dims();
+    let periodic = grid.periodic();
+    let fdims: [[usize; 3]; 3] = std::array::from_fn(|a| {
+        let mut d = dims;
+        d[a] += usize::from(!periodic[a]);
+        d
+    });
+    let face = |a: usize, f: [usize; 3]| {
+        let d = fdims[a];
+        cut.face[a][f[0] + d[0] * (f[1] + d[1] * f[2])]
+    };
+    let label = &l0.label;
+    for &[j, k, i0, i1] in &l0.row_spans {
+        let (j, k) = (j as usize, k as usize);
+        for i in i0 as usize..i1 as usize {
+            let c = [i, j, k];
+            if label[grid.index(c)] != L_FLUID {
+                continue;
+            }
+            let p = l0.pad(i, j, k);
+            for a in 0..3 {
+                // The +a face, stored at the cell; the -a face to an open cell, at the open cell
+                // (a fluid one stores it itself).
+                if let Some(g) = grid.neighbour(c, a, 1) {
+                    if label[grid.index(g)] != L_SOLID {
+                        let mut f = c;
+                        f[a] = if c[a] + 1 == dims[a] { 0 } else { c[a] + 1 };
+                        l0.wt[a][p] = face(a, f);
+                    }
+                }
+                if let Some(g) = grid.neighbour(c, a, -1) {
+                    if label[grid.index(g)] == L_OPEN {
+                        let pg = l0.pad(g[0], g[1], g[2]);
+                        l0.wt[a][pg] = face(a, c);
+                    }
+                }
+            }
+        }
+    }
+    if l0.periodic.iter().any(|&p| p) {
+        let mut wt = std::mem::take(&mut l0.wt);
+        for w in &mut wt {
+            l0.halo(w);
+        }
+        l0.wt = wt;
+    }
+    l0.diagonal_from_couplings();
+}
+
 impl FluidSolver {
     /// The solver's scaled pressure `dq = to_q pressure_pa` on the fluid spans of level 0.
     pub(super) fn pressure_to_dq(&mut self, to_q: f64) {
@@ -72,6 +137,9 @@ impl FluidSolver {
     /// solver's right-hand side, with the incompatible mean of closed regions removed; returns the
     /// largest mean removed (m/s). Row by row: each row's faces are contiguous in every component.
     pub(super) fn divergence_rhs(&mut self) -> f64 {
+        if self.grid.cut_fractions().is_some() {
+            return self.divergence_rhs_cut();
+        }
         let ps = &mut self.pressure;
         let l0 = &ps.mg.levels[0];
         let [nx, ny, nz] = self.grid.dims();
@@ -136,6 +204,43 @@ impl FluidSolver {
         ps.regions.remove_closed_means_dense(&mut ps.bd)
     }
 
+    /// [`FluidSolver::divergence_rhs`] with cut cells: `-sum A_f u_f` over each fluid cell's faces
+    /// (`h^2` times the flux out of the cell's fluid part, `A_f` the open area fraction).
+    fn divergence_rhs_cut(&mut self) -> f64 {
+        let ps = &mut self.pressure;
+        let l0 = &ps.mg.levels[0];
+        let Some(cut) = self.grid.cut_fractions() else {
+            return 0.0;
+        };
+        let dims = self.grid.dims();
+        let layout = &self.layout;
+        for &[j, k, i0, i1] in &l0.row_spans {
+            let (j, k) = (j as usize, k as usize);
+            for i in i0 as usize..i1 as usize {
+                let p = l0.pad(i, j, k);
+                if l0.mask[p] == 0.0 {
+                    ps.bd[p] = 0.0;
+                    continue;
+                }
+                let c = [i, j, k];
+                let mut flux = 0.0f64;
+                for a in 0..3 {
+                    let mut up = c;
+                    up[a] = if c[a] + 1 == dims[a] && layout.periodic[a] {
+                        0
+                    } else {
+                        c[a] + 1
+                    };
+                    let (fl, fu) = (layout.face_index(a, c), layout.face_index(a, up));
+                    flux += cut.face[a][fu] as f64 * self.u[a][fu] as f64
+                        - cut.face[a][fl] as f64 * self.u[a][fl] as f64;
+                }
+                ps.bd[p] = -flux;
+            }
+        }
+        ps.regions.remove_closed_means_dense(&mut ps.bd)
+    }
+
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
     pub(super) fn max_divergence_m_s(&self) -> f64 {
         max_abs_spans(&self.pressure.mg.levels[0], &self.pressure.bd)
@@ -170,6 +275,10 @@ impl FluidSolver {
                 crate::fork_join::join(|| kernel(ra, ca, a, 0), || kernel(rb, cb, b, mid));
             } else {
                 kernel(runs, cells, &mut self.u[c], 0);
+            }
+            // A face with no open area is a wall: the pressure does not act there.
+            for &idx in &self.cut_closed[c] {
+                self.u[c][idx as usize] = 0.0;
             }
         }
     }

@@ -1,0 +1,258 @@
+//! Curved regions of a case file: spheres and cylinders (any axis, capped ends) with cut-cell
+//! boundaries. With at least one curved region, the grid's background and every fluid or solid
+//! region (boxes too, as closed box surfaces) are layers of the cutcell module in file order,
+//! each making what it encloses fluid or solid over what lies below; a cell is fluid where its
+//! stabilised volume fraction (small cells merged, `SmallCellParams::default`) is above zero, and
+//! the grid carries the fractions. Velocity and outflow regions stay boxes, labelled after.
+//! Without curved regions nothing is cut (the labels of today).
+
+use serde::{Deserialize, Serialize};
+
+use super::{CellLabel, CutFractions, FluidError, FluidGrid};
+use crate::cutcell::mesh::ClosedMesh;
+use crate::cutcell::shapes::{self, Tessellation};
+use crate::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
+use crate::scene::voxelize::VoxelBox;
+
+/// A bad value: the dotted key, the value and what was expected (a `CaseError::Invalid`).
+#[derive(Debug)]
+pub(crate) struct Invalid {
+    pub key: String,
+    pub value: String,
+    pub problem: String,
+}
+
+fn invalid(key: impl Into<String>, value: impl std::fmt::Debug, problem: &str) -> Invalid {
+    Invalid {
+        key: key.into(),
+        value: format!("{value:?}"),
+        problem: problem.into(),
+    }
+}
+
+fn solver(e: FluidError) -> Invalid {
+    invalid("region", "", &e.to_string())
+}
+
+/// `[[region]]`: a box (cells whose centres lie in `[min_m, max_m]` get the label), or a curved
+/// shape with cut-cell boundaries (`shape = "sphere"` or `"cylinder"`, fluid or solid only; see
+/// `case_regions.rs`).
+#[derive(Clone, Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegionSpec {
+    /// `box` (default), `sphere` or `cylinder`.
+    pub shape: Option<String>,
+    /// `fluid`, `solid`, `velocity` or `outflow` (curved shapes: `fluid` or `solid`).
+    pub label: String,
+    /// Lower corner of a box (m).
+    pub min_m: Option<[f64; 3]>,
+    /// Upper corner of a box (m).
+    pub max_m: Option<[f64; 3]>,
+    /// Centre of a sphere or cylinder (m).
+    pub centre_m: Option<[f64; 3]>,
+    /// Radius of a sphere or cylinder (m).
+    pub radius_m: Option<f64>,
+    /// Axis direction of a cylinder (any non-zero vector).
+    pub axis: Option<[f64; 3]>,
+    /// Length of a cylinder along its axis, ends capped (m).
+    pub length_m: Option<f64>,
+    /// Velocity of `velocity` cells (m/s).
+    pub velocity_m_s: Option<[f64; 3]>,
+}
+
+/// The label of a region's `label` key.
+pub(super) fn parse_label(s: &str) -> Option<CellLabel> {
+    [
+        CellLabel::Fluid,
+        CellLabel::Solid,
+        CellLabel::Velocity,
+        CellLabel::Outflow,
+    ]
+    .into_iter()
+    .find(|l| l.name() == s)
+}
+
+/// Whether region `i` is a box (`true`; its box keys are checked by the caller) or a valid curved
+/// shape (`false`).
+pub(super) fn validate_shape(i: usize, r: &RegionSpec, label: CellLabel) -> Result<bool, Invalid> {
+    let key = |k: &str| format!("region[{i}].{k}");
+    let shape = r.shape.as_deref().unwrap_or("box");
+    let curved_keys = [
+        ("centre_m", r.centre_m.is_some()),
+        ("radius_m", r.radius_m.is_some()),
+        ("axis", r.axis.is_some()),
+        ("length_m", r.length_m.is_some()),
+    ];
+    let absent = |keys: &[(&str, bool)], why: &str| {
+        keys.iter()
+            .find(|(_, set)| *set)
+            .map_or(Ok(()), |(k, _)| Err(invalid(key(k), "given", why)))
+    };
+    match shape {
+        "box" => {
+            absent(&curved_keys, "only for shape sphere or cylinder")?;
+            Ok(true)
+        }
+        "sphere" | "cylinder" => {
+            if !matches!(label, CellLabel::Fluid | CellLabel::Solid) {
+                return Err(invalid(
+                    key("label"),
+                    &r.label,
+                    "a curved region is fluid or solid (ports stay boxes)",
+                ));
+            }
+            absent(
+                &[
+                    ("min_m", r.min_m.is_some()),
+                    ("max_m", r.max_m.is_some()),
+                    ("velocity_m_s", r.velocity_m_s.is_some()),
+                ],
+                "only for shape box",
+            )?;
+            let c = r
+                .centre_m
+                .ok_or_else(|| invalid(key("centre_m"), "missing", "required"))?;
+            if !c.iter().all(|x| x.is_finite()) {
+                return Err(invalid(key("centre_m"), c, "expected three finite numbers"));
+            }
+            let positive = |k: &str, v: Option<f64>| match v {
+                Some(x) if x.is_finite() && x > 0.0 => Ok(()),
+                Some(x) => Err(invalid(key(k), x, "expected a finite length > 0")),
+                None => Err(invalid(key(k), "missing", "required")),
+            };
+            positive("radius_m", r.radius_m)?;
+            if shape == "cylinder" {
+                positive("length_m", r.length_m)?;
+                let a = r
+                    .axis
+                    .ok_or_else(|| invalid(key("axis"), "missing", "required"))?;
+                let n2: f64 = a.iter().map(|x| x * x).sum();
+                if !(n2.is_finite() && n2 > 0.0) {
+                    return Err(invalid(
+                        key("axis"),
+                        a,
+                        "expected a finite non-zero direction",
+                    ));
+                }
+            } else {
+                absent(
+                    &[
+                        ("axis", r.axis.is_some()),
+                        ("length_m", r.length_m.is_some()),
+                    ],
+                    "only for shape cylinder",
+                )?;
+            }
+            Ok(false)
+        }
+        other => Err(invalid(
+            key("shape"),
+            other,
+            "expected box, sphere or cylinder",
+        )),
+    }
+}
+
+/// The grid's background phase.
+pub(super) fn background(name: Option<&str>) -> Result<Phase, Invalid> {
+    match name.unwrap_or("fluid") {
+        "fluid" => Ok(Phase::Fluid),
+        "solid" => Ok(Phase::Solid),
+        other => Err(invalid("grid.background", other, "expected fluid or solid")),
+    }
+}
+
+/// The closed surface of a fluid or solid region (a box's six faces, or the tessellated shape).
+fn surface(i: usize, r: &RegionSpec, h: f64) -> Result<ClosedMesh, Invalid> {
+    let fail =
+        |e: crate::cutcell::mesh::MeshError| invalid(format!("region[{i}]"), "", &e.to_string());
+    let t = Tessellation::for_spacing(h);
+    match r.shape.as_deref().unwrap_or("box") {
+        "sphere" => shapes::sphere(r.centre_m.unwrap_or_default(), r.radius_m.unwrap_or(0.0), t)
+            .map_err(fail),
+        "cylinder" => shapes::cylinder(
+            r.centre_m.unwrap_or_default(),
+            r.axis.unwrap_or_default(),
+            r.radius_m.unwrap_or(0.0),
+            r.length_m.unwrap_or(0.0),
+            t,
+        )
+        .map_err(fail),
+        _ => {
+            let (lo, hi) = (r.min_m.unwrap_or_default(), r.max_m.unwrap_or_default());
+            let corners = std::array::from_fn(|v| {
+                std::array::from_fn(|a| if v >> a & 1 == 1 { hi[a] } else { lo[a] })
+            });
+            shapes::hexahedron(&format!("region[{i}]"), corners).map_err(fail)
+        }
+    }
+}
+
+/// Labels and cut fractions of the case's fluid and solid regions when one is curved (returns
+/// `true`: the caller then labels only the velocity and outflow boxes); otherwise only a solid
+/// background is applied (returns `false`).
+pub(super) fn apply_cut_regions(
+    background_name: Option<&str>,
+    regions: &[RegionSpec],
+    grid: &mut FluidGrid,
+) -> Result<bool, Invalid> {
+    let phase = background(background_name)?;
+    let curved = regions
+        .iter()
+        .any(|r| !matches!(r.shape.as_deref(), None | Some("box")));
+    let (dims, h, origin) = (grid.dims(), grid.spacing_m(), grid.origin_m());
+    if !curved {
+        if phase == Phase::Solid {
+            let top = std::array::from_fn(|a| origin[a] + dims[a] as f64 * h);
+            grid.fill_box(origin, top, CellLabel::Solid, [0.0; 3]);
+        }
+        return Ok(false);
+    }
+    let mut layers = Vec::new();
+    let mut meshes = Vec::new();
+    for (i, r) in regions.iter().enumerate() {
+        let inside = match parse_label(&r.label) {
+            Some(CellLabel::Fluid) => Phase::Fluid,
+            Some(CellLabel::Solid) => Phase::Solid,
+            _ => continue,
+        };
+        let mesh = surface(i, r, h)?;
+        layers.push(Layer {
+            name: format!("region[{i}]"),
+            triangles: mesh.triangles().to_vec(),
+            vertex_count: mesh.positions_m().len(),
+            orientation: Orientation::Outward,
+            inside,
+        });
+        meshes.push(mesh);
+    }
+    let cells = VoxelBox {
+        dims,
+        origin_m: origin,
+        spacing_m: h,
+    };
+    let fail = |e: crate::cutcell::CutCellError| invalid("region", "", &e.to_string());
+    let mut cut = CutCells::new(cells, phase, layers, SmallCellParams::default()).map_err(fail)?;
+    let positions: Vec<&[[f32; 3]]> = meshes.iter().map(|m| m.positions_m()).collect();
+    cut.full(&positions).map_err(fail)?;
+    let volume: Vec<f32> = cut
+        .stabilised_volume_fractions()
+        .iter()
+        .map(|&v| v as f32)
+        .collect();
+    let periodic = grid.periodic();
+    let face = std::array::from_fn(|a| {
+        CutFractions::face_from_box(dims, periodic, a, cut.stabilised_face_fractions(a))
+    });
+    for (n, &v) in volume.iter().enumerate() {
+        let label = if v > 0.0 {
+            CellLabel::Fluid
+        } else {
+            CellLabel::Solid
+        };
+        grid.set_label(grid.coords(n), label).map_err(solver)?;
+    }
+    grid.set_cut_fractions(CutFractions { volume, face })
+        .map_err(solver)?;
+    Ok(true)
+}
