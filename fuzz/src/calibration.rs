@@ -32,7 +32,7 @@ pub fn check(data: &[u8]) {
             match e {
                 CalibrationError::Parse { .. } => {
                     assert!(
-                        crate::names_a_line(&msg),
+                        crate::position::names_a_line(&msg),
                         "parse error without a line: {msg}"
                     )
                 }

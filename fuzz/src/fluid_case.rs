@@ -21,7 +21,7 @@ pub fn check(data: &[u8]) {
             let msg = e.to_string();
             assert!(msg.starts_with("case file: "), "{msg}");
             let located = match &e {
-                CaseError::Parse(_) => crate::names_a_line(&msg),
+                CaseError::Parse(_) => crate::position::names_a_line(&msg),
                 CaseError::Invalid { key, .. } => msg.contains(&format!("`{key}` = ")),
                 CaseError::Solver(_) => msg.contains('`') || msg.contains(" = "),
             };

@@ -11,6 +11,7 @@ pub mod atlas;
 pub mod calibration;
 pub mod control;
 pub mod fluid_case;
+pub mod position;
 pub mod recording;
 pub mod scenario;
 pub mod scene;
@@ -130,12 +131,4 @@ pub fn run(target: &Target, data: &[u8]) {
         target.name,
         data.len()
     );
-}
-
-/// Whether an error message gives a TOML position (`line N`).
-pub fn names_a_line(message: &str) -> bool {
-    message
-        .split("line ")
-        .skip(1)
-        .any(|rest| rest.starts_with(|c: char| c.is_ascii_digit()))
 }

@@ -26,7 +26,7 @@ pub fn check(data: &[u8]) {
             let msg = e.to_string();
             assert!(msg.starts_with(&format!("{ORIGIN}: ")), "{msg}");
             assert!(
-                crate::names_a_line(&msg) || msg.contains('`'),
+                crate::position::names_a_line(&msg) || msg.contains('`'),
                 "error names neither a line nor a key: {msg}"
             );
         }

@@ -9,11 +9,6 @@ use serde::{Deserialize, Serialize};
 use super::params::DeficitParams;
 use crate::units::{ml_per_min_to_m3_per_s, ml_to_m3, mmhg_to_pa};
 
-/// The most warning stages `deficit.warning_fractions` may configure: the status publishes one
-/// alarm bit per stage (docs/ipc.md, "Alarm bits"), and a stage without a bit would be an alarm no
-/// renderer sees.
-pub const MAX_WARNING_STAGES: usize = 3;
-
 /// The monitor's state; also what the procedure record persists.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, Default)]
 pub struct DeficitStatus {

@@ -38,12 +38,12 @@ pub use circuit::{Circuit, Flows};
 pub use compliance::{
     AnalyticCompliance, CavityCompliance, ComplianceError, LinearCompliance, TabulatedCompliance,
 };
-pub use deficit::{DeficitMonitor, DeficitStatus, MAX_WARNING_STAGES};
+pub use deficit::{DeficitMonitor, DeficitStatus};
 pub use model::{HydraulicCounters, HydraulicInputs, HydraulicModel, HydraulicState};
 pub use params::{
     conductance_si, AbsorptionParams, CavityParams, CervixParams, DeficitLimit, DeficitParams,
     HydraulicParams, InflowParams, LineParams, OutflowParams, ParamsError, PerforationParams,
-    PumpParams,
+    PumpParams, MAX_WARNING_STAGES,
 };
 pub use procedure::{CumulativeVolumes, ProcedureInfo};
 pub use record::{

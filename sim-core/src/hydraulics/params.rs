@@ -9,9 +9,13 @@ use std::path::Path;
 use serde::{Deserialize, Serialize};
 
 use super::compliance::AnalyticCompliance;
-use super::deficit::MAX_WARNING_STAGES;
 use super::valve::ValveCurve;
 use crate::units::{ml_per_min_to_m3_per_s, ml_to_m3, mmhg_to_pa, PA_PER_MMHG};
+
+/// The most warning stages `deficit.warning_fractions` may configure: the status publishes one
+/// alarm bit per stage (docs/ipc.md, "Alarm bits"), and a stage without a bit would be an alarm no
+/// renderer sees.
+pub const MAX_WARNING_STAGES: usize = 3;
 
 /// Errors loading or validating [`HydraulicParams`].
 #[derive(Debug, thiserror::Error)]
