@@ -625,13 +625,7 @@ fn bench(a: &BenchArgs) -> Result<()> {
     let dt = 1.0 / a.rate_hz;
     let mut rows = Vec::new();
     for &v in &a.voxels_mm {
-        let mut desc = base.clone();
-        desc.fluid.voxel_mm = v;
-        if let Some(c) = a.max_cfl {
-            desc.fluid.max_cfl = c;
-        }
-        desc.stages.vortices = false;
-        desc.validate()?;
+        let desc = bench_desc(&base, a, v)?;
         // Overlay vortices leave the solver's state alone: the run with them times the fluid
         // step without them too (like for like, the same steps). Injected ones change the
         // state: a baseline scene without and a second scene with them, their steps alternating.
@@ -891,6 +885,19 @@ fn fork_join_run(desc: SceneDesc, assets: &SceneAssets, a: &BenchArgs) -> Result
 
 /// `scene bench --fork-join`: the fork-joins like for like on the real scene (module doc of
 /// `sim-core/src/fork_join.rs`), quiet or beside `--load-threads` busy threads.
+/// The benchmark's scene at voxel size `voxel_mm`: the base with `--max-cfl` applied and its own
+/// vortices off (the benchmark adds its own).
+fn bench_desc(base: &SceneDesc, a: &BenchArgs, voxel_mm: f64) -> Result<SceneDesc> {
+    let mut desc = base.clone();
+    desc.fluid.voxel_mm = voxel_mm;
+    if let Some(c) = a.max_cfl {
+        desc.fluid.max_cfl = c;
+    }
+    desc.stages.vortices = false;
+    desc.validate()?;
+    Ok(desc)
+}
+
 fn fork_join_bench(a: &BenchArgs, base: &SceneDesc, assets: &SceneAssets) -> Result<()> {
     if a.repeats == 0 || a.steps == 0 {
         bail!("--repeats and --steps must be at least 1");
@@ -898,13 +905,7 @@ fn fork_join_bench(a: &BenchArgs, base: &SceneDesc, assets: &SceneAssets) -> Res
     let load = BusyThreads::start(a.load_threads).context("starting the load threads")?;
     let mut rows = Vec::new();
     for &v in &a.voxels_mm {
-        let mut desc = base.clone();
-        desc.fluid.voxel_mm = v;
-        if let Some(c) = a.max_cfl {
-            desc.fluid.max_cfl = c;
-        }
-        desc.stages.vortices = false;
-        desc.validate()?;
+        let mut desc = bench_desc(base, a, v)?;
         if a.vortices > 0 {
             desc = with_vortices(desc, a.vortices, a.vortex_mode)?;
         }

@@ -18,7 +18,7 @@ use hydrometra_ipc::{alarms, Status};
 /// borrowed sample of each once it printed `holding`.
 ///
 /// A renderer started right after another was SIGKILLed can find a service missing while
-/// iceoryx2 removes the dead one's node (seen once in 1,000 opens on a loaded machine): like any
+/// iceoryx2 removes the dead one's node (seen once in a run of 100 renderers on a loaded machine): like any
 /// renderer (docs/ipc.md) it opens again, at most [`OPEN_ATTEMPTS`] times.
 fn holding_renderer(prefix: &str, read: bool) -> Child {
     let mut last = String::new();
