@@ -4,6 +4,7 @@
 
 use std::time::{Duration, Instant};
 
+use hydrometra_hil_tests::steal::HostSteal;
 use hydrometra_hil_tests::{unique_prefix, Daemon, StatusReader};
 use hydrometra_ipc::mesh::MeshPositionsHeader;
 use hydrometra_ipc::status::{realtime_mode, scene_state};
@@ -17,6 +18,10 @@ const MEASURED_S: u64 = 60;
 /// <= 5 ms on the slower 2-core machine).
 const MAX_MISS_SHARE: f64 = 0.001;
 const MAX_GAP_S: f64 = 0.005;
+
+/// The targets are judged on the stretches in which the hypervisor took no CPU time from the
+/// machine (`hydrometra_hil_tests::steal`); at least this share of the ticks must be left.
+const MIN_JUDGED_SHARE: f64 = 0.5;
 
 #[test]
 fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_republished() {
@@ -38,6 +43,7 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         .expect("positions subscriber");
     let mut frames: Vec<MeshPositionsHeader> = Vec::new();
     let mut statuses = Vec::new();
+    let steal = HostSteal::start();
     let started = Instant::now();
     while started.elapsed() < Duration::from_secs(MEASURED_S) {
         statuses.extend(reader.drain());
@@ -50,24 +56,43 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
     let (first, last) = (statuses[0], *statuses.last().expect("statuses"));
     let ticks = last.ticks - first.ticks;
     let misses = last.deadline_misses - first.deadline_misses;
-    // The gap between consecutive statuses, where the subscriber has both (it reads every 2 ms
-    // into a 64-deep buffer: a gap in its own reading is not the daemon's).
-    let pairs: Vec<f64> = statuses
+    // Each pair of consecutive statuses (where the subscriber has both: it reads every 2 ms into a
+    // 64-deep buffer, a gap in its own reading is not the daemon's): its gap, ticks and misses,
+    // judged where the host took nothing.
+    let pairs: Vec<_> = statuses
         .windows(2)
         .filter(|w| w[1].sequence == w[0].sequence + 1)
-        .map(|w| (w[1].publish_monotonic_ns - w[0].publish_monotonic_ns) as f64 * 1e-9)
+        .map(|w| {
+            let (a, b) = (w[0].publish_monotonic_ns, w[1].publish_monotonic_ns);
+            let gap_s = (b - a) as f64 * 1e-9;
+            let d = (
+                w[1].ticks - w[0].ticks,
+                w[1].deadline_misses - w[0].deadline_misses,
+            );
+            (gap_s, d, steal.stolen_between(a, b))
+        })
         .collect();
-    let gap_max_s = pairs.iter().copied().fold(0.0, f64::max);
+    let judged: Vec<_> = pairs.iter().filter(|p| !p.2).collect();
+    let gap_max_s = judged.iter().map(|p| p.0).fold(0.0, f64::max);
+    let (judged_ticks, judged_misses) = judged
+        .iter()
+        .fold((0u64, 0u64), |acc, p| (acc.0 + p.1 .0, acc.1 + p.1 .1));
+    let gap_all_s = pairs.iter().map(|p| p.0).fold(0.0, f64::max);
     let late = last.scene_frames_late - first.scene_frames_late;
     eprintln!(
         "{MEASURED_S} s under the `bleed` scene ({}): ticks {ticks}, deadline misses {misses} \
          ({:.4} %), longest gap between statuses {:.3} ms over {} consecutive pairs of {} \
-         statuses; scene frames {}, late {late}, degradation level {}, particles stage runs {}",
+         statuses; the host took {:.2} s of CPU from the machine, judged where it took nothing: \
+         {judged_ticks} ticks, {judged_misses} misses ({:.4} %), longest gap {:.3} ms; scene \
+         frames {}, late {late}, degradation level {}, particles stage runs {}",
         realtime_mode::name(last.realtime_mode),
         100.0 * misses as f64 / ticks as f64,
-        gap_max_s * 1e3,
+        gap_all_s * 1e3,
         pairs.len(),
         statuses.len(),
+        steal.stolen_s(),
+        100.0 * judged_misses as f64 / judged_ticks.max(1) as f64,
+        gap_max_s * 1e3,
         last.scene_frames - first.scene_frames,
         last.scene_degradation,
         last.scene_stage_runs[6] - first.scene_stage_runs[6],
@@ -83,13 +108,19 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         "{ticks} ticks in {MEASURED_S} s"
     );
     assert!(
-        misses as f64 <= MAX_MISS_SHARE * ticks as f64,
-        "deadline misses {misses} of {ticks} ticks:\n{}",
+        judged_ticks as f64 >= MIN_JUDGED_SHARE * ticks as f64,
+        "the host took CPU time from the machine ({:.2} s) in all but {judged_ticks} of {ticks} \
+         ticks: too little left to judge the daemon",
+        steal.stolen_s()
+    );
+    assert!(
+        judged_misses as f64 <= MAX_MISS_SHARE * judged_ticks as f64,
+        "deadline misses {judged_misses} of {judged_ticks} ticks while the host took nothing:\n{}",
         daemon.log()
     );
     assert!(
         gap_max_s <= MAX_GAP_S,
-        "two statuses {:.3} ms apart:\n{}",
+        "two statuses {:.3} ms apart while the host took nothing:\n{}",
         gap_max_s * 1e3,
         daemon.log()
     );

@@ -217,6 +217,9 @@ pub struct LoopConfig {
     pub isolate_realtime_cpu: bool,
     /// That CPU (default: the last one the process may use).
     pub realtime_cpu: Option<usize>,
+    /// Keep that CPU from halting while the loop sleeps (a `SCHED_IDLE` thread polls on it), so
+    /// its timer wakes the loop on time on a virtual machine (docs/daemon.md).
+    pub keep_realtime_cpu_awake: bool,
 }
 
 impl Default for LoopConfig {
@@ -229,6 +232,7 @@ impl Default for LoopConfig {
             fallback_nice: -10,
             isolate_realtime_cpu: true,
             realtime_cpu: None,
+            keep_realtime_cpu_awake: true,
         }
     }
 }

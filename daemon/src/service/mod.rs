@@ -460,6 +460,12 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     // blocking threads) runs with the rest.
     placement.enter_rest("main");
     placement.report(realtime_mode);
+    // The supervisor says when to poll; stopped when `run` returns (after the loop has stopped).
+    let keep_awake = if loop_config.keep_realtime_cpu_awake {
+        placement.keep_realtime_cpu_awake()
+    } else {
+        None
+    };
     telemetry
         .realtime_mode
         .store(realtime_mode as u64, Ordering::Relaxed);
@@ -534,6 +540,8 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         feed: &feed,
         scene_thread: scene_thread.as_ref(),
         control_thread: control_thread.as_ref(),
+        keep_awake: keep_awake.as_ref(),
+        safe_state_timeout: Duration::from_millis(config.rig.safe_state_timeout_ms),
         started,
         duration,
     };
@@ -600,6 +608,16 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
     Ok(s)
 }
 
+/// Whether a procedure is live, so the real-time CPU is kept awake ([`realtime::KeepAwake`]):
+/// a valve is open on a fresh sample, or the scene has work (running, not idle at rest). At rest
+/// (valves closed, the scene idle or absent) the core may sleep.
+fn procedure_is_live(inputs: &sim::SimInputs, scene_state: Option<u64>) -> bool {
+    use hydrometra_ipc::status::scene_state::RUNNING;
+    let valve_open =
+        !inputs.safe_state && (inputs.valve_in_opening > 0.0 || inputs.valve_out_opening > 0.0);
+    valve_open || scene_state == Some(RUNNING)
+}
+
 /// The periodic checks of the control plane: the threads, the duration, the systemd watchdog,
 /// dead renderers' resources and the periodic log line.
 struct Supervisor<'a> {
@@ -617,6 +635,8 @@ struct Supervisor<'a> {
     feed: &'a scene::SceneFeed,
     scene_thread: Option<&'a scene::SceneThread>,
     control_thread: Option<&'a control::ControlThread>,
+    keep_awake: Option<&'a realtime::KeepAwake>,
+    safe_state_timeout: Duration,
     started: Instant,
     duration: Option<Duration>,
 }
@@ -625,6 +645,16 @@ impl Supervisor<'_> {
     /// One round of checks; false when the daemon must stop.
     fn tick(&mut self) -> bool {
         self.link_reason.update(&self.rig.source());
+        if let Some(awake) = self.keep_awake {
+            let view = self.rig.source().view();
+            let live = procedure_is_live(
+                &sim::inputs_from(&view, self.safe_state_timeout),
+                self.scene_thread.map(|_| self.feed.figures.state()),
+            );
+            if awake.set_wanted(live) {
+                tracing::debug!(live, "real-time CPU kept awake: {live}");
+            }
+        }
         if self.duration.is_some_and(|d| self.started.elapsed() >= d) {
             return false;
         }
@@ -691,5 +721,43 @@ impl Supervisor<'_> {
             ));
         }
         true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hydrometra_ipc::status::scene_state;
+
+    #[test]
+    fn the_procedure_is_live_with_a_valve_open_or_the_scene_at_work_and_at_rest_otherwise() {
+        let rest = sim::SimInputs {
+            valve_in_opening: 0.0,
+            valve_out_opening: 0.0,
+            pump_set_pressure_pa: 12_000.0,
+            scope: sim::INITIAL_SCOPE,
+            safe_state: false,
+            sample_received_at: None,
+        };
+        let inflow = sim::SimInputs {
+            valve_in_opening: 0.3,
+            ..rest
+        };
+        let outflow = sim::SimInputs {
+            valve_out_opening: 0.3,
+            ..rest
+        };
+        let safe = sim::SimInputs {
+            safe_state: true,
+            ..inflow
+        };
+        assert!(!procedure_is_live(&rest, None));
+        assert!(!procedure_is_live(&rest, Some(scene_state::IDLE)));
+        assert!(!procedure_is_live(&rest, Some(scene_state::PREPARING)));
+        assert!(procedure_is_live(&rest, Some(scene_state::RUNNING)));
+        assert!(procedure_is_live(&inflow, None));
+        assert!(procedure_is_live(&outflow, Some(scene_state::IDLE)));
+        // A stale or lost link closes the valves (safe state): at rest.
+        assert!(!procedure_is_live(&safe, None));
     }
 }

@@ -21,6 +21,8 @@
 //! and the loop, [`Placement::enter_rest`] before anything else).
 
 use std::fmt;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// What the real-time side got from the system.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -116,6 +118,45 @@ pub struct Placement {
     fallback_nice: i32,
 }
 
+/// A thread that keeps the real-time CPU busy while nothing else wants it, so the CPU never halts
+/// between ticks ([`Placement::keep_realtime_cpu_awake`]). It polls only while
+/// [`KeepAwake::set_wanted`] says so (a procedure is live) and sleeps otherwise; stopped and
+/// joined on drop.
+#[derive(Debug)]
+pub struct KeepAwake {
+    shared: Arc<KeepAwakeFlags>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+#[derive(Debug, Default)]
+struct KeepAwakeFlags {
+    wanted: AtomicBool,
+    stop: AtomicBool,
+}
+
+impl KeepAwake {
+    /// Polls (true) or lets the CPU sleep (false); returns whether this changed it.
+    pub fn set_wanted(&self, wanted: bool) -> bool {
+        let was = self.shared.wanted.swap(wanted, Ordering::Relaxed);
+        if wanted && !was {
+            if let Some(t) = &self.thread {
+                t.thread().unpark();
+            }
+        }
+        was != wanted
+    }
+}
+
+impl Drop for KeepAwake {
+    fn drop(&mut self) {
+        self.shared.stop.store(true, Ordering::Relaxed);
+        if let Some(thread) = self.thread.take() {
+            thread.thread().unpark();
+            let _ = thread.join();
+        }
+    }
+}
+
 /// Which CPU the real-time side gets from the CPUs the process may use: `wanted` if it is one of
 /// them, else the last one (CPU 0 takes most device interrupts on a typical PC). `None` with fewer
 /// than two CPUs (nothing to split).
@@ -199,6 +240,55 @@ impl Placement {
         set_current_thread_nice(0);
     }
 
+    /// Keeps the real-time CPU from halting while the loop sleeps: a thread on that CPU alone,
+    /// under `SCHED_IDLE`, that polls a flag while [`KeepAwake::set_wanted`] says so. `None`
+    /// without a CPU of its own (nothing to keep awake) or when the thread cannot be started
+    /// (logged).
+    ///
+    /// Why: a halted CPU is woken by its timer interrupt, and on a virtual machine that wake-up is
+    /// the hypervisor's. Traced on the 2-core KVM machines (ftrace `sched_wakeup` of `hm-sim`):
+    /// the loop's core idle, no event on it at all, and the timer's wake-up 1 to 4 ms late, about
+    /// a dozen times a minute, each one deadline misses and a gap in status. A running CPU is
+    /// interrupted on time. The poller gives way at once: every `SCHED_FIFO` thread preempts it
+    /// on wake-up, and under `SCHED_IDLE` any other thread of the machine does too (the kernel's
+    /// per-CPU workers, which the loop's pty relies on). It uses no `pause` hint: a pause loop
+    /// makes KVM deschedule the vCPU (pause-loop exiting), the very delay it avoids. The price is
+    /// that core's idle time while it polls, so the daemon polls only while a procedure is live
+    /// and lets the core sleep at rest (`loop.keep_realtime_cpu_awake = false`: never polls).
+    pub fn keep_realtime_cpu_awake(&self) -> Option<KeepAwake> {
+        let set = self.realtime_cpus?;
+        let shared = Arc::new(KeepAwakeFlags::default());
+        let flags = shared.clone();
+        let spawned = std::thread::Builder::new()
+            .name("hm-rt-awake".into())
+            .spawn(move || {
+                if let Err(e) = set.apply_to_current_thread() {
+                    tracing::warn!("the keep-awake thread cannot move to CPU {set:?}: {e}");
+                    return;
+                }
+                if let Err(e) = set_current_thread_idle_policy() {
+                    tracing::warn!("the keep-awake thread stops: {e}");
+                    return;
+                }
+                while !flags.stop.load(Ordering::Relaxed) {
+                    if flags.wanted.load(Ordering::Relaxed) {
+                        continue;
+                    }
+                    std::thread::park();
+                }
+            });
+        match spawned {
+            Ok(thread) => Some(KeepAwake {
+                shared,
+                thread: Some(thread),
+            }),
+            Err(e) => {
+                tracing::warn!("cannot start the keep-awake thread: {e}");
+                None
+            }
+        }
+    }
+
     /// Says once what the real-time side got, and how to get more.
     pub fn report(&self, mode: RealtimeMode) {
         let cpus = match (&self.realtime_cpus, &self.rest_cpus) {
@@ -272,6 +362,22 @@ pub fn set_current_thread_normal() -> Result<(), String> {
     }
 }
 
+/// Puts the calling thread under `SCHED_IDLE`: it runs only when no other thread wants its CPU
+/// (needs no privilege).
+fn set_current_thread_idle_policy() -> Result<(), String> {
+    let param = libc::sched_param { sched_priority: 0 };
+    // SAFETY: pthread_self() is the calling thread; `param` is a valid sched_param.
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_IDLE, &param) };
+    if rc == 0 {
+        Ok(())
+    } else {
+        Err(format!(
+            "cannot use SCHED_IDLE: {}",
+            std::io::Error::from_raw_os_error(rc)
+        ))
+    }
+}
+
 /// Sleeps until `CLOCK_MONOTONIC` reads `deadline_ns` (returns at once if it has passed). An
 /// absolute deadline needs no clock read before the sleep, and the wake-up does not drift by
 /// the time between such a read and the system call.
@@ -340,5 +446,76 @@ mod tests {
         assert!(!rest_of_child.contains(&rt), "{rest_of_child:?} holds {rt}");
         assert_eq!(rest_of_child.len(), allowed.len() - 1);
         assert_eq!(rt_of_child, vec![rt]);
+    }
+
+    /// The `stat` fields (from field 3, the state) of this process's threads named `name`.
+    fn threads_named(name: &str) -> Vec<Vec<String>> {
+        let mut out = Vec::new();
+        for task in std::fs::read_dir("/proc/self/task").unwrap().flatten() {
+            let comm = std::fs::read_to_string(task.path().join("comm")).unwrap_or_default();
+            if comm.trim() != name {
+                continue;
+            }
+            let stat = std::fs::read_to_string(task.path().join("stat")).unwrap_or_default();
+            let after = stat.rsplit_once(") ").map(|(_, r)| r).unwrap_or("");
+            out.push(after.split_whitespace().map(str::to_string).collect());
+        }
+        out
+    }
+
+    /// Waits up to 5 s for the one `hm-rt-awake` thread to be in `state` ("R" polling, "S"
+    /// parked) on CPU `cpu` under SCHED_IDLE.
+    fn wait_keep_awake(state: &str, cpu: usize) {
+        // Indices from field 3: processor is field 39, policy field 41.
+        let (processor, policy) = (39 - 3, 41 - 3);
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(5);
+        loop {
+            let threads = threads_named("hm-rt-awake");
+            if threads.len() == 1
+                && threads[0][0] == state
+                && threads[0][processor] == cpu.to_string()
+                && threads[0][policy] == libc::SCHED_IDLE.to_string()
+            {
+                return;
+            }
+            assert!(
+                std::time::Instant::now() < deadline,
+                "the keep-awake thread is not {state} on CPU {cpu} under SCHED_IDLE: {threads:?}"
+            );
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
+
+    #[test]
+    fn the_keep_awake_thread_polls_the_realtime_cpu_under_sched_idle_only_while_wanted_where_available(
+    ) {
+        let allowed = CpuSet::of_current_thread().unwrap().cpus();
+        if allowed.len() < 2 {
+            println!(
+                "SKIP the_keep_awake_thread_polls_the_realtime_cpu_under_sched_idle_only_while_wanted_where_available: one CPU"
+            );
+            return;
+        }
+        let rt = *allowed.last().unwrap();
+        assert!(
+            Placement::plan(false, None, 0, 0)
+                .keep_realtime_cpu_awake()
+                .is_none(),
+            "no CPU of its own: nothing to keep awake"
+        );
+        let awake = Placement::plan(true, None, 0, 0)
+            .keep_realtime_cpu_awake()
+            .expect("a CPU of its own");
+        wait_keep_awake("S", rt);
+        assert!(awake.set_wanted(true));
+        assert!(!awake.set_wanted(true), "no change");
+        wait_keep_awake("R", rt);
+        assert!(awake.set_wanted(false));
+        wait_keep_awake("S", rt);
+        drop(awake);
+        assert!(
+            threads_named("hm-rt-awake").is_empty(),
+            "still there after drop"
+        );
     }
 }
