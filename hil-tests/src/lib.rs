@@ -149,6 +149,19 @@ impl Daemon {
     /// `--scene` in `args` the daemon runs no scene (`--no-scene`: status and hydraulics only);
     /// with it, the scene's atlas comes from the shared test cache ([`shared_atlas_cache`]).
     pub fn start(prefix: &str, args: &[&str]) -> Daemon {
+        Daemon::spawn(prefix, args, false)
+    }
+
+    /// [`Daemon::start`] without the privilege of real-time scheduling: `CAP_SYS_NICE` dropped
+    /// from the child's capability bounding set (so root loses it at `execve`) and
+    /// `RLIMIT_RTPRIO` and `RLIMIT_NICE` set to 0, as for a user the systemd unit did not
+    /// start. Where the bounding set cannot be changed the child may keep the capability:
+    /// check the mode it reports.
+    pub fn start_unprivileged(prefix: &str, args: &[&str]) -> Daemon {
+        Daemon::spawn(prefix, args, true)
+    }
+
+    fn spawn(prefix: &str, args: &[&str], unprivileged: bool) -> Daemon {
         let log = temp_dir("daemon-log").join("hydrometrad.log");
         let log_file = std::fs::File::create(&log).expect("log file");
         let mut command = Command::new(binary("hydrometrad"));
@@ -161,6 +174,30 @@ impl Daemon {
             }
             None => {
                 command.arg("--no-scene");
+            }
+        }
+        if unprivileged {
+            use std::os::unix::process::CommandExt;
+            // SAFETY: the closure runs in the forked child before exec and only makes system
+            // calls (prctl, setrlimit), which are async-signal-safe; it touches no memory of the
+            // parent's other threads.
+            unsafe {
+                command.pre_exec(|| {
+                    // CAP_SYS_NICE (linux/capability.h; not in the libc crate). EPERM without
+                    // CAP_SETPCAP: the child keeps what it had.
+                    const CAP_SYS_NICE: libc::c_ulong = 23;
+                    libc::prctl(libc::PR_CAPBSET_DROP, CAP_SYS_NICE, 0, 0, 0);
+                    let none = libc::rlimit {
+                        rlim_cur: 0,
+                        rlim_max: 0,
+                    };
+                    if libc::setrlimit(libc::RLIMIT_RTPRIO, &none) != 0
+                        || libc::setrlimit(libc::RLIMIT_NICE, &none) != 0
+                    {
+                        return Err(std::io::Error::last_os_error());
+                    }
+                    Ok(())
+                });
             }
         }
         let child = command

@@ -140,3 +140,55 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         );
     }
 }
+
+/// Without the privilege (no `CAP_SYS_NICE`, `RLIMIT_RTPRIO` and `RLIMIT_NICE` 0) the daemon says
+/// once that it runs degraded and how to grant the privilege, publishes the mode in status, and
+/// runs the loop as before.
+#[test]
+fn without_the_privilege_the_daemon_states_the_degraded_mode_and_runs_on_where_available() {
+    let prefix = unique_prefix("rt-unpriv");
+    let daemon = Daemon::start_unprivileged(&prefix, &["--emulated", "default"]);
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(20));
+    let first = *reader
+        .until("a status", Duration::from_secs(20), |_| true)
+        .last()
+        .expect("a status");
+    if first.realtime_mode == realtime_mode::FIFO {
+        println!(
+            "SKIP without_the_privilege_the_daemon_states_the_degraded_mode_and_runs_on_where_available: \
+             the child kept CAP_SYS_NICE (no CAP_SETPCAP to drop it)"
+        );
+        return;
+    }
+    assert_eq!(
+        first.realtime_mode,
+        realtime_mode::NORMAL,
+        "no privilege: normal scheduling ({})",
+        realtime_mode::name(first.realtime_mode)
+    );
+    std::thread::sleep(Duration::from_secs(2));
+    let statuses = reader.drain();
+    let last = *statuses.last().expect("statuses");
+    assert!(
+        last.ticks - first.ticks >= 1_800,
+        "{} ticks in 2 s",
+        last.ticks - first.ticks
+    );
+    let log = daemon.log();
+    let stated: Vec<&str> = log
+        .lines()
+        .filter(|l| l.contains("degraded real-time mode"))
+        .collect();
+    assert_eq!(stated.len(), 1, "said once:\n{log}");
+    for needed in [
+        "SCHED_FIFO priority 10 refused",
+        "LimitRTPRIO=10",
+        "ulimit -r 10",
+    ] {
+        assert!(
+            stated[0].contains(needed),
+            "{needed:?} missing from: {}",
+            stated[0]
+        );
+    }
+}
