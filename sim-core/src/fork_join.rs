@@ -38,6 +38,25 @@
 //! them probes the helper again, and each probe that fails doubles the serial stretch (up to
 //! [`SERIAL_WINDOWS_MAX`]). Results never depend on which thread runs a half, so they do not
 //! depend on the guard; [`guard_serial_joins`] counts the joins it ran in the caller.
+//!
+//! **Why home-made, and not `chili` or `rayon::join`** (issue 31, measured 2026-11-28 on the Xeon
+//! 2-core machine, dev profile, `hydrometra scene bench --voxels-mm 0.6,1.2 --fork-join
+//! helper,rayon,chili --repeats 3`, 3 interleaved runs of each, 200 timed steps, the same final
+//! state in all of them; BENCHMARKS.md, "Fluid solver", [F6]). Scene step, mean ms:
+//!
+//! | | helper | rayon | chili |
+//! |---|---|---|---|
+//! | 0.6 mm, quiet | 26.2 | 30.2 | 35.6 |
+//! | 1.2 mm, quiet | 1.89 | 2.24 | 2.28 |
+//! | 0.6 mm, one busy thread | 46.0 | 56.9 | 36.0 |
+//! | 1.2 mm, one busy thread | 2.37 | 2.61 | 2.34 |
+//!
+//! On a machine whose two cores are the scene's, the helper is 13-27 % faster than either; beside
+//! a busy process chili is 22 % faster at 0.6 mm and level at 1.2 mm, where the guard has made
+//! the helper's joins serial. The helper stays for the quiet case. Where it stands in the product:
+//! on a 2-core machine the daemon gives the scene one core, and its rayon pool of one thread runs
+//! every join serially whichever fork-join is chosen; the comparison decides for `hydrometra`'s
+//! offline commands and for machines with more cores.
 
 use std::any::Any;
 use std::cell::UnsafeCell;
