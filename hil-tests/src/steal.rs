@@ -2,7 +2,9 @@
 //!
 //! On a virtual machine the host can take a virtual CPU away for milliseconds at a time (another
 //! guest, the host's own work). The guest's kernel accounts that as *steal* (`/proc/stat`, eighth
-//! value of the `cpu` line, in 1/100 s). A 1 kHz loop cannot keep its deadlines while its CPU is
+//! value of a `cpuN` line, in 1/100 s). What is sampled is the CPU the daemon gives its loop: the
+//! last one this process may use (the daemon, started by it, inherits its CPUs and takes the last,
+//! docs/daemon.md "Real-time scheduling"); with one CPU, the machine's sum. A 1 kHz loop cannot keep its deadlines while its CPU is
 //! not running at all, whatever the daemon does; a check of the daemon's timing therefore judges
 //! the stretches of a run in which the host took nothing, reports the rest beside it, and fails
 //! when too little of the run was left to judge.
@@ -24,7 +26,7 @@ const STEAL_TICK_S: f64 = 0.01;
 
 /// Samples the machine's steal time on a thread of its own until dropped.
 pub struct HostSteal {
-    /// (CLOCK_MONOTONIC ns, steal ticks so far summed over the CPUs) per sample.
+    /// (CLOCK_MONOTONIC ns, steal ticks of the loop's CPU so far) per sample.
     samples: Arc<Mutex<Vec<(u64, u64)>>>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
@@ -41,10 +43,30 @@ pub fn monotonic_ns() -> u64 {
     ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
 }
 
-/// The steal ticks of the `cpu` line of `/proc/stat` (`None` where there is none).
-fn steal_ticks() -> Option<u64> {
+/// The `/proc/stat` line to sample: `cpuN ` for the last CPU this process may use when it may use
+/// two or more, else the machine's `cpu ` line.
+fn stat_line_prefix() -> String {
+    // SAFETY: `set` is a zeroed cpu_set_t the call fills; 0 names the calling thread.
+    let cpus: Vec<usize> = unsafe {
+        let mut set: libc::cpu_set_t = std::mem::zeroed();
+        if libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set) != 0 {
+            Vec::new()
+        } else {
+            (0..libc::CPU_SETSIZE as usize)
+                .filter(|&c| libc::CPU_ISSET(c, &set))
+                .collect()
+        }
+    };
+    match cpus.as_slice() {
+        [_, .., last] => format!("cpu{last} "),
+        _ => "cpu ".to_string(),
+    }
+}
+
+/// The steal ticks of the `/proc/stat` line starting with `prefix` (`None` where there is none).
+fn steal_ticks(prefix: &str) -> Option<u64> {
     let stat = std::fs::read_to_string("/proc/stat").ok()?;
-    let line = stat.lines().find(|l| l.starts_with("cpu "))?;
+    let line = stat.lines().find(|l| l.starts_with(prefix))?;
     line.split_whitespace().nth(8)?.parse().ok()
 }
 
@@ -55,9 +77,10 @@ impl HostSteal {
         let stop = Arc::new(AtomicBool::new(false));
         let thread = {
             let (samples, stop) = (samples.clone(), stop.clone());
+            let prefix = stat_line_prefix();
             std::thread::spawn(move || {
                 while !stop.load(Ordering::Relaxed) {
-                    if let Some(ticks) = steal_ticks() {
+                    if let Some(ticks) = steal_ticks(&prefix) {
                         let now = monotonic_ns();
                         samples.lock().expect("steal samples").push((now, ticks));
                     }
@@ -72,7 +95,7 @@ impl HostSteal {
         }
     }
 
-    /// Whether the host took CPU time from the machine between the two CLOCK_MONOTONIC instants
+    /// Whether the host took time from the loop's CPU between the two CLOCK_MONOTONIC instants
     /// (give or take [`MARGIN_NS`]).
     pub fn stolen_between(&self, from_ns: u64, to_ns: u64) -> bool {
         let samples = self.samples.lock().expect("steal samples");
@@ -82,7 +105,7 @@ impl HostSteal {
             .any(|w| w[1].1 > w[0].1 && w[1].0 >= lo && w[0].0 <= hi)
     }
 
-    /// Seconds the host took from the machine (summed over its CPUs) since the start.
+    /// Seconds the host took from the loop's CPU since the start.
     pub fn stolen_s(&self) -> f64 {
         let samples = self.samples.lock().expect("steal samples");
         match (samples.first(), samples.last()) {
@@ -125,7 +148,14 @@ mod tests {
         assert!(!s.stolen_between(1_300_000_000, 1_400_000_000));
         assert!(!s.stolen_between(0, 900_000_000));
         assert!((s.stolen_s() - 0.02).abs() < 1e-12);
-        // The sampler runs and stops on drop.
+        // The sampled line exists; the sampler runs and stops on drop.
+        if std::path::Path::new("/proc/stat").exists() {
+            assert!(
+                steal_ticks(&stat_line_prefix()).is_some(),
+                "{}",
+                stat_line_prefix()
+            );
+        }
         let live = HostSteal::start();
         std::thread::sleep(SAMPLE_PERIOD * 3);
         assert!(live.stolen_s() >= 0.0);

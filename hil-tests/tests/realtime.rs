@@ -19,8 +19,8 @@ const MEASURED_S: u64 = 60;
 const MAX_MISS_SHARE: f64 = 0.001;
 const MAX_GAP_S: f64 = 0.005;
 
-/// The targets are judged on the stretches in which the hypervisor took no CPU time from the
-/// machine (`hydrometra_hil_tests::steal`); at least this share of the ticks must be left.
+/// The targets are judged on the stretches in which the hypervisor took no time from the
+/// loop's CPU (`hydrometra_hil_tests::steal`); at least this share of the ticks must be left.
 const MIN_JUDGED_SHARE: f64 = 0.5;
 
 #[test]
@@ -82,7 +82,7 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
     eprintln!(
         "{MEASURED_S} s under the `bleed` scene ({}): ticks {ticks}, deadline misses {misses} \
          ({:.4} %), longest gap between statuses {:.3} ms over {} consecutive pairs of {} \
-         statuses; the host took {:.2} s of CPU from the machine, judged where it took nothing: \
+         statuses; the host took {:.2} s from the loop's CPU, judged where it took nothing: \
          {judged_ticks} ticks, {judged_misses} misses ({:.4} %), longest gap {:.3} ms; scene \
          frames {}, late {late}, degradation level {}, particles stage runs {}",
         realtime_mode::name(last.realtime_mode),
@@ -109,7 +109,7 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
     );
     assert!(
         judged_ticks as f64 >= MIN_JUDGED_SHARE * ticks as f64,
-        "the host took CPU time from the machine ({:.2} s) in all but {judged_ticks} of {ticks} \
+        "the host took time from the loop's CPU ({:.2} s) in all but {judged_ticks} of {ticks} \
          ticks: too little left to judge the daemon",
         steal.stolen_s()
     );

@@ -279,7 +279,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // window already took that long (the machine's, once in CI), the kill is checked by the misses
     // between two statuses instead (a tick held up 10 ms is 10 misses).
     let max_before = around_kill[0].tick_work_max_s;
-    // Not judged where the hypervisor took CPU time from the machine (`hydrometra_hil_tests::steal`):
+    // Not judged where the hypervisor took time from the loop's CPU (`hydrometra_hil_tests::steal`):
     // a tick whose CPU stopped running takes that long whatever the daemon does.
     for w in around_kill.windows(2) {
         let (a, b) = (w[0], w[1]);

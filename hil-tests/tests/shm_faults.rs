@@ -63,7 +63,7 @@ fn wait_running(reader: &StatusReader) {
     });
 }
 
-/// Misses and ticks since the status before, where the host took no CPU time from the machine
+/// Misses and ticks since the status before, where the host took no time from the loop's CPU
 /// in between (`hydrometra_hil_tests::steal`: a loop whose CPU is not running at all misses
 /// whatever the daemon does); `None` where it took some.
 fn judged(a: &Status, b: &Status, steal: &HostSteal) -> Option<(u64, u64)> {
