@@ -214,7 +214,8 @@ pub fn run(cmd: FluidCommand) -> Result<()> {
 fn run_case(a: RunArgs) -> Result<()> {
     let text = std::fs::read_to_string(&a.case)
         .with_context(|| format!("reading case file {}", a.case.display()))?;
-    let case = Case::parse(&text).with_context(|| format!("in {}", a.case.display()))?;
+    let case =
+        Case::parse_at(&text, Some(&a.case)).with_context(|| format!("in {}", a.case.display()))?;
     let report = case
         .run()
         .with_context(|| format!("running {}", a.case.display()))?;

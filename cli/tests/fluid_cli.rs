@@ -9,6 +9,17 @@ fn case_path(name: &str) -> String {
     )
 }
 
+/// The stderr of `hydrometra fluid run --case CASE`, which must fail.
+fn refused(case: &std::path::Path) -> String {
+    let o = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .args(["fluid", "run", "--case"])
+        .arg(case)
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
 #[test]
 fn fluid_run_writes_probes_as_json_and_csv() {
     let out = std::env::temp_dir().join(format!("hydrometra-fluid-cli-{}", std::process::id()));
@@ -68,15 +79,39 @@ fn fluid_run_rejects_a_malformed_case_naming_file_and_key() {
             "velocity_m_s = [0.2, 0.0]",
         );
     std::fs::write(&case, text).unwrap();
-    let o = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
-        .args(["fluid", "run", "--case"])
-        .arg(&case)
-        .output()
-        .unwrap();
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
+    let err = refused(&case);
     assert!(
         err.contains("bad.toml") && err.contains("velocity_m_s"),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A mesh region's file is found beside the case file whatever the working directory, and a
+/// missing one is refused naming the case file, the region and the key.
+#[test]
+fn fluid_run_reads_a_mesh_beside_the_case_file() {
+    let elsewhere = std::env::temp_dir();
+    let o = Command::new(env!("CARGO_BIN_EXE_hydrometra"))
+        .current_dir(&elsewhere)
+        .args(["fluid", "run", "--json", "--case"])
+        .arg(case_path("mesh_pipe"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(v["statistics"]["steady_reached"], true);
+    let dir = elsewhere.join(format!("hydrometra-fluid-mesh-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let case = dir.join("pipe.toml");
+    std::fs::write(
+        &case,
+        std::fs::read_to_string(case_path("mesh_pipe")).unwrap(),
+    )
+    .unwrap();
+    let err = refused(&case);
+    assert!(
+        err.contains("pipe.toml") && err.contains("region[0].file") && err.contains("pipe_mm.obj"),
         "{err}"
     );
     std::fs::remove_dir_all(&dir).ok();

@@ -4,6 +4,9 @@
 //! any axis, closed and outward), and the STL (binary, ASCII) and OBJ readers, with errors that
 //! name the file, the line or byte offset and what is wrong.
 
+mod cutcell_common;
+
+use cutcell_common::{ascii_stl, binary_stl};
 use hydrometra_sim::cutcell::mesh::{ClosedMesh, MeshError};
 use hydrometra_sim::cutcell::shapes::{self, Tessellation};
 use std::f64::consts::PI;
@@ -13,39 +16,6 @@ fn tmp(name: &str) -> PathBuf {
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("cutcell-shapes-io");
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
-}
-
-fn binary_stl(m: &ClosedMesh, scale: f32) -> Vec<u8> {
-    let mut b = vec![0u8; 80];
-    b.extend((m.triangles().len() as u32).to_le_bytes());
-    for t in m.triangles() {
-        b.extend([0u8; 12]);
-        for &v in t {
-            for x in m.positions_m()[v as usize] {
-                b.extend((x * scale).to_le_bytes());
-            }
-        }
-        b.extend([0u8; 2]);
-    }
-    b
-}
-
-fn ascii_stl(m: &ClosedMesh, scale: f32) -> String {
-    let mut s = String::from("solid test\n");
-    for t in m.triangles() {
-        s += "  facet normal 0 0 0\n    outer loop\n";
-        for &v in t {
-            let p = m.positions_m()[v as usize];
-            s += &format!(
-                "      vertex {:e} {:e} {:e}\n",
-                p[0] * scale,
-                p[1] * scale,
-                p[2] * scale
-            );
-        }
-        s += "    endloop\n  endfacet\n";
-    }
-    s + "endsolid test\n"
 }
 
 fn err(r: Result<ClosedMesh, MeshError>) -> String {

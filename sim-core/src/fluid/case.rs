@@ -1,6 +1,7 @@
 //! Case files: a box-shaped flow problem in TOML (grid, fluid, time, solver, regions, probes) and the
 //! runner that steps it and samples its probes. The format is specified in `docs/fluid-cases.md`.
 
+use std::path::Path;
 use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
@@ -169,10 +170,18 @@ fn finite3(key: &str, v: [f64; 3]) -> Result<(), CaseError> {
 }
 
 impl Case {
-    /// Parses and checks a case file's text.
+    /// Parses and checks a case file's text that has no file of its own: a `mesh` region's
+    /// `file` must then be an absolute path ([`Case::parse_at`]).
     pub fn parse(text: &str) -> Result<Case, CaseError> {
-        let case: Case = toml::from_str(text).map_err(|e| CaseError::Parse(e.to_string()))?;
+        Self::parse_at(text, None)
+    }
+
+    /// Parses and checks the text of `case_file` (the caller reads it) and reads the meshes of its
+    /// `mesh` regions, a relative `file` resolved against the case file's directory.
+    pub fn parse_at(text: &str, case_file: Option<&Path>) -> Result<Case, CaseError> {
+        let mut case: Case = toml::from_str(text).map_err(|e| CaseError::Parse(e.to_string()))?;
         case.validate()?;
+        super::case_regions::read_meshes(&mut case.regions, case_file)?;
         Ok(case)
     }
 

@@ -1,15 +1,17 @@
-//! Curved regions of a case file: spheres and cylinders (any axis, capped ends) with cut-cell
-//! boundaries. With at least one curved region, the grid's background and every fluid or solid
+//! Curved regions of a case file: spheres, cylinders (any axis, capped ends) and closed triangle
+//! meshes (STL or OBJ files, read here) with cut-cell boundaries. With at least one curved region, the grid's background and every fluid or solid
 //! region (boxes too, as closed box surfaces) are layers of the cutcell module in file order,
 //! each making what it encloses fluid or solid over what lies below; a cell is fluid where its
 //! stabilised volume fraction (small cells merged, `SmallCellParams::default`) is above zero, and
 //! the grid carries the fractions. Velocity and outflow regions stay boxes, labelled after.
 //! Without curved regions nothing is cut (the labels of today).
 
+use std::path::{Path, PathBuf};
+
 use serde::{Deserialize, Serialize};
 
 use super::{CellLabel, CutFractions, FluidError, FluidGrid};
-use crate::cutcell::mesh::ClosedMesh;
+use crate::cutcell::mesh::{ClosedMesh, MeshError};
 use crate::cutcell::shapes::{self, Tessellation};
 use crate::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
 use crate::scene::voxelize::VoxelBox;
@@ -35,12 +37,12 @@ fn solver(e: FluidError) -> Invalid {
 }
 
 /// `[[region]]`: a box (cells whose centres lie in `[min_m, max_m]` get the label), or a curved
-/// shape with cut-cell boundaries (`shape = "sphere"` or `"cylinder"`, fluid or solid only; see
-/// `case_regions.rs`).
+/// shape with cut-cell boundaries (`shape = "sphere"`, `"cylinder"` or `"mesh"`, fluid or solid
+/// only; see `case_regions.rs`).
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RegionSpec {
-    /// `box` (default), `sphere` or `cylinder`.
+    /// `box` (default), `sphere`, `cylinder` or `mesh`.
     pub shape: Option<String>,
     /// `fluid`, `solid`, `velocity` or `outflow` (curved shapes: `fluid` or `solid`).
     pub label: String,
@@ -58,6 +60,14 @@ pub struct RegionSpec {
     pub length_m: Option<f64>,
     /// Velocity of `velocity` cells (m/s).
     pub velocity_m_s: Option<[f64; 3]>,
+    /// The closed triangle mesh (STL or OBJ) of shape `mesh`, relative to the case file's
+    /// directory.
+    pub file: Option<PathBuf>,
+    /// Metres per unit of the mesh file's coordinates (default 1).
+    pub scale_m_per_unit: Option<f64>,
+    /// The mesh read from `file` (by [`super::case::Case::parse_at`]), in metres.
+    #[serde(skip)]
+    pub(super) mesh: Option<ClosedMesh>,
 }
 
 /// The label of a region's `label` key.
@@ -72,85 +82,134 @@ pub(super) fn parse_label(s: &str) -> Option<CellLabel> {
     .find(|l| l.name() == s)
 }
 
+/// The shapes of `[[region]]`.
+const SHAPES: [&str; 4] = ["box", "sphere", "cylinder", "mesh"];
+
 /// Whether region `i` is a box (`true`; its box keys are checked by the caller) or a valid curved
-/// shape (`false`).
+/// shape (`false`). Every shape key belongs to the shapes named beside it and is refused on others.
 pub(super) fn validate_shape(i: usize, r: &RegionSpec, label: CellLabel) -> Result<bool, Invalid> {
     let key = |k: &str| format!("region[{i}].{k}");
     let shape = r.shape.as_deref().unwrap_or("box");
-    let curved_keys = [
-        ("centre_m", r.centre_m.is_some()),
-        ("radius_m", r.radius_m.is_some()),
-        ("axis", r.axis.is_some()),
-        ("length_m", r.length_m.is_some()),
-    ];
-    let absent = |keys: &[(&str, bool)], why: &str| {
-        keys.iter()
-            .find(|(_, set)| *set)
-            .map_or(Ok(()), |(k, _)| Err(invalid(key(k), "given", why)))
-    };
-    match shape {
-        "box" => {
-            absent(&curved_keys, "only for shape sphere or cylinder")?;
-            Ok(true)
-        }
-        "sphere" | "cylinder" => {
-            if !matches!(label, CellLabel::Fluid | CellLabel::Solid) {
-                return Err(invalid(
-                    key("label"),
-                    &r.label,
-                    "a curved region is fluid or solid (ports stay boxes)",
-                ));
-            }
-            absent(
-                &[
-                    ("min_m", r.min_m.is_some()),
-                    ("max_m", r.max_m.is_some()),
-                    ("velocity_m_s", r.velocity_m_s.is_some()),
-                ],
-                "only for shape box",
-            )?;
-            let c = r
-                .centre_m
-                .ok_or_else(|| invalid(key("centre_m"), "missing", "required"))?;
-            if !c.iter().all(|x| x.is_finite()) {
-                return Err(invalid(key("centre_m"), c, "expected three finite numbers"));
-            }
-            let positive = |k: &str, v: Option<f64>| match v {
-                Some(x) if x.is_finite() && x > 0.0 => Ok(()),
-                Some(x) => Err(invalid(key(k), x, "expected a finite length > 0")),
-                None => Err(invalid(key(k), "missing", "required")),
-            };
-            positive("radius_m", r.radius_m)?;
-            if shape == "cylinder" {
-                positive("length_m", r.length_m)?;
-                let a = r
-                    .axis
-                    .ok_or_else(|| invalid(key("axis"), "missing", "required"))?;
-                let n2: f64 = a.iter().map(|x| x * x).sum();
-                if !(n2.is_finite() && n2 > 0.0) {
-                    return Err(invalid(
-                        key("axis"),
-                        a,
-                        "expected a finite non-zero direction",
-                    ));
-                }
-            } else {
-                absent(
-                    &[
-                        ("axis", r.axis.is_some()),
-                        ("length_m", r.length_m.is_some()),
-                    ],
-                    "only for shape cylinder",
-                )?;
-            }
-            Ok(false)
-        }
-        other => Err(invalid(
-            key("shape"),
-            other,
-            "expected box, sphere or cylinder",
-        )),
+    if !SHAPES.contains(&shape) {
+        let expected = format!("expected one of {}", SHAPES.join(", "));
+        return Err(invalid(key("shape"), shape, &expected));
     }
+    let owned = [
+        ("min_m", r.min_m.is_some(), "box"),
+        ("max_m", r.max_m.is_some(), "box"),
+        ("velocity_m_s", r.velocity_m_s.is_some(), "box"),
+        ("centre_m", r.centre_m.is_some(), "sphere or cylinder"),
+        ("radius_m", r.radius_m.is_some(), "sphere or cylinder"),
+        ("axis", r.axis.is_some(), "cylinder"),
+        ("length_m", r.length_m.is_some(), "cylinder"),
+        ("file", r.file.is_some(), "mesh"),
+        ("scale_m_per_unit", r.scale_m_per_unit.is_some(), "mesh"),
+    ];
+    if let Some((k, _, owners)) = owned
+        .iter()
+        .find(|(_, set, owners)| *set && !owners.split(" or ").any(|o| o == shape))
+    {
+        return Err(invalid(
+            key(k),
+            "given",
+            &format!("only for shape {owners}"),
+        ));
+    }
+    if shape == "box" {
+        return Ok(true);
+    }
+    if !matches!(label, CellLabel::Fluid | CellLabel::Solid) {
+        return Err(invalid(
+            key("label"),
+            &r.label,
+            "a curved region is fluid or solid (ports stay boxes)",
+        ));
+    }
+    let positive = |k: &str, v: Option<f64>, what: &str| match v {
+        Some(x) if x.is_finite() && x > 0.0 => Ok(()),
+        Some(x) => Err(invalid(key(k), x, &format!("expected a finite {what} > 0"))),
+        None => Err(invalid(key(k), "missing", "required")),
+    };
+    if shape == "mesh" {
+        if r.file.is_none() {
+            return Err(invalid(
+                key("file"),
+                "missing",
+                "required: a closed STL or OBJ mesh",
+            ));
+        }
+        if r.scale_m_per_unit.is_some() {
+            positive("scale_m_per_unit", r.scale_m_per_unit, "scale (m per unit)")?;
+        }
+        return Ok(false);
+    }
+    let c = r
+        .centre_m
+        .ok_or_else(|| invalid(key("centre_m"), "missing", "required"))?;
+    if !c.iter().all(|x| x.is_finite()) {
+        return Err(invalid(key("centre_m"), c, "expected three finite numbers"));
+    }
+    positive("radius_m", r.radius_m, "length")?;
+    if shape == "cylinder" {
+        positive("length_m", r.length_m, "length")?;
+        let a = r
+            .axis
+            .ok_or_else(|| invalid(key("axis"), "missing", "required"))?;
+        let n2: f64 = a.iter().map(|x| x * x).sum();
+        if !(n2.is_finite() && n2 > 0.0) {
+            return Err(invalid(
+                key("axis"),
+                a,
+                "expected a finite non-zero direction",
+            ));
+        }
+    }
+    Ok(false)
+}
+
+/// Reads the closed mesh of every `mesh` region (validated), its relative `file` resolved against
+/// the directory of `case_file`; without a case file only an absolute `file` can be read.
+pub(super) fn read_meshes(
+    regions: &mut [RegionSpec],
+    case_file: Option<&Path>,
+) -> Result<(), Invalid> {
+    for (i, r) in regions.iter_mut().enumerate() {
+        let Some(file) = r.file.as_ref() else {
+            continue;
+        };
+        let key = format!("region[{i}].file");
+        let path =
+            match case_file {
+                _ if file.is_absolute() => file.clone(),
+                Some(case) => case.parent().unwrap_or(Path::new("")).join(file),
+                None => return Err(invalid(
+                    key,
+                    file,
+                    "a relative path needs the case file's directory, and this case was parsed \
+                     from text without one: give an absolute path or load the case from its file",
+                )),
+            };
+        let origin = path.display().to_string();
+        // Only a regular file: a device (`/dev/zero`) or a fifo would block the reader.
+        let regular = match std::fs::metadata(&path) {
+            Err(source) => Err(MeshError::Io { origin, source }),
+            Ok(m) if !m.is_file() => Err(MeshError::Whole {
+                origin,
+                what: "not a regular file".into(),
+            }),
+            Ok(_) => Ok(()),
+        };
+        let mesh = regular
+            .and_then(|()| ClosedMesh::read(&path, r.scale_m_per_unit.unwrap_or(1.0)))
+            .map_err(|e| {
+                let case = case_file.map_or(String::new(), |c| {
+                    format!(" (a region of case file {})", c.display())
+                });
+                invalid(key, file, &format!("{e}{case}"))
+            })?;
+        r.mesh = Some(mesh);
+    }
+    Ok(())
 }
 
 /// The grid's background phase.
@@ -164,8 +223,7 @@ pub(super) fn background(name: Option<&str>) -> Result<Phase, Invalid> {
 
 /// The closed surface of a fluid or solid region (a box's six faces, or the tessellated shape).
 fn surface(i: usize, r: &RegionSpec, h: f64) -> Result<ClosedMesh, Invalid> {
-    let fail =
-        |e: crate::cutcell::mesh::MeshError| invalid(format!("region[{i}]"), "", &e.to_string());
+    let fail = |e: MeshError| invalid(format!("region[{i}]"), "", &e.to_string());
     let t = Tessellation::for_spacing(h);
     match r.shape.as_deref().unwrap_or("box") {
         "sphere" => shapes::sphere(r.centre_m.unwrap_or_default(), r.radius_m.unwrap_or(0.0), t)
@@ -178,6 +236,13 @@ fn surface(i: usize, r: &RegionSpec, h: f64) -> Result<ClosedMesh, Invalid> {
             t,
         )
         .map_err(fail),
+        "mesh" => r.mesh.clone().ok_or_else(|| {
+            invalid(
+                format!("region[{i}].file"),
+                &r.file,
+                "the mesh was not read: make cases with Case::parse or Case::parse_at",
+            )
+        }),
         _ => {
             let (lo, hi) = (r.min_m.unwrap_or_default(), r.max_m.unwrap_or_default());
             let corners = std::array::from_fn(|v| {

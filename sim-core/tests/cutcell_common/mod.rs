@@ -56,6 +56,53 @@ pub fn apply(r: &[V3; 3], x: V3) -> V3 {
     std::array::from_fn(|i| dot(r[i], x))
 }
 
+/// A binary STL of the mesh, coordinates times `scale` (e.g. 1e3: millimetres).
+pub fn binary_stl(m: &ClosedMesh, scale: f32) -> Vec<u8> {
+    let mut b = vec![0u8; 80];
+    b.extend((m.triangles().len() as u32).to_le_bytes());
+    for t in m.triangles() {
+        b.extend([0u8; 12]);
+        for &v in t {
+            for x in m.positions_m()[v as usize] {
+                b.extend((x * scale).to_le_bytes());
+            }
+        }
+        b.extend([0u8; 2]);
+    }
+    b
+}
+
+/// An ASCII STL of the mesh, coordinates times `scale`.
+pub fn ascii_stl(m: &ClosedMesh, scale: f32) -> String {
+    let mut s = String::from("solid test\n");
+    for t in m.triangles() {
+        s += "  facet normal 0 0 0\n    outer loop\n";
+        for &v in t {
+            let p = m.positions_m()[v as usize];
+            s += &format!(
+                "      vertex {:e} {:e} {:e}\n",
+                p[0] * scale,
+                p[1] * scale,
+                p[2] * scale
+            );
+        }
+        s += "    endloop\n  endfacet\n";
+    }
+    s + "endsolid test\n"
+}
+
+/// A Wavefront OBJ of the mesh (`v` and `f` statements), coordinates times `scale`.
+pub fn obj_text(m: &ClosedMesh, scale: f32) -> String {
+    let mut s = String::from("o test\n");
+    for p in m.positions_m() {
+        s += &format!("v {} {} {}\n", p[0] * scale, p[1] * scale, p[2] * scale);
+    }
+    for t in m.triangles() {
+        s += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    s
+}
+
 /// A xorshift generator for reproducible "random-ish" parameters.
 pub struct Rng(pub u64);
 impl Rng {
