@@ -12,6 +12,7 @@
 //! solver then runs today's unweighted kernels: bit for bit the discretisation without cut cells.
 
 use super::FluidError;
+use crate::cutcell::CutCells;
 
 /// The fractions of one grid, in the solver's layouts: cells x fastest, faces of component `c` in
 /// `dims` with `dims[c] + 1` along `c` unless `c` is periodic (face `f` lies between cells
@@ -96,21 +97,69 @@ impl CutFractions {
         c: usize,
         boxed: &[f64],
     ) -> Vec<f32> {
-        let mut bd = dims;
-        bd[c] += 1;
-        let mut sd = dims;
-        if !periodic[c] {
-            sd[c] += 1;
-        }
-        let mut out = Vec::with_capacity(sd.iter().product());
-        for k in 0..sd[2] {
-            for j in 0..sd[1] {
-                for i in 0..sd[0] {
-                    out.push(boxed[i + bd[0] * (j + bd[1] * k)] as f32);
-                }
-            }
-        }
+        let mut out = Vec::new();
+        face_from_box_into(dims, periodic, c, boxed, &mut out);
         out
+    }
+
+    /// The stabilised fractions of `cut` (small cells merged) in the solver's layout for a grid
+    /// with the periodic axes `periodic`: what a grid carries from the cutcell module.
+    pub fn from_cut_cells(cut: &CutCells, periodic: [bool; 3]) -> Self {
+        let mut f = Self {
+            volume: Vec::new(),
+            face: Default::default(),
+        };
+        f.assign_from_cut_cells(cut, periodic);
+        f
+    }
+
+    /// [`CutFractions::from_cut_cells`] into these arrays (no allocation once they have the
+    /// sizes).
+    pub fn assign_from_cut_cells(&mut self, cut: &CutCells, periodic: [bool; 3]) {
+        let dims = cut.cells().dims;
+        self.volume.clear();
+        self.volume
+            .extend(cut.stabilised_volume_fractions().iter().map(|&v| v as f32));
+        for c in 0..3 {
+            face_from_box_into(
+                dims,
+                periodic,
+                c,
+                cut.stabilised_face_fractions(c),
+                &mut self.face[c],
+            );
+        }
+    }
+}
+
+/// Whether a cell with this fluid volume fraction is a fluid cell of the solver (cut or whole);
+/// a cell without fluid is solid or a boundary. The one rule by which the labels follow the
+/// fractions (case files, the scene).
+#[inline]
+pub fn holds_fluid(volume_fraction: f32) -> bool {
+    volume_fraction > 0.0
+}
+
+/// [`CutFractions::face_from_box`] into `out` (cleared first).
+fn face_from_box_into(
+    dims: [usize; 3],
+    periodic: [bool; 3],
+    c: usize,
+    boxed: &[f64],
+    out: &mut Vec<f32>,
+) {
+    let mut bd = dims;
+    bd[c] += 1;
+    let mut sd = dims;
+    if !periodic[c] {
+        sd[c] += 1;
+    }
+    out.clear();
+    for k in 0..sd[2] {
+        for j in 0..sd[1] {
+            let row = bd[0] * (j + bd[1] * k);
+            out.extend(boxed[row..row + sd[0]].iter().map(|&a| a as f32));
+        }
     }
 }
 
