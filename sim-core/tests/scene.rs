@@ -743,17 +743,29 @@ fn cut_cells_fill_the_distending_cavity() {
     let volume = &fractions.fractions().volume;
     let flow = cut.flow().unwrap();
     let h = cut.cells().spacing_m;
-    let mut fluid_m3 = 0.0;
-    let mut scope_cells = 0;
+    // The cavity's volume by where it lies: fluid cells, the os's open cells, the scope's cells.
+    let (mut fluid_m3, mut open_m3, mut scope_m3) = (0.0, 0.0, 0.0);
     for (n, (&v, &kind)) in volume.iter().zip(flow.kinds()).enumerate() {
+        let v_m3 = v as f64 * h * h * h;
         match kind {
-            VoxelKind::Fluid => fluid_m3 += v as f64 * h * h * h,
-            VoxelKind::Open => {}
-            VoxelKind::Scope | VoxelKind::Inflow | VoxelKind::Outflow => scope_cells += 1,
+            VoxelKind::Fluid => fluid_m3 += v_m3,
+            VoxelKind::Open => open_m3 += v_m3,
+            VoxelKind::Scope | VoxelKind::Inflow | VoxelKind::Outflow => scope_m3 += v_m3,
             other => assert_eq!(v, 0.0, "cell {n} holds fluid {v} but is {other:?}"),
         }
     }
-    assert!(scope_cells > 0, "the scope is not in the grid");
+    let surface_m3 = cut.report().surface_volume_m3;
+    let all_m3 = fluid_m3 + open_m3 + scope_m3;
+    println!(
+        "scope in: surface {:.4} ml = fluid {:.4} + os cells {:.4} + scope cells {:.4} ml ({:+.3} %)",
+        surface_m3 * 1e6,
+        fluid_m3 * 1e6,
+        open_m3 * 1e6,
+        scope_m3 * 1e6,
+        100.0 * (all_m3 / surface_m3 - 1.0)
+    );
+    assert!(scope_m3 > 0.0, "the scope is not in the cavity");
+    assert!((all_m3 - surface_m3).abs() < 0.02 * surface_m3);
     let carried = flow.solver().grid().fluid_volume_m3();
     assert!(
         (carried - fluid_m3).abs() <= 1e-9 * fluid_m3,
