@@ -236,7 +236,9 @@ pub(super) fn apply_cut_regions(
     let mut cut = CutCells::new(cells, phase, layers, SmallCellParams::default()).map_err(fail)?;
     let positions: Vec<&[[f32; 3]]> = meshes.iter().map(|m| m.positions_m()).collect();
     cut.full(&positions).map_err(fail)?;
-    let fractions = CutFractions::from_cut_cells(&cut, grid.periodic());
+    let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
+    let volume = cut.stabilised_volume_fractions();
+    let fractions = CutFractions::from_box(dims, grid.periodic(), volume, faces);
     for (n, &v) in fractions.volume.iter().enumerate() {
         let label = if holds_fluid(v) {
             CellLabel::Fluid

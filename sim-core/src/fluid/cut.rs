@@ -12,7 +12,6 @@
 //! solver then runs today's unweighted kernels: bit for bit the discretisation without cut cells.
 
 use super::FluidError;
-use crate::cutcell::CutCells;
 
 /// The fractions of one grid, in the solver's layouts: cells x fastest, faces of component `c` in
 /// `dims` with `dims[c] + 1` along `c` unless `c` is periodic (face `f` lies between cells
@@ -102,32 +101,35 @@ impl CutFractions {
         out
     }
 
-    /// The stabilised fractions of `cut` (small cells merged) in the solver's layout for a grid
-    /// with the periodic axes `periodic`: what a grid carries from the cutcell module.
-    pub fn from_cut_cells(cut: &CutCells, periodic: [bool; 3]) -> Self {
+    /// Fractions of a box of `dims` cells in the cutcell module's layout (`volume` per cell,
+    /// `faces` per axis with `dims[a] + 1` along it; e.g. `CutCells::stabilised_*`) in the
+    /// solver's layout for a grid with the periodic axes `periodic`.
+    pub fn from_box(
+        dims: [usize; 3],
+        periodic: [bool; 3],
+        volume: &[f64],
+        faces: [&[f64]; 3],
+    ) -> Self {
         let mut f = Self {
             volume: Vec::new(),
             face: Default::default(),
         };
-        f.assign_from_cut_cells(cut, periodic);
+        f.assign_from_box(dims, periodic, volume, faces);
         f
     }
 
-    /// [`CutFractions::from_cut_cells`] into these arrays (no allocation once they have the
-    /// sizes).
-    pub fn assign_from_cut_cells(&mut self, cut: &CutCells, periodic: [bool; 3]) {
-        let dims = cut.cells().dims;
+    /// [`CutFractions::from_box`] into these arrays (no allocation once they have the sizes).
+    pub fn assign_from_box(
+        &mut self,
+        dims: [usize; 3],
+        periodic: [bool; 3],
+        volume: &[f64],
+        faces: [&[f64]; 3],
+    ) {
         self.volume.clear();
-        self.volume
-            .extend(cut.stabilised_volume_fractions().iter().map(|&v| v as f32));
-        for c in 0..3 {
-            face_from_box_into(
-                dims,
-                periodic,
-                c,
-                cut.stabilised_face_fractions(c),
-                &mut self.face[c],
-            );
+        self.volume.extend(volume.iter().map(|&v| v as f32));
+        for (c, boxed) in faces.into_iter().enumerate() {
+            face_from_box_into(dims, periodic, c, boxed, &mut self.face[c]);
         }
     }
 }

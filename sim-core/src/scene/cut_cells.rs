@@ -78,7 +78,11 @@ impl CavityFractions {
         // Threshold 0: exactly the vertices whose held position the voxelizer moved.
         let stats = self.cut.update(&[voxels.voxel_positions_m()], 0.0)?;
         if stats.changed_rows > 0 {
-            self.fractions.assign_from_cut_cells(&self.cut, PERIODIC);
+            let cut = &self.cut;
+            let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
+            let (dims, volume) = (cut.cells().dims, cut.stabilised_volume_fractions());
+            self.fractions
+                .assign_from_box(dims, PERIODIC, volume, faces);
             self.unsent = true;
         }
         counters.extend_last_run_since(t);
