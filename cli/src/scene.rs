@@ -76,6 +76,9 @@ pub struct RunArgs {
     /// Voxel size override, mm.
     #[arg(long)]
     voxel_mm: Option<f64>,
+    /// Cut cells on (`[fluid] cut_cells = true`) whatever the scene file says.
+    #[arg(long)]
+    cut_cells: bool,
     /// Run every SIMD kernel on its portable (SSE2 baseline) path instead of AVX2 + FMA, to check
     /// the fallbacks against a run on the AVX2 paths (the fluid's agree to the bit).
     #[arg(long)]
@@ -123,6 +126,9 @@ pub struct BenchArgs {
     /// Table 1 and the session-7 figures).
     #[arg(long)]
     max_cfl: Option<f64>,
+    /// Cut cells on (`[fluid] cut_cells = true`) whatever the scene file says.
+    #[arg(long)]
+    cut_cells: bool,
     /// Turn off the fork-join guard (on in the daemon: it runs the solver's joins in one thread
     /// while the helper thread does not pay, e.g. another process on its core): every join is
     /// offered to the helper, to measure the guard against.
@@ -245,6 +251,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         desc.fluid.voxel_mm = v;
         desc.validate()?;
     }
+    desc.fluid.cut_cells |= a.cut_cells;
     let (scenario, case) = load_scenario(&a.scenario)?;
     if let Some(p) = case.params.clone() {
         // The scenario's hydraulics, with the scope's port areas (one source).
@@ -893,6 +900,7 @@ fn bench_desc(base: &SceneDesc, a: &BenchArgs, voxel_mm: f64) -> Result<SceneDes
     if let Some(c) = a.max_cfl {
         desc.fluid.max_cfl = c;
     }
+    desc.fluid.cut_cells |= a.cut_cells;
     desc.stages.vortices = false;
     desc.validate()?;
     Ok(desc)

@@ -10,6 +10,7 @@ use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 
+use super::cut::holds_fluid;
 use super::{CellLabel, CutFractions, FluidError, FluidGrid};
 use crate::cutcell::mesh::{ClosedMesh, MeshError};
 use crate::cutcell::shapes::{self, Tessellation};
@@ -300,24 +301,17 @@ pub(super) fn apply_cut_regions(
     let mut cut = CutCells::new(cells, phase, layers, SmallCellParams::default()).map_err(fail)?;
     let positions: Vec<&[[f32; 3]]> = meshes.iter().map(|m| m.positions_m()).collect();
     cut.full(&positions).map_err(fail)?;
-    let volume: Vec<f32> = cut
-        .stabilised_volume_fractions()
-        .iter()
-        .map(|&v| v as f32)
-        .collect();
-    let periodic = grid.periodic();
-    let face = std::array::from_fn(|a| {
-        CutFractions::face_from_box(dims, periodic, a, cut.stabilised_face_fractions(a))
-    });
-    for (n, &v) in volume.iter().enumerate() {
-        let label = if v > 0.0 {
+    let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
+    let volume = cut.stabilised_volume_fractions();
+    let fractions = CutFractions::from_box(dims, grid.periodic(), volume, faces);
+    for (n, &v) in fractions.volume.iter().enumerate() {
+        let label = if holds_fluid(v) {
             CellLabel::Fluid
         } else {
             CellLabel::Solid
         };
         grid.set_label(grid.coords(n), label).map_err(solver)?;
     }
-    grid.set_cut_fractions(CutFractions { volume, face })
-        .map_err(solver)?;
+    grid.set_cut_fractions(fractions).map_err(solver)?;
     Ok(true)
 }

@@ -96,21 +96,72 @@ impl CutFractions {
         c: usize,
         boxed: &[f64],
     ) -> Vec<f32> {
-        let mut bd = dims;
-        bd[c] += 1;
-        let mut sd = dims;
-        if !periodic[c] {
-            sd[c] += 1;
-        }
-        let mut out = Vec::with_capacity(sd.iter().product());
-        for k in 0..sd[2] {
-            for j in 0..sd[1] {
-                for i in 0..sd[0] {
-                    out.push(boxed[i + bd[0] * (j + bd[1] * k)] as f32);
-                }
-            }
-        }
+        let mut out = Vec::new();
+        face_from_box_into(dims, periodic, c, boxed, &mut out);
         out
+    }
+
+    /// Fractions of a box of `dims` cells in the cutcell module's layout (`volume` per cell,
+    /// `faces` per axis with `dims[a] + 1` along it; e.g. `CutCells::stabilised_*`) in the
+    /// solver's layout for a grid with the periodic axes `periodic`.
+    pub fn from_box(
+        dims: [usize; 3],
+        periodic: [bool; 3],
+        volume: &[f64],
+        faces: [&[f64]; 3],
+    ) -> Self {
+        let mut f = Self {
+            volume: Vec::new(),
+            face: Default::default(),
+        };
+        f.assign_from_box(dims, periodic, volume, faces);
+        f
+    }
+
+    /// [`CutFractions::from_box`] into these arrays (no allocation once they have the sizes).
+    pub fn assign_from_box(
+        &mut self,
+        dims: [usize; 3],
+        periodic: [bool; 3],
+        volume: &[f64],
+        faces: [&[f64]; 3],
+    ) {
+        self.volume.clear();
+        self.volume.extend(volume.iter().map(|&v| v as f32));
+        for (c, boxed) in faces.into_iter().enumerate() {
+            face_from_box_into(dims, periodic, c, boxed, &mut self.face[c]);
+        }
+    }
+}
+
+/// Whether a cell with this fluid volume fraction is a fluid cell of the solver (cut or whole);
+/// a cell without fluid is solid or a boundary. The one rule by which the labels follow the
+/// fractions (case files, the scene).
+#[inline]
+pub fn holds_fluid(volume_fraction: f32) -> bool {
+    volume_fraction > 0.0
+}
+
+/// [`CutFractions::face_from_box`] into `out` (cleared first).
+fn face_from_box_into(
+    dims: [usize; 3],
+    periodic: [bool; 3],
+    c: usize,
+    boxed: &[f64],
+    out: &mut Vec<f32>,
+) {
+    let mut bd = dims;
+    bd[c] += 1;
+    let mut sd = dims;
+    if !periodic[c] {
+        sd[c] += 1;
+    }
+    out.clear();
+    for k in 0..sd[2] {
+        for j in 0..sd[1] {
+            let row = bd[0] * (j + bd[1] * k);
+            out.extend(boxed[row..row + sd[0]].iter().map(|&a| a as f32));
+        }
     }
 }
 

@@ -128,6 +128,25 @@ impl FluidGrid {
         Ok(())
     }
 
+    /// [`FluidGrid::set_cut_fractions`] from a borrowed copy, into the arrays the grid holds (no
+    /// allocation once it holds fractions of its size): for fractions that change while a scene
+    /// runs.
+    pub fn copy_cut_fractions(&mut self, fractions: &CutFractions) -> Result<(), FluidError> {
+        fractions.validate(self.dims, self.periodic)?;
+        if fractions.is_whole() {
+            self.cut = None;
+        } else if let Some(cut) = &mut self.cut {
+            cut.volume.clone_from(&fractions.volume);
+            for (a, b) in cut.face.iter_mut().zip(&fractions.face) {
+                a.clone_from(b);
+            }
+        } else {
+            self.cut = Some(fractions.clone());
+        }
+        self.revision += 1;
+        Ok(())
+    }
+
     /// Sets cut-cell fractions without the all-ones shortcut (tests of the weighted path).
     #[cfg(test)]
     pub(crate) fn set_cut_fractions_weighted(&mut self, fractions: CutFractions) {

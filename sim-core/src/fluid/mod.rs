@@ -39,7 +39,7 @@ mod topology;
 mod viscosity;
 
 pub use advection::AdvectionScheme;
-pub use cut::CutFractions;
+pub use cut::{holds_fluid, CutFractions};
 pub(crate) use grid::step_along;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;

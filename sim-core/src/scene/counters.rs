@@ -100,6 +100,17 @@ impl StageCounters {
     pub fn ran_since(&mut self, started: Instant) {
         self.ran(started.elapsed().as_secs_f64() * 1e3);
     }
+    /// Adds the time since `started` to the run just counted (work of the same run done by a
+    /// second part of the stage, e.g. the voxelize stage's cut cells); nothing without a run.
+    pub fn extend_last_run_since(&mut self, started: Instant) {
+        if self.next == 0 || !self.ran_last {
+            return;
+        }
+        let ms = started.elapsed().as_secs_f64() * 1e3;
+        self.last_ms += ms;
+        self.total_ms += ms;
+        self.recent[(self.next - 1) % RECENT_RUNS] = self.last_ms as f32;
+    }
     /// Counts a skip.
     pub fn skipped(&mut self) {
         self.skips += 1;

@@ -100,6 +100,10 @@ pub struct FluidSpec {
     /// travel farther is split into substeps (at most the solver's `max_substeps`); `inf`: one
     /// fluid step per frame whatever the CFL number.
     pub max_cfl: f64,
+    /// Cut cells: the fluid fills the cavity surface exactly (each cell's fluid volume fraction
+    /// and each face's open area fraction from the surface, `crate::cutcell`) instead of the
+    /// whole cells entirely inside it. Off: the conservative voxelization of before.
+    pub cut_cells: bool,
 }
 
 /// The scene's default CFL bound of a fluid substep: a semi-Lagrangian trace of at most five
@@ -119,6 +123,7 @@ impl Default for FluidSpec {
             divergence_tolerance: 1e-5,
             min_fluid_cells: 64,
             max_cfl: DEFAULT_MAX_CFL,
+            cut_cells: false,
         }
     }
 }

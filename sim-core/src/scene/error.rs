@@ -1,6 +1,7 @@
 //! The scene's error: every variant names what failed and where.
 
 use crate::atlas::AtlasError;
+use crate::cutcell::CutCellError;
 use crate::fluid::FluidError;
 use crate::hydraulics::ParamsError;
 
@@ -51,4 +52,7 @@ pub enum SceneError {
     /// The fluid solver refused its grid or parameters.
     #[error(transparent)]
     Fluid(#[from] FluidError),
+    /// The cut cells of the cavity surface cannot be computed (`[fluid] cut_cells`).
+    #[error("cut cells: {0}")]
+    CutCells(#[from] CutCellError),
 }

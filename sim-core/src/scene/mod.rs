@@ -15,6 +15,7 @@
 //! | [`HydraulicStage`] | the rig's [`crate::hydraulics::HydraulicInputs`], [`HydraulicsInput`] | [`FrameFlows`], its [`crate::hydraulics::HydraulicState`] |
 //! | [`Deformation`] | the hydraulic state | whether the [`CavitySurface`] moved |
 //! | [`Voxelizer`] | the moved surface's positions | the rows whose cell states changed |
+//! | [`CavityFractions`] (`[fluid] cut_cells`) | the voxelizer's held positions | the cells' fluid volume and faces' open area fractions, the rows they changed in; into the solver |
 //! | [`Ports`] | those rows, the [`ScopePose`], [`CavityCells`], [`FrameFlows`] | labels and boundary velocities in the solver, [`FluxBalance`], [`PortsStep`] |
 //! | [`FluidStage`] | [`FluidDrive`] | the step of its solver, [`FluidStep`] |
 //! | [`vortices::Vortices`] | the inflow, the solver | their field (overlaid or injected) |
@@ -45,6 +46,7 @@
 
 pub mod clarity;
 pub mod counters;
+mod cut_cells;
 mod deformation;
 pub mod desc;
 pub mod dispersion;
@@ -65,6 +67,7 @@ pub mod voxelize;
 use std::time::Instant;
 
 pub use counters::{Counters, Stage, StageCounters};
+pub use cut_cells::CavityFractions;
 pub use deformation::Deformation;
 pub use desc::SceneDesc;
 pub use error::SceneError;
@@ -94,6 +97,8 @@ pub struct Scene {
     hydraulics: HydraulicStage,
     deformation: Deformation,
     voxelizer: Voxelizer,
+    /// With `[fluid] cut_cells` and a fluid stage: the fractions of the voxelizer's surface.
+    fractions: Option<CavityFractions>,
     ports: Ports,
     /// Present when the scene has a fluid stage (and then the vortices and particles may run).
     fluid: Option<FluidStage>,
@@ -115,6 +120,12 @@ impl Scene {
         let voxelizer = Voxelizer::new(cells, surface.triangles().to_vec(), surface.vertex_count());
         let fluid = if desc.stages.fluid {
             Some(fluid_solver(&desc, &cells)?)
+        } else {
+            None
+        };
+        let fractions = if desc.stages.fluid && desc.fluid.cut_cells {
+            let tris = surface.triangles().to_vec();
+            Some(CavityFractions::new(cells, tris, surface.vertex_count())?)
         } else {
             None
         };
@@ -140,6 +151,7 @@ impl Scene {
                 desc.skip.pressure_tolerance_pa,
             ),
             voxelizer,
+            fractions,
             ports: Ports::new(cells, &desc),
             fluid: fluid.map(|solver| {
                 FluidStage::new(solver, desc.fluid.min_fluid_cells, desc.skip.rest_speed_m_s)
@@ -192,8 +204,14 @@ impl Scene {
         self.report.surface_volume_m3 = self.deformation.enclosed_volume_m3();
         self.report.cavity_pressure_pa = surface.pressure_pa();
 
-        // 3. Voxelize: the cell states of the surface where a vertex moved by a voxel fraction.
-        let threshold_m = self.desc.skip.voxel_move_fraction * self.voxelizer.cells().spacing_m;
+        // 3. Voxelize: the cell states of the surface where a vertex moved by a voxel fraction;
+        // with cut cells, the fractions of the same positions, which then follow every move (a
+        // lag of up to `voxel_move_fraction` voxels cost 2-4 % of the cavity's volume).
+        let move_fraction = match self.fractions {
+            Some(_) => 0.0,
+            None => self.desc.skip.voxel_move_fraction,
+        };
+        let threshold_m = move_fraction * self.voxelizer.cells().spacing_m;
         let changed_rows = self.voxelizer.step(
             deformed.then(|| surface.positions_m()),
             threshold_m,
@@ -203,12 +221,20 @@ impl Scene {
         // 4. Ports: the scope at its pose; the labels of the rows that the cavity or the scope
         // changed; the ports' and walls' velocities for the frame's flows.
         self.ports.track(changed_rows, &inputs.rig.scope);
+        if let Some(fractions) = self.fractions.as_mut() {
+            let cut_rows = fractions.step(
+                &self.voxelizer,
+                self.report.counters.get_mut(Stage::Voxelize),
+            )?;
+            self.ports.track_rows(cut_rows);
+        }
         let Some(fluid) = self.fluid.as_mut() else {
             return Ok(self.finish(started));
         };
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface,
+            fractions: self.fractions.as_ref().map(|f| &f.fractions().volume[..]),
         };
         let ports = self.ports.step(
             &cavity,
@@ -220,8 +246,12 @@ impl Scene {
         if let Some(n) = ports.relabelled_cells {
             self.report.relabelled_cells = n;
         }
+        if let Some(fractions) = self.fractions.as_mut() {
+            fractions.send(fluid.solver_mut().grid_mut())?;
+        }
         self.report.fluid_cells = self.ports.fluid_cells();
-        self.report.grid_fluid_volume_m3 = self.ports.fluid_volume_m3();
+        self.report.grid_fluid_volume_m3 =
+            grid_fluid_volume_m3(&self.ports, self.fractions.is_some(), Some(fluid.solver()));
 
         // 5. Fluid: one solver step on those labels and velocities; the fluxes it carried.
         let drive = FluidDrive {
@@ -325,6 +355,10 @@ impl Scene {
     pub fn voxelizer(&self) -> &Voxelizer {
         &self.voxelizer
     }
+    /// The cut cells of the cavity surface, with `[fluid] cut_cells` (and a fluid stage).
+    pub fn cavity_fractions(&self) -> Option<&CavityFractions> {
+        self.fractions.as_ref()
+    }
     /// The scope as last placed, if ever.
     pub fn scope(&self) -> Option<&ScopeGeometry> {
         self.ports.scope()
@@ -362,6 +396,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface: self.deformation.surface(),
+            fractions: self.fractions.as_ref().map(|f| &f.fractions().volume[..]),
         };
         let solver = self.fluid.as_mut().map(FluidStage::solver_mut);
         let check = self
@@ -369,8 +404,21 @@ impl Scene {
             .relabel_whole_box(&cavity, solver, &mut self.report.flux)?;
         self.report.relabelled_cells = check.labels_changed;
         self.report.fluid_cells = self.ports.fluid_cells();
-        self.report.grid_fluid_volume_m3 = self.ports.fluid_volume_m3();
+        self.report.grid_fluid_volume_m3 = grid_fluid_volume_m3(
+            &self.ports,
+            self.fractions.is_some(),
+            self.fluid.as_ref().map(FluidStage::solver),
+        );
         Ok(check)
+    }
+}
+
+/// The fluid volume the grid carries, m^3: with cut cells the solver's `sum V_i h^3` over its
+/// fluid cells, else the whole fluid cells' volume (the same figure, counted by the ports stage).
+fn grid_fluid_volume_m3(ports: &Ports, cut: bool, solver: Option<&FluidSolver>) -> f64 {
+    match solver {
+        Some(solver) if cut => solver.grid().fluid_volume_m3(),
+        _ => ports.fluid_volume_m3(),
     }
 }
 

@@ -25,7 +25,9 @@ use super::types::{
     BoundaryCell, FluxBalance, FrameFlows, InflowPort, ScopePose, VoxelKind, WholeBoxCheck,
 };
 use super::voxelize::{state, VoxelBox, Voxelizer, NO_TRIANGLE};
-use crate::fluid::{range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidSolver};
+use crate::fluid::{
+    holds_fluid, range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidSolver,
+};
 
 /// The cavity as the ports stage reads it: the voxelizer's cell states and the surface they
 /// belong to.
@@ -35,6 +37,9 @@ pub struct CavityCells<'a> {
     pub voxels: &'a Voxelizer,
     /// The surface (its cap triangles, triangles and `dx/dp`).
     pub surface: &'a CavitySurface,
+    /// With cut cells (`[fluid] cut_cells`), each cell's fluid volume fraction of the same
+    /// surface: a cell holding fluid is fluid (`fluid::holds_fluid`), cut or whole.
+    pub fractions: Option<&'a [f32]>,
 }
 
 /// What one step of the ports stage did.
@@ -183,16 +188,21 @@ impl Ports {
         self.fluid_cells as f64 * h * h * h
     }
 
-    /// Notes what moved since the last step: the rows whose cell states the voxelizer changed
-    /// (recomposed at the next step) and the scope's pose (placed when valid; its labels move
-    /// when it moved by more than the threshold).
-    pub fn track(&mut self, changed_rows: &[u32], pose: &ScopePose) {
+    /// Notes rows of cells whose cavity states or fractions changed: recomposed at the next step.
+    pub fn track_rows(&mut self, changed_rows: &[u32]) {
         if !changed_rows.is_empty() {
             self.labels_dirty = true;
             for &row in changed_rows {
                 self.mark_pending(row as usize);
             }
         }
+    }
+
+    /// Notes what moved since the last step: the rows whose cell states the voxelizer changed
+    /// (recomposed at the next step) and the scope's pose (placed when valid; its labels move
+    /// when it moved by more than the threshold).
+    pub fn track(&mut self, changed_rows: &[u32], pose: &ScopePose) {
+        self.track_rows(changed_rows);
         if pose.valid {
             if let Some(dir) = unit(pose.view_direction) {
                 if pose.tip_position_m.iter().all(|v| v.is_finite()) {
@@ -407,10 +417,13 @@ impl Ports {
             let mut fluid = 0u32;
             let [a, b] = if whole { all } else { range_hull(last, vox) };
             for n in base + a as usize..base + b as usize {
-                let kind = match states[n] {
-                    state::INSIDE => VoxelKind::Fluid,
-                    state::BAND if owners[n] < caps => VoxelKind::Open,
-                    state::BAND => VoxelKind::Wall,
+                // With cut cells the fraction decides what is fluid (every cell holding fluid is
+                // inside or band, so within the row's range); the os stays open.
+                let kind = match (states[n], cavity.fractions) {
+                    (state::BAND, _) if owners[n] < caps => VoxelKind::Open,
+                    (_, Some(v)) if holds_fluid(v[n]) => VoxelKind::Fluid,
+                    (state::INSIDE, None) => VoxelKind::Fluid,
+                    (state::BAND, _) => VoxelKind::Wall,
                     _ => VoxelKind::Solid,
                 };
                 fluid += u32::from(kind == VoxelKind::Fluid);
@@ -727,7 +740,8 @@ impl Ports {
         flux.hydraulic_dvdt_m3_per_s = dvdt;
     }
 
-    /// Measures the fluxes through the ports' and walls' fluid faces after a fluid step.
+    /// Measures the fluxes through the ports' and walls' fluid faces after a fluid step (with cut
+    /// cells, through their open parts).
     pub fn measure_fluxes(&self, solver: &FluidSolver, flux: &mut FluxBalance) {
         let cells = self.cells;
         let h2 = cells.spacing_m * cells.spacing_m;
@@ -737,8 +751,10 @@ impl Ports {
             let mut s = 0.0;
             for f in 0..6 {
                 if b.faces >> f & 1 == 1 {
-                    // Face f of the boundary cell; its normal points into the fluid.
-                    let u = solver.cell_face_velocity_m_s(c, f) as f64;
+                    // Face f of the boundary cell; its normal points into the fluid; with cut
+                    // cells only its open part carries flux.
+                    let u = solver.cell_face_velocity_m_s(c, f) as f64
+                        * solver.cell_face_open_fraction(c, f) as f64;
                     let sign = if f % 2 == 1 { 1.0 } else { -1.0 };
                     s -= sign * u * h2;
                 }

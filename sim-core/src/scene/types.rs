@@ -131,7 +131,9 @@ pub struct StepReport {
     pub surface_volume_m3: f64,
     /// Fluid cells now.
     pub fluid_cells: usize,
-    /// Volume of the fluid cells, m^3 (the conservative voxelization's volume).
+    /// The fluid volume the grid carries, m^3: with `[fluid] cut_cells` `sum V_i h^3` over its
+    /// fluid cells (`FluidGrid::fluid_volume_m3`), else the whole fluid cells' volume (the
+    /// conservative voxelization's).
     pub grid_fluid_volume_m3: f64,
     /// Whether the fluid stage idled for too few fluid cells.
     pub fluid_idle: bool,

@@ -106,6 +106,8 @@ pub struct Voxelizer {
     /// The rows in which the last call changed a cell's state or owner.
     changed_rows: Vec<u32>,
     crossings: Vec<(f64, i32)>,
+    /// What the last call did.
+    last: VoxelizeStats,
     row_state: Vec<u8>,
     row_owner: Vec<u32>,
 }
@@ -133,6 +135,7 @@ impl Voxelizer {
             dirty_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
             changed_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
             crossings: Vec::with_capacity(64),
+            last: VoxelizeStats::default(),
             row_state: vec![0; cells.dims[0]],
             row_owner: vec![NO_TRIANGLE; cells.dims[0]],
             triangles,
@@ -164,6 +167,10 @@ impl Voxelizer {
     /// a cell's state or owner, in the order they were re-tested: every other row is as before.
     pub fn changed_rows(&self) -> &[u32] {
         &self.changed_rows
+    }
+    /// What the last [`Voxelizer::step`] did (nothing when it had no surface to take).
+    pub fn last_stats(&self) -> VoxelizeStats {
+        self.last
     }
     /// The positions (m) the current labels were computed from.
     pub fn voxel_positions_m(&self) -> &[[f32; 3]] {
@@ -342,6 +349,7 @@ impl Voxelizer {
             Some(positions_m) => self.update(positions_m, threshold_m),
             None => VoxelizeStats::default(),
         };
+        self.last = stats;
         if stats.moved_vertices > 0 {
             counters.ran_since(t);
         } else {

@@ -9,6 +9,22 @@ impl FluidSolver {
     /// -z, +z).
     #[inline]
     pub fn cell_face_velocity_m_s(&self, cell: [usize; 3], face: usize) -> f32 {
+        let (c, f) = self.cell_face(cell, face);
+        self.u[c][f]
+    }
+
+    /// Open area fraction of face `face` of `cell` (numbered as in
+    /// [`FluidSolver::cell_face_velocity_m_s`]; 1 without cut cells): its flux is this times
+    /// `u h^2`.
+    #[inline]
+    pub fn cell_face_open_fraction(&self, cell: [usize; 3], face: usize) -> f32 {
+        let (c, f) = self.cell_face(cell, face);
+        self.grid.cut_fractions().map_or(1.0, |cut| cut.face[c][f])
+    }
+
+    /// Component and index of face `face` of `cell`.
+    #[inline]
+    fn cell_face(&self, cell: [usize; 3], face: usize) -> (usize, usize) {
         let c = face / 2;
         let mut f = cell;
         if face % 2 == 1 {
@@ -17,7 +33,7 @@ impl FluidSolver {
                 f[c] = 0;
             }
         }
-        self.u[c][self.layout.face_index(c, f)]
+        (c, self.layout.face_index(c, f))
     }
 
     /// Cell-centred velocity (m/s): the mean of the two faces along each axis.
