@@ -244,6 +244,15 @@ impl Daemon {
         }
     }
 
+    /// The lines of the daemon's log so far that contain `needle`.
+    pub fn log_lines_with(&self, needle: &str) -> Vec<String> {
+        self.log()
+            .lines()
+            .filter(|l| l.contains(needle))
+            .map(str::to_string)
+            .collect()
+    }
+
     /// The daemon's log so far.
     pub fn log(&self) -> String {
         let mut s = String::new();

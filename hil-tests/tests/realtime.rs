@@ -174,12 +174,8 @@ fn without_the_privilege_the_daemon_states_the_degraded_mode_and_runs_on_where_a
         "{} ticks in 2 s",
         last.ticks - first.ticks
     );
-    let log = daemon.log();
-    let stated: Vec<&str> = log
-        .lines()
-        .filter(|l| l.contains("degraded real-time mode"))
-        .collect();
-    assert_eq!(stated.len(), 1, "said once:\n{log}");
+    let stated = daemon.log_lines_with("degraded real-time mode");
+    assert_eq!(stated.len(), 1, "said once:\n{}", daemon.log());
     for needed in [
         "SCHED_FIFO priority 10 refused",
         "LimitRTPRIO=10",

@@ -20,10 +20,7 @@ fn a_missing_device_is_named_in_the_log_once_and_shown_by_the_monitor() {
     assert!(text.contains("device not found"), "{j}");
 
     let log = daemon.log();
-    let down: Vec<&str> = log
-        .lines()
-        .filter(|l| l.contains("/dev/does-not-exist"))
-        .collect();
+    let down = daemon.log_lines_with("/dev/does-not-exist");
     assert_eq!(down.len(), 1, "one line per change of reason:\n{log}");
     assert!(
         down[0].contains("rig link down") && down[0].contains("No such file or directory"),

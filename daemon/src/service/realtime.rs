@@ -317,22 +317,32 @@ impl Placement {
     }
 }
 
-/// Puts the calling thread under SCHED_FIFO at `priority` (1..=99).
-/// Returns an error message when the system refuses (no CAP_SYS_NICE or RLIMIT_RTPRIO too low).
-pub fn set_current_thread_fifo(priority: u8) -> Result<(), String> {
+/// Puts the calling thread under `policy` at `priority` (`libc::SCHED_*`); the error names
+/// `what` and the system's reason.
+fn set_current_thread_policy(policy: i32, priority: i32, what: &str) -> Result<(), String> {
     let param = libc::sched_param {
-        sched_priority: i32::from(priority),
+        sched_priority: priority,
     };
     // SAFETY: pthread_self() is the calling thread; `param` is a valid sched_param.
-    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) };
+    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), policy, &param) };
     if rc == 0 {
         Ok(())
     } else {
         Err(format!(
-            "cannot use SCHED_FIFO priority {priority}: {}",
+            "cannot {what}: {}",
             std::io::Error::from_raw_os_error(rc)
         ))
     }
+}
+
+/// Puts the calling thread under SCHED_FIFO at `priority` (1..=99).
+/// Returns an error message when the system refuses (no CAP_SYS_NICE or RLIMIT_RTPRIO too low).
+pub fn set_current_thread_fifo(priority: u8) -> Result<(), String> {
+    set_current_thread_policy(
+        libc::SCHED_FIFO,
+        i32::from(priority),
+        &format!("use SCHED_FIFO priority {priority}"),
+    )
 }
 
 /// Sets the calling thread's nice value (Linux: per thread); false when refused.
@@ -348,34 +358,13 @@ fn set_current_thread_nice(nice: i32) -> bool {
 /// Puts the calling thread back under normal scheduling (SCHED_OTHER): for threads that inherit
 /// SCHED_FIFO but must never preempt the real-time loop (the scene thread and its helpers).
 pub fn set_current_thread_normal() -> Result<(), String> {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: pthread_self() is the calling thread; `param` is a valid sched_param.
-    let rc =
-        unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_OTHER, &param) };
-    if rc == 0 {
-        Ok(())
-    } else {
-        Err(format!(
-            "cannot leave real-time scheduling: {}",
-            std::io::Error::from_raw_os_error(rc)
-        ))
-    }
+    set_current_thread_policy(libc::SCHED_OTHER, 0, "leave real-time scheduling")
 }
 
 /// Puts the calling thread under `SCHED_IDLE`: it runs only when no other thread wants its CPU
 /// (needs no privilege).
 fn set_current_thread_idle_policy() -> Result<(), String> {
-    let param = libc::sched_param { sched_priority: 0 };
-    // SAFETY: pthread_self() is the calling thread; `param` is a valid sched_param.
-    let rc = unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_IDLE, &param) };
-    if rc == 0 {
-        Ok(())
-    } else {
-        Err(format!(
-            "cannot use SCHED_IDLE: {}",
-            std::io::Error::from_raw_os_error(rc)
-        ))
-    }
+    set_current_thread_policy(libc::SCHED_IDLE, 0, "use SCHED_IDLE")
 }
 
 /// Sleeps until `CLOCK_MONOTONIC` reads `deadline_ns` (returns at once if it has passed). An
