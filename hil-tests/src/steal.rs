@@ -2,16 +2,19 @@
 //!
 //! On a virtual machine the host can take a virtual CPU away for milliseconds at a time (another
 //! guest, the host's own work). The guest's kernel accounts that as *steal* (`/proc/stat`, eighth
-//! value of a `cpuN` line, in 1/100 s). What is sampled is the CPU the daemon gives its loop: the
-//! last one this process may use (the daemon, started by it, inherits its CPUs and takes the last,
-//! docs/daemon.md "Real-time scheduling"); with one CPU, the machine's sum. A 1 kHz loop cannot keep its deadlines while its CPU is
-//! not running at all, whatever the daemon does; a check of the daemon's timing therefore judges
-//! the stretches of a run in which the host took nothing, reports the rest beside it, and fails
-//! when too little of the run was left to judge.
+//! value of a `cpuN` line, in 1/100 s). What is sampled is the CPU the daemon gives its loop,
+//! chosen by the daemon's own rule (`choose_realtime_cpu`) from the CPUs this process may use,
+//! which the daemon it starts inherits; with one CPU, the machine's sum. A 1 kHz loop cannot keep
+//! its deadlines while its CPU is not running at all, whatever the daemon does; a check of the
+//! daemon's timing therefore judges the stretches of a run in which the host took nothing,
+//! reports the rest beside it, and fails when too little of the run was left to judge.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::Duration;
+
+use hydrometra_daemon::service::realtime::{choose_realtime_cpu, CpuSet};
+use hydrometra_drivers::transport::monotonic_ns;
 
 /// How often `/proc/stat` is read.
 const SAMPLE_PERIOD: Duration = Duration::from_millis(50);
@@ -32,34 +35,16 @@ pub struct HostSteal {
     thread: Option<std::thread::JoinHandle<()>>,
 }
 
-/// CLOCK_MONOTONIC in ns: the clock of the daemon's `publish_monotonic_ns`.
-pub fn monotonic_ns() -> u64 {
-    let mut ts = libc::timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: `ts` is a valid timespec for the call to fill.
-    unsafe { libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts) };
-    ts.tv_sec as u64 * 1_000_000_000 + ts.tv_nsec as u64
-}
-
-/// The `/proc/stat` line to sample: `cpuN ` for the last CPU this process may use when it may use
-/// two or more, else the machine's `cpu ` line.
+/// The `/proc/stat` line to sample: `cpuN ` for the CPU the daemon's loop gets from the CPUs this
+/// process may use (the daemon's own rule, with `loop.realtime_cpu` unset), else the machine's
+/// `cpu ` line.
 fn stat_line_prefix() -> String {
-    // SAFETY: `set` is a zeroed cpu_set_t the call fills; 0 names the calling thread.
-    let cpus: Vec<usize> = unsafe {
-        let mut set: libc::cpu_set_t = std::mem::zeroed();
-        if libc::sched_getaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &mut set) != 0 {
-            Vec::new()
-        } else {
-            (0..libc::CPU_SETSIZE as usize)
-                .filter(|&c| libc::CPU_ISSET(c, &set))
-                .collect()
-        }
-    };
-    match cpus.as_slice() {
-        [_, .., last] => format!("cpu{last} "),
-        _ => "cpu ".to_string(),
+    let allowed = CpuSet::of_current_thread()
+        .map(|s| s.cpus())
+        .unwrap_or_default();
+    match choose_realtime_cpu(&allowed, None) {
+        Some(cpu) => format!("cpu{cpu} "),
+        None => "cpu ".to_string(),
     }
 }
 
