@@ -203,6 +203,14 @@ impl CutCells {
     pub fn layer(&self, l: usize) -> &SurfaceFractions {
         &self.layers[l].0
     }
+    /// What lies under the layers.
+    pub fn background(&self) -> Phase {
+        self.background
+    }
+    /// What layer `l`'s enclosed region becomes.
+    pub fn layer_phase(&self, l: usize) -> Phase {
+        self.layers[l].1
+    }
     /// How many layers.
     pub fn layer_count(&self) -> usize {
         self.layers.len()

@@ -227,6 +227,19 @@ impl SurfaceFractions {
         &self.changed_strips[1]
     }
 
+    /// The held positions in cell units (relative to the box's corner).
+    pub(crate) fn cell_positions(&self) -> &[P3] {
+        &self.pos
+    }
+    /// Which way the normals point.
+    pub(crate) fn orientation(&self) -> Orientation {
+        if self.sign > 0.0 {
+            Orientation::Outward
+        } else {
+            Orientation::Inward
+        }
+    }
+
     fn to_cells(&self, p: [f32; 3]) -> P3 {
         let h = self.cells.spacing_m;
         std::array::from_fn(|a| (p[a] as f64 - self.cells.origin_m[a]) / h)

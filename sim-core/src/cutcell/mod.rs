@@ -86,6 +86,7 @@
 
 mod cells;
 mod clip;
+mod crossings;
 mod fractions;
 pub mod mesh;
 mod mesh_io;
@@ -93,6 +94,7 @@ pub mod shapes;
 pub mod small;
 
 pub use cells::{CutCellStats, CutCells, Layer, Phase, SmallCellParams};
+pub use crossings::{FaceWalls, NO_WALL};
 pub use fractions::{FractionStats, SurfaceFractions, MAX_CELLS_AWAY};
 
 use crate::scene::voxelize::VoxelBox;

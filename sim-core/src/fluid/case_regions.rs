@@ -303,7 +303,13 @@ pub(super) fn apply_cut_regions(
     cut.full(&positions).map_err(fail)?;
     let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
     let volume = cut.stabilised_volume_fractions();
-    let fractions = CutFractions::from_box(dims, grid.periodic(), volume, faces);
+    let mut fractions = CutFractions::from_box(dims, grid.periodic(), volume, faces);
+    // The walls' distances along the viscous stencil's arms, from the same surfaces.
+    fractions.walls = Some(CutFractions::walls_from_box(
+        dims,
+        grid.periodic(),
+        &cut.face_walls(),
+    ));
     for (n, &v) in fractions.volume.iter().enumerate() {
         let label = if holds_fluid(v) {
             CellLabel::Fluid

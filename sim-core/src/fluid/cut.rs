@@ -12,6 +12,7 @@
 //! solver then runs today's unweighted kernels: bit for bit the discretisation without cut cells.
 
 use super::FluidError;
+use crate::cutcell::{FaceWalls, NO_WALL};
 
 /// The fractions of one grid, in the solver's layouts: cells x fastest, faces of component `c` in
 /// `dims` with `dims[c] + 1` along `c` unless `c` is periodic (face `f` lies between cells
@@ -23,6 +24,11 @@ pub struct CutFractions {
     pub volume: Vec<f32>,
     /// Open area fraction per face, per component (`[0, 1]`).
     pub face: [Vec<f32>; 3],
+    /// Where the walls cross the viscous stencil's arms (faces in the solver's layout; see
+    /// [`FaceWalls`], [`CutFractions::walls_from_box`]): with them the viscous step puts the
+    /// no-slip wall at its distance (`fluid/cut_viscosity.rs`), without them (`None`) at the
+    /// staircase of the labels.
+    pub walls: Option<FaceWalls>,
 }
 
 /// Largest volume fraction accepted: a merge target holds its own cell and at most a neighbour's
@@ -36,6 +42,7 @@ impl CutFractions {
         Self {
             volume: vec![1.0; n],
             face: std::array::from_fn(|c| vec![1.0; face_count(dims, periodic, c)]),
+            walls: None,
         }
     }
 
@@ -78,6 +85,25 @@ impl CutFractions {
                     "area fraction of face {i} of component {c} is {v}: expected 0..=1"
                 ));
             }
+            let Some(walls) = &self.walls else { continue };
+            let mut last = None;
+            for &(idx, arms) in &walls.faces[c] {
+                if idx as usize >= n || last.is_some_and(|l| l >= idx) {
+                    return bad(format!(
+                        "wall distances of component {c}: face {idx} out of order or beyond \
+                         the {n} faces"
+                    ));
+                }
+                last = Some(idx);
+                if let Some(x) = arms
+                    .iter()
+                    .find(|x| !(**x >= 0.0 && (**x <= 1.0 || **x == NO_WALL)))
+                {
+                    return bad(format!(
+                        "wall distance {x} at face {idx} of component {c}: expected 0..=1 or none"
+                    ));
+                }
+            }
         }
         Ok(())
     }
@@ -113,6 +139,7 @@ impl CutFractions {
         let mut f = Self {
             volume: Vec::new(),
             face: Default::default(),
+            walls: None,
         };
         f.assign_from_box(dims, periodic, volume, faces);
         f
@@ -131,6 +158,32 @@ impl CutFractions {
         for (c, boxed) in faces.into_iter().enumerate() {
             face_from_box_into(dims, periodic, c, boxed, &mut self.face[c]);
         }
+    }
+}
+
+impl CutFractions {
+    /// Wall distances of the cutcell module's box layout ([`crate::cutcell::CutCells::face_walls`])
+    /// in the solver's, for a grid of `dims` cells with the periodic axes `periodic` (on a
+    /// periodic axis the box's last face, the same face as its first, is dropped).
+    pub fn walls_from_box(dims: [usize; 3], periodic: [bool; 3], boxed: &FaceWalls) -> FaceWalls {
+        let mut out = FaceWalls::default();
+        for c in 0..3 {
+            let mut bd = dims;
+            bd[c] += 1;
+            let mut sd = dims;
+            if !periodic[c] {
+                sd[c] += 1;
+            }
+            for &(idx, arms) in &boxed.faces[c] {
+                let idx = idx as usize;
+                let f = [idx % bd[0], (idx / bd[0]) % bd[1], idx / (bd[0] * bd[1])];
+                if f[c] >= sd[c] {
+                    continue;
+                }
+                out.faces[c].push(((f[0] + sd[0] * (f[1] + sd[1] * f[2])) as u32, arms));
+            }
+        }
+        out
     }
 }
 

@@ -140,6 +140,7 @@ impl FluidGrid {
             for (a, b) in cut.face.iter_mut().zip(&fractions.face) {
                 a.clone_from(b);
             }
+            cut.walls.clone_from(&fractions.walls);
         } else {
             self.cut = Some(fractions.clone());
         }

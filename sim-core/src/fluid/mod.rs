@@ -28,6 +28,7 @@ mod advection;
 pub mod case;
 mod case_regions;
 mod cut;
+mod cut_viscosity;
 mod grid;
 mod labels;
 mod multigrid;
@@ -40,6 +41,7 @@ mod viscosity;
 
 pub use advection::AdvectionScheme;
 pub use cut::{holds_fluid, CutFractions};
+pub use cut_viscosity::MIN_WALL_DISTANCE;
 pub(crate) use grid::step_along;
 pub use grid::FluidGrid;
 pub use labels::CellLabel;

@@ -33,11 +33,33 @@ pub(crate) struct ViscosityScratch {
     pub ap: Vec<f32>,
 }
 
+/// The implicit system of one component: per compact face its full index, the diagonal of the
+/// negative Laplacian and the stencil (see [`FaceSet`]; `compact` maps full indices).
+#[derive(Clone, Copy)]
+pub(crate) struct Operator<'a> {
+    pub active: &'a [u32],
+    pub compact: &'a [u32],
+    pub stencil: &'a [[u32; 6]],
+    pub diag: &'a [f32],
+}
+
+impl<'a> Operator<'a> {
+    /// The labels' operator (staircase walls).
+    pub fn of(set: &'a FaceSet) -> Self {
+        Self {
+            active: &set.active,
+            compact: &set.compact,
+            stencil: &set.stencil,
+            diag: &set.diag,
+        }
+    }
+}
+
 /// Sum of the fixed (constant) neighbours of compact face `n` plus its wall ghosts.
 #[inline]
-fn constant_part(set: &FaceSet, full: &[f32], ghost: &[f32], n: usize) -> f32 {
+fn constant_part(op: Operator, full: &[f32], ghost: &[f32], n: usize) -> f32 {
     let mut s = ghost[n];
-    for &e in &set.stencil[n] {
+    for &e in &op.stencil[n] {
         if e != NONE && e & CONST_BIT != 0 {
             s += full[(e & !CONST_BIT) as usize];
         }
@@ -46,13 +68,13 @@ fn constant_part(set: &FaceSet, full: &[f32], ghost: &[f32], n: usize) -> f32 {
 }
 
 /// Sum of the active neighbours of compact face `n` in `x` (compact; the stencil holds full
-/// indices, which `FaceSet::compact` maps).
+/// indices, which `compact` maps).
 #[inline]
-fn variable_part(set: &FaceSet, x: &[f32], n: usize) -> f32 {
+fn variable_part(op: Operator, x: &[f32], n: usize) -> f32 {
     let mut s = 0.0;
-    for &e in &set.stencil[n] {
+    for &e in &op.stencil[n] {
         if e != NONE && e & CONST_BIT == 0 {
-            s += x[set.compact[e as usize] as usize];
+            s += x[op.compact[e as usize] as usize];
         }
     }
     s
@@ -186,7 +208,7 @@ pub(crate) fn write_back(set: &FaceSet, compact: &[f32], full: &mut [f32]) {
 /// Implicit step: solves `(1 + a diag) x - a sum(active neighbours) = u + a (constants)`. Returns
 /// the CG iterations; the result is in `scratch.x`.
 pub(crate) fn implicit(
-    set: &FaceSet,
+    op: Operator,
     full: &[f32],
     ghost: &[f32],
     a: f32,
@@ -194,18 +216,18 @@ pub(crate) fn implicit(
     rel_tol: f64,
     max_iterations: usize,
 ) -> usize {
-    let n = set.active.len();
+    let n = op.active.len();
     let ViscosityScratch { rhs, x, r, p, ap } = scratch;
     for v in [&mut *rhs, &mut *x, &mut *r, &mut *p, &mut *ap] {
         v.clear();
         v.resize(n, 0.0);
     }
     for i in 0..n {
-        let u = full[set.active[i] as usize];
-        rhs[i] = u + a * constant_part(set, full, ghost, i);
+        let u = full[op.active[i] as usize];
+        rhs[i] = u + a * constant_part(op, full, ghost, i);
         x[i] = u;
     }
-    let apply = |x: &[f32], i: usize| (1.0 + a * set.diag[i]) * x[i] - a * variable_part(set, x, i);
+    let apply = |x: &[f32], i: usize| (1.0 + a * op.diag[i]) * x[i] - a * variable_part(op, x, i);
     let mut rr = 0.0f64;
     let mut bb = 0.0f64;
     for i in 0..n {
@@ -213,7 +235,7 @@ pub(crate) fn implicit(
         rr += (r[i] as f64).powi(2);
         bb += (rhs[i] as f64).powi(2);
     }
-    let inv = |i: usize| 1.0 / (1.0 + a * set.diag[i]);
+    let inv = |i: usize| 1.0 / (1.0 + a * op.diag[i]);
     // Relative to the initial residual (the warm start is usually close), floored near f32 precision.
     let tol2 = (rel_tol * rel_tol * rr).max(1e-14 * bb).max(1e-30);
     if rr <= 1e-14 * bb {

@@ -9,6 +9,7 @@
 //!   geometry of the fluid benchmark and tests.
 //! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
+//! - [`pipe`]: Hagen-Poiseuille flow in a pipe tilted to the grid (cut-cell walls).
 //! - [`soak`]: the random stability soak of the fluid solver.
 //! - [`load`]: busy threads, to measure the fork-joins under load.
 //! - [`stage_bench`]: the cavity and particles the vortex and particle benchmarks share.
@@ -23,6 +24,7 @@ use crate::fluid::{
 pub mod analytic_cavity;
 pub mod benchmark;
 pub mod load;
+pub mod pipe;
 pub mod soak;
 pub mod stage_bench;
 // Index loops mirror the mesh formulas, as in `fem`.

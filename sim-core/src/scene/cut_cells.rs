@@ -55,6 +55,8 @@ impl CavityFractions {
                 d[a] += 1;
                 vec![0.0; d.iter().product()]
             }),
+            // The scene's viscous step keeps the staircase wall (no wall distances per frame).
+            walls: None,
         };
         Ok(Self {
             cut,

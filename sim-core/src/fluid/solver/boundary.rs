@@ -72,6 +72,16 @@ impl FluidSolver {
                 }
             }
         }
+        let walls = self.grid.cut_fractions().and_then(|c| c.walls.as_ref());
+        self.cut_walls = walls.is_some();
+        for c in 0..3 {
+            match walls {
+                Some(w) => {
+                    self.cut_visc[c].build(&self.faces[c], &self.layout, &self.grid, c, &w.faces[c])
+                }
+                None => self.cut_visc[c] = Default::default(),
+            }
+        }
         self.find_outflow_faces();
         let [f0, f1, f2] = &self.faces;
         let counts = [f0.active.len(), f1.active.len(), f2.active.len()];

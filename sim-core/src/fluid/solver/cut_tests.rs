@@ -47,8 +47,12 @@ fn cut_grid(mesh: &ClosedMesh, dims: [usize; 3], origin_m: [f64; 3], h: f64) -> 
         };
         grid.set_label(grid.coords(i), label).unwrap();
     }
-    grid.set_cut_fractions(CutFractions { volume, face })
-        .unwrap();
+    grid.set_cut_fractions(CutFractions {
+        volume,
+        face,
+        walls: None,
+    })
+    .unwrap();
     grid
 }
 

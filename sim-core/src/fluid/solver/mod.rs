@@ -14,11 +14,12 @@
 use std::time::Instant;
 
 use super::advection::{self, AdvectionScheme};
+use super::cut_viscosity::CutViscosity;
 use super::grid::FluidGrid;
 use super::pressure::{PressureSolver, SPLIT_DIVISOR};
 use super::sample::Layout;
 use super::topology::{self, FaceSet};
-use super::viscosity::{self, ViscosityMode, ViscosityScratch};
+use super::viscosity::{self, Operator, ViscosityMode, ViscosityScratch};
 use super::FluidError;
 
 mod advect;
@@ -65,6 +66,10 @@ pub struct FluidSolver {
     adv_refl: Vec<f32>,
     ghost: [Vec<f32>; 3],
     visc: ViscosityScratch,
+    /// The viscous operators with the walls at their distance, when the grid's cut fractions
+    /// carry the walls' distances (`cut_walls`); otherwise unused (the labels' staircase).
+    cut_visc: [CutViscosity; 3],
+    cut_walls: bool,
     pressure: PressureSolver,
     /// Pressure (Pa) on level 0's padded box (zero off the fluid cells), kept for warm starts and
     /// probes; the box does not change with the labels, so the pressure of a cell that stays fluid
@@ -127,6 +132,8 @@ impl FluidSolver {
             compact: Default::default(),
             ghost: Default::default(),
             visc: ViscosityScratch::default(),
+            cut_visc: Default::default(),
+            cut_walls: false,
             pressure: PressureSolver::default(),
             pressure_pa: Vec::new(),
             p_lag: Vec::new(),
@@ -380,7 +387,10 @@ impl FluidSolver {
         let nu = self.params.viscosity_m2_s;
         let a = nu * dt / (h * h);
         let wide = parallel;
-        let implicit = nu > 0.0 && a > viscosity::EXPLICIT_LIMIT;
+        // With the walls at their distance the explicit limit also depends on them.
+        let implicit = nu > 0.0
+            && (a > viscosity::EXPLICIT_LIMIT
+                || (self.cut_walls && !self.cut_visc.iter().all(|v| v.explicit_stable(a))));
         stats.viscosity = match (nu > 0.0, implicit) {
             (false, _) => ViscosityMode::Skipped,
             (true, false) => ViscosityMode::Explicit,
@@ -388,7 +398,11 @@ impl FluidSolver {
         };
         if nu > 0.0 {
             for c in 0..3 {
-                self.update_ghosts(c);
+                if self.cut_walls {
+                    self.cut_visc[c].ghosts(&self.grid, c, &self.u[c], &mut self.ghost[c]);
+                } else {
+                    self.update_ghosts(c);
+                }
             }
         }
         if nu == 0.0 || implicit {
@@ -397,9 +411,11 @@ impl FluidSolver {
         if nu > 0.0 {
             for c in 0..3 {
                 let set = &self.faces[c];
+                let cut = self.cut_walls.then_some(&self.cut_visc[c]);
                 if implicit {
+                    let op = cut.map_or_else(|| Operator::of(set), |v| v.operator(set));
                     stats.viscosity_iterations += viscosity::implicit(
-                        set,
+                        op,
                         &self.u[c],
                         &self.ghost[c],
                         a as f32,
@@ -411,14 +427,23 @@ impl FluidSolver {
                         self.u[c][idx as usize] = self.visc.x[n];
                     }
                 } else {
-                    viscosity::explicit(
-                        set,
-                        &self.u[c],
-                        &self.ghost[c],
-                        a as f32,
-                        &mut self.compact[c],
-                        wide,
-                    );
+                    match cut {
+                        Some(v) => v.explicit(
+                            set,
+                            &self.u[c],
+                            &self.ghost[c],
+                            a as f32,
+                            &mut self.compact[c],
+                        ),
+                        None => viscosity::explicit(
+                            set,
+                            &self.u[c],
+                            &self.ghost[c],
+                            a as f32,
+                            &mut self.compact[c],
+                            wide,
+                        ),
+                    }
                     viscosity::write_back(set, &self.compact[c], &mut self.u[c]);
                 }
             }

@@ -88,7 +88,7 @@ pub(super) fn face_cells(
 /// outside), as [`face_cells`] finds them but by stride arithmetic: the rebuild asks this for every
 /// visited face and every tangential stencil neighbour.
 #[inline]
-pub(super) fn face_cell_indices(
+pub(crate) fn face_cell_indices(
     dims: [usize; 3],
     periodic: [bool; 3],
     c: usize,

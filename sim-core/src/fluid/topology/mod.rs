@@ -17,7 +17,7 @@ mod update;
 
 #[cfg(test)]
 pub(crate) use faces::extend_runs;
-pub(crate) use faces::wall_velocity;
+pub(crate) use faces::{face_cell_indices, neighbour_index, wall_velocity};
 pub(crate) use rows::{open_row_ranges, range_hull, update_open_row_ranges, LabelDiff};
 
 /// "No such index".
