@@ -11,7 +11,10 @@
 //!   axis `a` the face `(i, j, k)` lies between cells `(i, j, k) - e_a` and `(i, j, k)`, with
 //!   `dims[a] + 1` faces along the axis (the box's boundary faces included), x fastest: the
 //!   solver's face layout;
-//! - the small-cell rule's merge targets and stabilised fractions ([`small`]).
+//! - the small-cell rule's merge targets and stabilised fractions ([`small`]);
+//! - per MAC face centre, the distance along each axis to the fluid's boundary where it lies
+//!   within one cell ([`CutCells::face_walls`], `crossings.rs`): the no-slip rule of the viscous
+//!   step at cut walls.
 //!
 //! Method: exact for the polygonal surface, up to rounding (about 1e-15 relative on the default
 //! cavity). Each triangle is clipped to the rows of cells it crosses and cut along x into cells;

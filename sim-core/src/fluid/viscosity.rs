@@ -1,6 +1,8 @@
 //! Viscous diffusion of the face velocities: explicit where stable, backward Euler (Jacobi-PCG)
 //! otherwise. Walls enter through ghost values (no-slip at the wall, moving with `Velocity` cells),
-//! outflow sides as zero gradient.
+//! outflow sides as zero gradient. This is the labels' (staircase) operator; on grids whose cut
+//! fractions carry the walls' distances the solver builds the operator of `cut_viscosity.rs`
+//! instead and runs the same implicit solve on it ([`Operator`]).
 
 // Index loops over several parallel arrays read clearer than zipped iterators here.
 #![allow(clippy::needless_range_loop)]
