@@ -106,7 +106,7 @@ fn tilted_pipe_unseen_tilt_radius_and_viscosity() {
 /// `nu dt L grad p`: the flow rate moves with `nu dt / h^2`. The explicit step (the smallest
 /// value, below its limit with the walls' diagonal) has no such term.
 #[test]
-#[ignore]
+#[ignore = "a measurement of about 15 minutes, run by hand for docs/fluid-cases.md: cargo test -p hydrometra-sim --test fluid_pipe -- --ignored --nocapture"]
 fn tilted_pipe_flow_rate_against_the_time_step() {
     for radius in [4.0, 8.0] {
         for a in [0.0075, 0.1, 2.0, 50.0] {
