@@ -1,11 +1,14 @@
 //! Reconstructs the cavity mesh from `cavity/topology` and `cavity/positions` and prints the
-//! volume it encloses, frame by frame (docs/ipc.md, "Cavity mesh").
+//! volume it encloses, frame by frame (docs/ipc.md, "Cavity mesh"); beside it, for the frames
+//! that published a flow field, the fluid volume of the field's fluid volume fractions,
+//! `sum(fraction) h^3` (docs/ipc.md, "Flow field").
 //!
 //!     cargo run -p hydrometra-ipc --example cavity_volume -- [PREFIX] [FRAMES]
 
 use core::time::Duration;
 
-use hydrometra_ipc::slice::{self, Positions, Topology};
+use hydrometra_ipc::field::fraction_from_u8;
+use hydrometra_ipc::slice::{self, Flow, Positions, Topology};
 use hydrometra_ipc::{events, ServiceNames};
 use iceoryx2::prelude::*;
 
@@ -49,7 +52,18 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         })?
         .subscriber_builder()
         .create()?;
+    let flow = slice::open::<Flow, _>(&node, &names)
+        .map_err(|e| {
+            format!(
+                "{}: {e}: {hint}",
+                names.full(hydrometra_ipc::names::suffix::FLOW_FIELD)
+            )
+        })?
+        .subscriber_builder()
+        .create()?;
     let listener = events::open(&node, &names)?.listener_builder().create()?;
+    // The newest flow field's (scene frame, fluid volume m^3).
+    let mut fluid: Option<(u64, Option<f64>)> = None;
     let mut triangles: Vec<u32> = Vec::new();
     let mut revision = None;
     let mut printed = 0;
@@ -64,14 +78,34 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         while let Some(sample) = positions.receive()? {
             newest = Some(sample);
         }
+        while let Some(sample) = flow.receive()? {
+            let h = sample.user_header();
+            // Absent fractions (offset 0) give no volume; the field is still this frame's.
+            let cells = h
+                .fractions(sample.payload())
+                .map(|f| f.iter().map(|&b| fraction_from_u8(b)).sum::<f64>());
+            fluid = Some((h.scene_frame, cells.map(|c| c * h.spacing_m.powi(3))));
+        }
         let Some(sample) = newest else { continue };
         let h = *sample.user_header();
         if Some(h.topology_revision) != revision {
             continue; // positions of a topology not received yet
         }
         let volume = enclosed_volume_m3(&triangles, sample.payload());
+        // The flow of the same frame is published right after its positions, so it is here
+        // already unless the fluid stage skipped the frame (then the flow service is quiet).
+        let fluid_text = match fluid {
+            Some((frame, Some(v))) if frame == h.scene_frame => {
+                format!(
+                    "  fluid {:.3} ml ({:+.1} %)",
+                    v * 1e6,
+                    100.0 * (v / volume - 1.0)
+                )
+            }
+            _ => String::new(),
+        };
         println!(
-            "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml",
+            "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml{fluid_text}",
             h.sim_time_s,
             h.cavity_pressure_pa / hydrometra_units::PA_PER_MMHG,
             h.vertex_count,
