@@ -62,8 +62,10 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         .subscriber_builder()
         .create()?;
     let listener = events::open(&node, &names)?.listener_builder().create()?;
-    // The newest flow field's (scene frame, fluid volume m^3).
-    let mut fluid: Option<(u64, Option<f64>)> = None;
+    // The enclosed volumes of the last frames, by scene frame: a flow field is published right
+    // after its frame's positions (when the fluid stage ran), so it usually arrives a wake-up
+    // later and is paired with its frame's volume here.
+    let mut volumes = [(u64::MAX, 0.0f64); 8];
     let mut triangles: Vec<u32> = Vec::new();
     let mut revision = None;
     let mut printed = 0;
@@ -78,41 +80,42 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         while let Some(sample) = positions.receive()? {
             newest = Some(sample);
         }
+        if let Some(sample) = newest {
+            let h = *sample.user_header();
+            // Positions of a topology not received yet are skipped.
+            if Some(h.topology_revision) == revision {
+                let volume = enclosed_volume_m3(&triangles, sample.payload());
+                volumes[h.scene_frame as usize % volumes.len()] = (h.scene_frame, volume);
+                println!(
+                    "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml",
+                    h.sim_time_s,
+                    h.cavity_pressure_pa / hydrometra_units::PA_PER_MMHG,
+                    h.vertex_count,
+                    triangles.len() / 3,
+                    volume * 1e6
+                );
+                printed += 1;
+            }
+        }
         while let Some(sample) = flow.receive()? {
             let h = sample.user_header();
-            // Absent fractions (offset 0) give no volume; the field is still this frame's.
-            let cells = h
-                .fractions(sample.payload())
-                .map(|f| f.iter().map(|&b| fraction_from_u8(b)).sum::<f64>());
-            fluid = Some((h.scene_frame, cells.map(|c| c * h.spacing_m.powi(3))));
-        }
-        let Some(sample) = newest else { continue };
-        let h = *sample.user_header();
-        if Some(h.topology_revision) != revision {
-            continue; // positions of a topology not received yet
-        }
-        let volume = enclosed_volume_m3(&triangles, sample.payload());
-        // The flow of the same frame is published right after its positions, so it is here
-        // already unless the fluid stage skipped the frame (then the flow service is quiet).
-        let fluid_text = match fluid {
-            Some((frame, Some(v))) if frame == h.scene_frame => {
-                format!(
-                    "  fluid {:.3} ml ({:+.1} %)",
-                    v * 1e6,
-                    100.0 * (v / volume - 1.0)
-                )
+            // Absent fractions (offset 0): nothing to add up.
+            let Some(fractions) = h.fractions(sample.payload()) else {
+                continue;
+            };
+            let cells: f64 = fractions.iter().map(|&b| fraction_from_u8(b)).sum();
+            let fluid_m3 = cells * h.spacing_m.powi(3);
+            let (frame, volume) = volumes[h.scene_frame as usize % volumes.len()];
+            if frame == h.scene_frame {
+                println!(
+                    "t={:.3} s  fluid {:.3} ml of the flow field's fractions ({:+.1} % of the \
+                     enclosed volume)",
+                    h.sim_time_s,
+                    fluid_m3 * 1e6,
+                    100.0 * (fluid_m3 / volume - 1.0)
+                );
             }
-            _ => String::new(),
-        };
-        println!(
-            "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml{fluid_text}",
-            h.sim_time_s,
-            h.cavity_pressure_pa / hydrometra_units::PA_PER_MMHG,
-            h.vertex_count,
-            triangles.len() / 3,
-            volume * 1e6
-        );
-        printed += 1;
+        }
     }
     Ok(())
 }
