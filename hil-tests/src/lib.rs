@@ -14,6 +14,21 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::builder::publish_subscribe::PublishSubscribeOpenError;
 
+/// The Python that runs the scene examples: `$PYTHON` or `python3`, which must import iceoryx2
+/// and numpy (`.ci/setup` installs both); panics saying so otherwise.
+pub fn python_with_numpy() -> String {
+    let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&python)
+        .args(["-c", "import iceoryx2, numpy"])
+        .status()
+        .is_ok_and(|s| s.success());
+    assert!(
+        ok,
+        "{python} cannot import iceoryx2 and numpy: run .ci/setup"
+    );
+    python
+}
+
 /// Path of a workspace binary built next to the test executable (`target/<profile>/NAME`,
 /// honouring `CARGO_TARGET_DIR`). Panics with the build command when it is missing.
 pub fn binary(name: &str) -> PathBuf {

@@ -7,28 +7,17 @@ use std::process::{Command, Stdio};
 use std::time::Duration;
 
 use hydrometra_hil_tests::steal::HostSteal;
-use hydrometra_hil_tests::{temp_dir, unique_prefix, workspace_root, Daemon, StatusReader};
+use hydrometra_hil_tests::{
+    python_with_numpy, temp_dir, unique_prefix, workspace_root, Daemon, StatusReader,
+};
 use hydrometra_ipc::status::{scene_stage, scene_state};
 use serde_json::Value;
-
-fn python() -> String {
-    let python = std::env::var("PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&python)
-        .args(["-c", "import iceoryx2, numpy"])
-        .status()
-        .is_ok_and(|s| s.success());
-    assert!(
-        ok,
-        "{python} cannot import iceoryx2 and numpy: run .ci/setup"
-    );
-    python
-}
 
 /// Runs the checker for `seconds` and returns its JSON lines. Its output is read while `during`
 /// runs: a pipe nobody drains fills after a few dozen lines and stalls the checker.
 fn check(prefix: &str, seconds: f64, during: impl FnOnce()) -> Vec<Value> {
     let script = workspace_root().join("hil-tests/python/scene_check.py");
-    let child = Command::new(python())
+    let child = Command::new(python_with_numpy())
         .arg(&script)
         .args(["--prefix", prefix, "--seconds", &seconds.to_string()])
         .stdout(Stdio::piped())
@@ -122,7 +111,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // starts collecting: a pause between two collections longer than the subscriber's buffer
     // (64 statuses, 640 ms at the 100 Hz used here, so a test process held off the CPU for a
     // moment on a loaded machine loses none) would lose statuses.
-    let victim_python = python();
+    let victim_python = python_with_numpy();
     let mut killed_after = None;
     let lines = check(&prefix, 24.0, || {
         statuses.extend(reader.collect_for(Duration::from_secs(4)));

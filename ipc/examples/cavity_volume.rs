@@ -1,11 +1,14 @@
 //! Reconstructs the cavity mesh from `cavity/topology` and `cavity/positions` and prints the
-//! volume it encloses, frame by frame (docs/ipc.md, "Cavity mesh").
+//! volume it encloses, frame by frame (docs/ipc.md, "Cavity mesh"); beside it, for the frames
+//! that published a flow field, the fluid volume of the field's fluid volume fractions,
+//! `sum(fraction) h^3` (docs/ipc.md, "Flow field").
 //!
 //!     cargo run -p hydrometra-ipc --example cavity_volume -- [PREFIX] [FRAMES]
 
 use core::time::Duration;
 
-use hydrometra_ipc::slice::{self, Positions, Topology};
+use hydrometra_ipc::field::fraction_from_u8;
+use hydrometra_ipc::slice::{self, Flow, Positions, Topology};
 use hydrometra_ipc::{events, ServiceNames};
 use iceoryx2::prelude::*;
 
@@ -49,7 +52,20 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         })?
         .subscriber_builder()
         .create()?;
+    let flow = slice::open::<Flow, _>(&node, &names)
+        .map_err(|e| {
+            format!(
+                "{}: {e}: {hint}",
+                names.full(hydrometra_ipc::names::suffix::FLOW_FIELD)
+            )
+        })?
+        .subscriber_builder()
+        .create()?;
     let listener = events::open(&node, &names)?.listener_builder().create()?;
+    // The enclosed volumes of the last frames, by scene frame: a flow field is published right
+    // after its frame's positions (when the fluid stage ran), so it usually arrives a wake-up
+    // later and is paired with its frame's volume here.
+    let mut volumes = [(u64::MAX, 0.0f64); 8];
     let mut triangles: Vec<u32> = Vec::new();
     let mut revision = None;
     let mut printed = 0;
@@ -64,21 +80,42 @@ fn main() -> Result<(), Box<dyn core::error::Error>> {
         while let Some(sample) = positions.receive()? {
             newest = Some(sample);
         }
-        let Some(sample) = newest else { continue };
-        let h = *sample.user_header();
-        if Some(h.topology_revision) != revision {
-            continue; // positions of a topology not received yet
+        if let Some(sample) = newest {
+            let h = *sample.user_header();
+            // Positions of a topology not received yet are skipped.
+            if Some(h.topology_revision) == revision {
+                let volume = enclosed_volume_m3(&triangles, sample.payload());
+                volumes[h.scene_frame as usize % volumes.len()] = (h.scene_frame, volume);
+                println!(
+                    "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml",
+                    h.sim_time_s,
+                    h.cavity_pressure_pa / hydrometra_units::PA_PER_MMHG,
+                    h.vertex_count,
+                    triangles.len() / 3,
+                    volume * 1e6
+                );
+                printed += 1;
+            }
         }
-        let volume = enclosed_volume_m3(&triangles, sample.payload());
-        println!(
-            "t={:.3} s  {:.1} mmHg  {} vertices, {} triangles  enclosed volume {:.3} ml",
-            h.sim_time_s,
-            h.cavity_pressure_pa / hydrometra_units::PA_PER_MMHG,
-            h.vertex_count,
-            triangles.len() / 3,
-            volume * 1e6
-        );
-        printed += 1;
+        while let Some(sample) = flow.receive()? {
+            let h = sample.user_header();
+            // Absent fractions (offset 0): nothing to add up.
+            let Some(fractions) = h.fractions(sample.payload()) else {
+                continue;
+            };
+            let cells: f64 = fractions.iter().map(|&b| fraction_from_u8(b)).sum();
+            let fluid_m3 = cells * h.spacing_m.powi(3);
+            let (frame, volume) = volumes[h.scene_frame as usize % volumes.len()];
+            if frame == h.scene_frame {
+                println!(
+                    "t={:.3} s  fluid {:.3} ml of the flow field's fractions ({:+.1} % of the \
+                     enclosed volume)",
+                    h.sim_time_s,
+                    fluid_m3 * 1e6,
+                    100.0 * (fluid_m3 / volume - 1.0)
+                );
+            }
+        }
     }
     Ok(())
 }

@@ -10,8 +10,8 @@ use hydrometra_ipc::Status;
 use iceoryx2::prelude::ZeroCopySend;
 use std::mem::{align_of, offset_of, size_of};
 
-/// (field, offset, size, type) of one field.
-type Row = (String, usize, usize, String);
+mod docs_common;
+use docs_common::{doc_layout, ipc_doc, stated_sizes_and_alignments, Row};
 
 /// A contract type as the Rust code declares it: type name, size, alignment, fields.
 struct Layout {
@@ -162,6 +162,7 @@ fn layouts() -> Vec<Layout> {
             total_bytes: "u64",
             scene_frame: "u64",
             frame_late_s: "f64",
+            fractions_offset_bytes: "u64",
         }),
         layout!(Particle {
             position_m: "f32[3]",
@@ -201,61 +202,6 @@ fn layouts() -> Vec<Layout> {
     ]
 }
 
-/// Parses the table that follows `<!-- layout: NAME size=N -->` in docs/ipc.md and the caption
-/// that heads it, `` `NAME` (N B, align A): ``: (size, alignment, rows). The marker keeps its
-/// plain form: `record/examples/python/read_recording.py` reads the Status table by it.
-fn doc_layout(doc: &str, type_name: &str) -> (usize, usize, Vec<Row>) {
-    let marker = format!("<!-- layout: {type_name} size=");
-    let start = doc
-        .find(&marker)
-        .unwrap_or_else(|| panic!("docs/ipc.md has no layout table for {type_name}"));
-    let rest = &doc[start + marker.len()..];
-    let size: usize = rest[..rest.find(" -->").unwrap()].parse().unwrap();
-    // The caption: the last non-blank line before the marker, visible where the marker is not.
-    let caption = doc[..start]
-        .lines()
-        .rev()
-        .find(|l| !l.trim().is_empty())
-        .unwrap_or("");
-    let (caption_size, align) = stated_sizes_and_alignments(caption, type_name)
-        .first()
-        .copied()
-        .unwrap_or_else(|| {
-            panic!(
-                "docs/ipc.md: the layout table of {type_name} is not headed by \
-                 `{type_name}` (N B, align A):, found `{caption}`"
-            )
-        });
-    assert_eq!(
-        caption_size, size,
-        "docs/ipc.md: {type_name}: the caption's size and the marker's differ"
-    );
-    let rows = rest
-        .lines()
-        .skip(1)
-        .skip_while(|l| !l.starts_with('|'))
-        .take_while(|l| l.starts_with('|'))
-        .skip(2) // header and separator
-        .map(|l| {
-            let cells: Vec<&str> = l.trim_matches('|').split('|').map(str::trim).collect();
-            let name = cells[3].trim_matches('`').to_string();
-            (
-                name,
-                cells[0].parse().unwrap(),
-                cells[1].parse().unwrap(),
-                cells[2].to_string(),
-            )
-        })
-        .collect();
-    (size, align, rows)
-}
-
-/// The contract's text.
-fn ipc_doc() -> String {
-    let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../docs/ipc.md");
-    std::fs::read_to_string(path).expect("docs/ipc.md")
-}
-
 #[test]
 fn docs_layout_tables_match_the_structs() {
     let doc = ipc_doc();
@@ -280,31 +226,6 @@ fn docs_layout_tables_match_the_structs() {
         assert_eq!(doc_align, align, "{type_name}: alignment in docs/ipc.md");
         assert_eq!(doc_rows, rows, "{type_name}: layout table in docs/ipc.md");
     }
-}
-
-/// Every `(..., N B, align A)` that follows `` `type_name` `` in `doc`: (N, A) as written.
-fn stated_sizes_and_alignments(doc: &str, type_name: &str) -> Vec<(usize, usize)> {
-    let quoted = format!("`{type_name}` (");
-    doc.match_indices(&quoted)
-        .filter_map(|(i, m)| {
-            let inside = &doc[i + m.len()..];
-            let inside = &inside[..inside.find(')')?];
-            let mut size = None;
-            let mut align = None;
-            for part in inside.split(',').map(str::trim) {
-                if let Some(n) = part.strip_suffix(" B") {
-                    size = n.parse().ok();
-                } else if let Some(n) = part.strip_prefix("align ") {
-                    align = n.parse().ok();
-                }
-            }
-            match (size, align) {
-                (Some(s), Some(a)) => Some((s, a)),
-                (None, None) => None, // a parenthesis that states neither
-                _ => panic!("docs/ipc.md: `{type_name} ({inside})` states size or alignment alone"),
-            }
-        })
-        .collect()
 }
 
 #[test]

@@ -14,7 +14,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use hydrometra_ipc::field::FlowFieldHeader;
+use hydrometra_ipc::field::{fraction_to_u8, FlowFieldHeader, FlowLayout};
 use hydrometra_ipc::mesh::{MeshPositionsHeader, MeshTopologyHeader};
 use hydrometra_ipc::particles::ParticlesHeader;
 use hydrometra_ipc::slice::{self, SliceService};
@@ -319,13 +319,6 @@ struct Ports {
     notifier: iceoryx2::port::notifier::Notifier<ipc::Service>,
 }
 
-/// Byte layout of a flow field payload of `cells` cells: labels at 0, velocities at the next
-/// multiple of 4, then the end.
-pub fn flow_layout(cells: usize) -> (usize, usize, usize) {
-    let velocities = cells.div_ceil(4) * 4;
-    (0, velocities, velocities + 12 * cells)
-}
-
 fn publisher<K: SliceService>(
     node: &iceoryx2::node::Node<ipc::Service>,
     names: &ServiceNames,
@@ -367,7 +360,7 @@ fn ports(
         ),
         (
             "flow",
-            slice::shared_memory_bytes::<slice::Flow>(flow_layout(cells).2),
+            slice::shared_memory_bytes::<slice::Flow>(FlowLayout::new(cells).total_bytes),
         ),
         (
             "particles",
@@ -389,7 +382,7 @@ fn ports(
         .map_err(|e| anyhow::anyhow!("cannot create the scene's iceoryx2 node: {e:?}"))?;
     let topology = publisher::<slice::Topology>(&node, names, 3 * triangles)?;
     let positions = publisher::<slice::Positions>(&node, names, 3 * vertices)?;
-    let flow = publisher::<slice::Flow>(&node, names, flow_layout(cells).2)?;
+    let flow = publisher::<slice::Flow>(&node, names, FlowLayout::new(cells).total_bytes)?;
     let particles = publisher::<slice::Particles>(&node, names, particles)?;
     let notifier = events::create(&node, names)
         .map_err(|e| anyhow::anyhow!("{}: {e:?}", names.full("events")))?
@@ -541,7 +534,7 @@ fn run_scene(
         vertices,
         triangles,
         cells,
-        flow_bytes = flow_layout(cells).2,
+        flow_bytes = FlowLayout::new(cells).total_bytes,
         seconds = started.elapsed().as_secs_f64(),
         "scene ready; publishing cavity/topology, cavity/positions, flow, particles"
     );
@@ -675,35 +668,32 @@ fn run_scene(
             flow.velocities_into(&mut velocities);
             let kinds = flow.kinds();
             let dims = flow.dims();
-            let (labels_at, velocities_at, total) = flow_layout(kinds.len());
+            let layout = FlowLayout::new(kinds.len());
             let v = &velocities;
-            let header = FlowFieldHeader {
+            let mut header = FlowFieldHeader {
                 schema_version: SCHEMA_VERSION,
-                reserved0: 0,
                 dims: dims.map(|d| d as u32),
-                cell_count: kinds.len() as u32,
                 origin_m: flow.first_centre_m(),
                 spacing_m: flow.spacing_m(),
                 status_sequence,
                 sim_time_s,
-                labels_offset_bytes: labels_at as u64,
-                velocities_offset_bytes: velocities_at as u64,
-                total_bytes: total as u64,
                 scene_frame: pacer.frames,
                 frame_late_s,
+                ..FlowFieldHeader::default()
             };
+            layout.write_offsets(&mut header);
             let sent = ports
                 .flow
-                .loan_slice_uninit(total)
+                .loan_slice_uninit(layout.total_bytes)
                 .map(|mut sample| {
                     *sample.user_header_mut() = header;
                     sample.write_from_fn(|n| {
-                        if n < velocities_at {
-                            kinds.get(n).map_or(0, |k| *k as u8)
-                        } else {
-                            let b = n - velocities_at;
-                            v[b / 12][(b % 12) / 4].to_ne_bytes()[b % 4]
-                        }
+                        layout.byte(
+                            n,
+                            |c| kinds.get(c).map_or(0, |k| *k as u8),
+                            |c| v.get(c).copied().unwrap_or_default(),
+                            |c| fraction_to_u8(flow.fluid_fraction(c)),
+                        )
                     })
                 })
                 .map_err(|e| format!("{e:?}"))
@@ -833,17 +823,6 @@ fn write_figures(f: &SceneFigures, report: &hydrometra_sim::scene::StepReport, p
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn flow_velocities_start_on_a_multiple_of_four_after_the_labels() {
-        for cells in [1usize, 3, 4, 5, 57_001] {
-            let (labels, vel, total) = flow_layout(cells);
-            assert_eq!(labels, 0);
-            assert_eq!(vel % 4, 0);
-            assert!(vel >= cells && vel < cells + 4);
-            assert_eq!(total, vel + 12 * cells);
-        }
-    }
 
     #[test]
     fn the_loop_takes_each_compliance_once_and_never_misses_a_newer_one() {

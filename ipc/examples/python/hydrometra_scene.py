@@ -62,7 +62,7 @@ class MeshPositionsHeader(ctypes.Structure):
 
 
 class FlowFieldHeader(ctypes.Structure):
-    """hydrometra.v1.FlowFieldHeader: 112 bytes."""
+    """hydrometra.v1.FlowFieldHeader: 120 bytes."""
 
     _fields_ = [
         ("schema_version", ctypes.c_uint32),
@@ -78,6 +78,7 @@ class FlowFieldHeader(ctypes.Structure):
         ("total_bytes", ctypes.c_uint64),
         ("scene_frame", ctypes.c_uint64),
         ("frame_late_s", ctypes.c_double),
+        ("fractions_offset_bytes", ctypes.c_uint64),
     ]
 
     @staticmethod
@@ -118,7 +119,7 @@ class ParticlesHeader(ctypes.Structure):
         return "hydrometra.v1.ParticlesHeader"
 
 
-for _t, _size in [(MeshTopologyHeader, 24), (MeshPositionsHeader, 56), (FlowFieldHeader, 112),
+for _t, _size in [(MeshTopologyHeader, 24), (MeshPositionsHeader, 56), (FlowFieldHeader, 120),
                   (Particle, 32), (ParticlesHeader, 48)]:
     assert ctypes.sizeof(_t) == _size, (_t, ctypes.sizeof(_t))
 
@@ -169,7 +170,8 @@ def enclosed_volume_m3(tris, verts):
 
 
 class FlowField:
-    """A flow field sample copied out of shared memory: labels and cell-centred velocities."""
+    """A flow field sample copied out of shared memory: labels, cell-centred velocities and fluid
+    volume fractions (None when the payload has none: `fractions_offset_bytes` 0)."""
 
     def __init__(self, sample):
         h = sample.user_header().contents
@@ -178,10 +180,21 @@ class FlowField:
         self.spacing_m = h.spacing_m
         self.status_sequence = h.status_sequence
         self.sim_time_s = h.sim_time_s
+        self.scene_frame = h.scene_frame
         n = h.cell_count
         shape = (self.dims[2], self.dims[1], self.dims[0])  # x fastest
         self.labels = array(sample, ctypes.c_uint8, n, h.labels_offset_bytes).reshape(shape)
         self.velocities = array(sample, ctypes.c_float, 3 * n, h.velocities_offset_bytes).reshape(shape + (3,))
+        self.fractions = None
+        if h.fractions_offset_bytes != 0 and h.fractions_offset_bytes + n <= h.total_bytes:
+            raw = array(sample, ctypes.c_uint8, n, h.fractions_offset_bytes)
+            self.fractions = (raw.astype(np.float64) / 255.0).reshape(shape)
+
+    def fluid_volume_m3(self):
+        """The fluid volume, sum of the fractions times the cell volume (None without fractions)."""
+        if self.fractions is None:
+            return None
+        return float(self.fractions.sum()) * self.spacing_m ** 3
 
     def cell_of(self, point_m):
         """(i, j, k) of the cell containing `point_m`, or None outside the grid."""

@@ -1,9 +1,11 @@
-//! The flow field as the scene publishes it: the cells' kinds and velocities on the voxel grid.
+//! The flow field as the scene publishes it: the cells' kinds, velocities and fluid volume
+//! fractions on the voxel grid.
 
 use super::particles::{self, Traverse, TRAVERSE_SUBGRID};
 use super::ports::Ports;
 use super::types::VoxelKind;
 use super::vortices::Vortices;
+use crate::cutcell::CutCells;
 use crate::fluid::FluidSolver;
 use crate::vtk::{CellType, Digits, Document};
 
@@ -12,6 +14,8 @@ pub struct FlowField<'a> {
     pub(super) ports: &'a Ports,
     pub(super) solver: &'a FluidSolver,
     pub(super) vortices: Option<&'a Vortices>,
+    /// The cavity's cut cells, with `[fluid] cut_cells`.
+    pub(super) cut: Option<&'a CutCells>,
 }
 
 impl FlowField<'_> {
@@ -62,6 +66,32 @@ impl FlowField<'_> {
             v.overlay_into(out);
         }
     }
+    /// The fluid volume fraction of cell `n` (x fastest) as a renderer draws the fluid region,
+    /// in [0, 1]. With cut cells: the exact, unmerged fraction of the cell inside the cavity
+    /// surface (a small cell merged into a neighbour keeps its own; the stabilised fractions the
+    /// solver uses put it in the neighbour, which may then exceed 1), 0 in the scope's cells
+    /// (sheath and ports, whole cells). With whole cells: 1 in fluid and open cells, 0 elsewhere.
+    #[inline]
+    pub fn fluid_fraction(&self, n: usize) -> f64 {
+        let kind = self.ports.kinds().get(n).copied().unwrap_or_default();
+        match (self.cut, kind) {
+            (_, VoxelKind::Scope | VoxelKind::Inflow | VoxelKind::Outflow) => 0.0,
+            (Some(cut), _) => cut
+                .volume_fractions()
+                .get(n)
+                .map_or(0.0, |v| v.clamp(0.0, 1.0)),
+            (None, VoxelKind::Fluid | VoxelKind::Open) => 1.0,
+            (None, _) => 0.0,
+        }
+    }
+
+    /// The fluid volume of [`FlowField::fluid_fraction`], m^3: `sum f h^3`.
+    pub fn fluid_volume_m3(&self) -> f64 {
+        let h = self.spacing_m();
+        let cells = self.kinds().len();
+        (0..cells).map(|n| self.fluid_fraction(n)).sum::<f64>() * h * h * h
+    }
+
     /// The fluid solver (face velocities, pressure, sampling).
     pub fn solver(&self) -> &FluidSolver {
         self.solver

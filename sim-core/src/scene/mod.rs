@@ -377,6 +377,7 @@ impl Scene {
             ports: &self.ports,
             solver: fluid.solver(),
             vortices: self.vortices.as_ref(),
+            cut: self.fractions.as_ref().map(CavityFractions::cut_cells),
         })
     }
     /// The particles, if the scene has them.

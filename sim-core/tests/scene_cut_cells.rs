@@ -1,0 +1,219 @@
+//! Cut cells in the coupled scene (`[fluid] cut_cells`) on the coarse test uterus: the fluid
+//! fills the distending cavity surface, and the flow service's fluid volume fractions are the
+//! exact ones a renderer draws.
+
+use hydrometra_sim::cutcell::small::NO_TARGET;
+use hydrometra_sim::scene::{Scene, ScopePose, VoxelKind};
+
+mod scene_common;
+use scene_common::*;
+
+/// `[fluid] cut_cells`: the fluid fills the cavity surface. The cavity distends from rest (inflow
+/// open, outflow shut, pump at 100 mmHg; the scope out of the cavity, so the surface's enclosed
+/// volume is the fluid's), at 1.2 mm: in every frame with at least `min_fluid_cells` fluid cells
+/// the grid's fluid volume (`sum V_i h^3` over its fluid cells) is within 2 % of the surface's,
+/// where the whole cells of the same scene hold 20 % less or worse. Then the scope enters:
+/// every cell holding fluid is fluid, the open os or the scope (whose cells stay whole), the
+/// fluid volume is the fractions of the fluid cells, the row-incremental labels equal a pass over
+/// the box, and the fractions equal a full computation at the voxelizer's positions bit for bit.
+/// The projection converges as well as without cut cells (largest `max |div u| h / U` and
+/// unconverged steps no more), with no NaN.
+#[test]
+fn cut_cells_fill_the_distending_cavity() {
+    use hydrometra_sim::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
+    let (desc, assets) = coarse(1.2);
+    let mut on = desc.clone();
+    on.fluid.cut_cells = true;
+    let tolerance = desc.fluid.divergence_tolerance;
+    let mut whole = Scene::new(desc, assets.clone()).unwrap();
+    let mut cut = Scene::new(on, assets).unwrap();
+    let away = ScopePose::default();
+    let (mut counted, mut worst_cut, mut best_whole) = (0, 0.0f64, f64::INFINITY);
+    let (mut max_div, mut unconverged, mut steps) = ([0.0f64; 2], [0; 2], [0; 2]);
+    for f in 0..150 {
+        let rig = inputs(1.0, 0.0, 100.0, away);
+        for (s, scene) in [&mut whole, &mut cut].into_iter().enumerate() {
+            let r = scene.step(&own(rig), DT).unwrap();
+            if let Some(stats) = r.fluid {
+                assert!(stats.max_div_rel.is_finite(), "frame {f}, scene {s}");
+                max_div[s] = max_div[s].max(stats.max_div_rel);
+                unconverged[s] += usize::from(!stats.projection_converged);
+                steps[s] += 1;
+            }
+            assert!(scene.flow().unwrap().solver().max_speed_m_s().is_finite());
+        }
+        let (w, c) = (whole.report(), cut.report());
+        assert_eq!(w.surface_volume_m3, c.surface_volume_m3, "frame {f}");
+        if c.fluid_cells >= cut.desc().fluid.min_fluid_cells {
+            counted += 1;
+            let err = (c.grid_fluid_volume_m3 - c.surface_volume_m3) / c.surface_volume_m3;
+            let err_whole = (w.grid_fluid_volume_m3 - w.surface_volume_m3) / w.surface_volume_m3;
+            if f % 30 == 0 {
+                println!(
+                    "frame {f}: surface {:.4} ml, cut cells {:.4} ml ({:+.2} %), whole cells \
+                     {:.4} ml ({:+.1} %)",
+                    c.surface_volume_m3 * 1e6,
+                    c.grid_fluid_volume_m3 * 1e6,
+                    100.0 * err,
+                    w.grid_fluid_volume_m3 * 1e6,
+                    100.0 * err_whole
+                );
+            }
+            assert!(err.abs() < 0.02, "frame {f}: cut-cell volume error {err:e}");
+            worst_cut = worst_cut.max(err.abs());
+            best_whole = best_whole.min(err_whole.abs());
+        }
+    }
+    println!(
+        "{counted} frames: worst cut-cell error {:.2} %, best whole-cell error {:.1} %; max div \
+         whole {:.2e}, cut {:.2e}; unconverged fluid steps whole {} of {}, cut {} of {}",
+        100.0 * worst_cut,
+        100.0 * best_whole,
+        max_div[0],
+        max_div[1],
+        unconverged[0],
+        steps[0],
+        unconverged[1],
+        steps[1]
+    );
+    assert!(
+        counted > 30,
+        "only {counted} frames with enough fluid cells"
+    );
+    assert!(best_whole > 0.2 && worst_cut < 0.1 * best_whole);
+    // The projection as converged as without cut cells.
+    assert!(
+        max_div[1] <= max_div[0].max(tolerance) && unconverged[1] <= unconverged[0],
+        "max div {max_div:?}, unconverged {unconverged:?} of {steps:?}"
+    );
+
+    // The scope enters and sways; the valves open.
+    let home = scope_in_cavity(&cut);
+    for f in 0..60 {
+        cut.step(&own(inputs(1.0, 0.5, 100.0, slide_and_sway(home, f))), DT)
+            .unwrap();
+        assert_incompressible(&cut, f);
+    }
+    let check = cut.relabel_whole_box().unwrap();
+    assert!(check.is_clean(), "{check:?}");
+    let fractions = cut.cavity_fractions().unwrap();
+    let volume = &fractions.fractions().volume;
+    let flow = cut.flow().unwrap();
+    let h = cut.cells().spacing_m;
+    // The cavity's volume by where it lies: fluid cells, the os's open cells, the scope's cells.
+    let (mut fluid_m3, mut open_m3, mut scope_m3) = (0.0, 0.0, 0.0);
+    for (n, (&v, &kind)) in volume.iter().zip(flow.kinds()).enumerate() {
+        let v_m3 = v as f64 * h * h * h;
+        match kind {
+            VoxelKind::Fluid => fluid_m3 += v_m3,
+            VoxelKind::Open => open_m3 += v_m3,
+            VoxelKind::Scope | VoxelKind::Inflow | VoxelKind::Outflow => scope_m3 += v_m3,
+            other => assert_eq!(v, 0.0, "cell {n} holds fluid {v} but is {other:?}"),
+        }
+    }
+    let surface_m3 = cut.report().surface_volume_m3;
+    let all_m3 = fluid_m3 + open_m3 + scope_m3;
+    println!(
+        "scope in: surface {:.4} ml = fluid {:.4} + os cells {:.4} + scope cells {:.4} ml ({:+.3} %)",
+        surface_m3 * 1e6,
+        fluid_m3 * 1e6,
+        open_m3 * 1e6,
+        scope_m3 * 1e6,
+        100.0 * (all_m3 / surface_m3 - 1.0)
+    );
+    assert!(scope_m3 > 0.0, "the scope is not in the cavity");
+    assert!((all_m3 - surface_m3).abs() < 0.02 * surface_m3);
+    let carried = flow.solver().grid().fluid_volume_m3();
+    assert!(
+        (carried - fluid_m3).abs() <= 1e-9 * fluid_m3,
+        "{carried} {fluid_m3}"
+    );
+    assert_eq!(carried, cut.report().grid_fluid_volume_m3);
+    published_fractions_are_the_exact_ones_less_the_scope(&cut);
+    published_fractions_of_whole_cells_are_the_fluid_and_open_cells(&whole);
+    // Incremental == full at the held positions.
+    let surface = cut.cavity_surface();
+    let layer = Layer {
+        name: "cavity".into(),
+        triangles: surface.triangles().to_vec(),
+        vertex_count: surface.vertex_count(),
+        orientation: Orientation::Inward,
+        inside: Phase::Fluid,
+    };
+    let mut full = CutCells::new(
+        *cut.cells(),
+        Phase::Solid,
+        vec![layer],
+        SmallCellParams::default(),
+    )
+    .unwrap();
+    full.full(&[cut.voxelizer().voxel_positions_m()]).unwrap();
+    let held = fractions.cut_cells();
+    assert!(full.stabilised_volume_fractions() == held.stabilised_volume_fractions());
+    for a in 0..3 {
+        assert!(full.stabilised_face_fractions(a) == held.stabilised_face_fractions(a));
+    }
+}
+
+/// What the flow service publishes per cell ([`FlowField::fluid_fraction`], docs/ipc.md): with cut
+/// cells the exact, unmerged fraction in [0, 1], 0 in the scope's cells; so a merged small cell
+/// shows its own fluid (the solver's stabilised fraction moved it to its neighbour) and the sum
+/// is the surface's enclosed volume less the cavity's part in the scope's cells.
+fn published_fractions_are_the_exact_ones_less_the_scope(scene: &Scene) {
+    let flow = scene.flow().unwrap();
+    let cut = scene.cavity_fractions().unwrap().cut_cells();
+    let exact = cut.volume_fractions();
+    let (mut merged, mut in_scope_m3) = (0, 0.0);
+    let h = scene.cells().spacing_m;
+    for (n, &kind) in flow.kinds().iter().enumerate() {
+        let published = flow.fluid_fraction(n);
+        assert!((0.0..=1.0).contains(&published), "cell {n}: {published}");
+        match kind {
+            VoxelKind::Scope | VoxelKind::Inflow | VoxelKind::Outflow => {
+                assert_eq!(published, 0.0, "cell {n} is the scope's");
+                in_scope_m3 += exact[n] * h * h * h;
+            }
+            _ => assert_eq!(published, exact[n], "cell {n} ({kind:?})"),
+        }
+        if cut.merge_targets()[n] != NO_TARGET
+            && !matches!(
+                kind,
+                VoxelKind::Scope | VoxelKind::Inflow | VoxelKind::Outflow
+            )
+        {
+            merged += 1;
+            assert!(
+                published > 0.0 && cut.stabilised_volume_fractions()[n] == 0.0,
+                "merged cell {n}: published {published}"
+            );
+        }
+    }
+    let surface_m3 = scene.report().surface_volume_m3;
+    let expected_m3 = exact.iter().sum::<f64>() * h * h * h - in_scope_m3;
+    println!(
+        "published: {:.4} ml = exact {:.4} ml less the scope's {:.4} ml; surface {:.4} ml; {merged} \
+         merged small cells",
+        flow.fluid_volume_m3() * 1e6,
+        expected_m3 * 1e6 + in_scope_m3 * 1e6,
+        in_scope_m3 * 1e6,
+        surface_m3 * 1e6
+    );
+    assert!(merged > 0, "no merged small cell to check");
+    assert!((flow.fluid_volume_m3() - expected_m3).abs() <= 1e-12 * surface_m3);
+    // The exact fractions sum to the surface's volume (the cut cells' own check, to 1e-5 here).
+    assert!((expected_m3 + in_scope_m3 - surface_m3).abs() <= 1e-5 * surface_m3);
+}
+
+/// Whole cells publish 1 in the fluid and open cells (labels 1 and 6) and 0 elsewhere.
+fn published_fractions_of_whole_cells_are_the_fluid_and_open_cells(scene: &Scene) {
+    let flow = scene.flow().unwrap();
+    let mut ones = 0;
+    for (n, &kind) in flow.kinds().iter().enumerate() {
+        let want = f64::from(u8::from(matches!(kind, VoxelKind::Fluid | VoxelKind::Open)));
+        assert_eq!(flow.fluid_fraction(n), want, "cell {n} ({kind:?})");
+        ones += usize::from(want == 1.0);
+    }
+    let h = scene.cells().spacing_m;
+    assert!(ones >= scene.desc().fluid.min_fluid_cells);
+    assert_eq!(flow.fluid_volume_m3(), ones as f64 * h * h * h);
+}
