@@ -10,6 +10,7 @@
 //! - [`benchmark`]: the paper's Table 1 operating points, ours against the Gauss-Seidel baseline.
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
 //! - [`soak`]: the random stability soak of the fluid solver.
+//! - [`converge`]: the scene's accuracy metrics against a fine reference (`hydrometra scene converge`).
 //! - [`load`]: busy threads, to measure the fork-joins under load.
 //! - [`stage_bench`]: the cavity and particles the vortex and particle benchmarks share.
 
@@ -22,6 +23,7 @@ use crate::fluid::{
 
 pub mod analytic_cavity;
 pub mod benchmark;
+pub mod converge;
 pub mod load;
 pub mod soak;
 pub mod stage_bench;
