@@ -194,6 +194,10 @@ impl Table {
             .windows(2)
             .map(|w| format!("{} -> {}", w[0].voxel_mm, w[1].voxel_mm))
             .collect();
+        if pairs.is_empty() {
+            let _ = writeln!(s, "\nOne size: no observed order.");
+            return s + &self.probe_shares();
+        }
         let _ = writeln!(
             s,
             "\nObserved order (ln of the error ratio over ln of the size ratio; fit: least squares of \
@@ -211,17 +215,20 @@ impl Table {
                 opt(o.fit, 2)
             );
         }
+        s + &self.probe_shares()
+    }
+
+    /// The line on the jet probes' positions in the reference.
+    fn probe_shares(&self) -> String {
         let shares: Vec<String> = JET_PROBE_MM
             .iter()
             .zip(&self.reference.jet_in_fluid_share)
             .map(|(d, f)| format!("{d} mm {:.0} %", 100.0 * f))
             .collect();
-        let _ = writeln!(
-            s,
-            "\nJet probes in a fluid cell of the reference, share of the window's frames: {}.",
+        format!(
+            "\nJet probes in a fluid cell of the reference, share of the window's frames: {}.\n",
             shares.join(", ")
-        );
-        s
+        )
     }
 }
 
