@@ -2,6 +2,7 @@
 
 mod anatomy;
 mod control;
+mod converge;
 mod fem;
 mod fluid;
 mod hydraulics;

@@ -12,7 +12,7 @@ use clap::{Args, Subcommand};
 use hydrometra_sim::harness::benchmark::StepTimes;
 use hydrometra_sim::harness::fork_join::{set_backend, set_guard, Backend};
 use hydrometra_sim::harness::load::BusyThreads;
-use hydrometra_sim::hydraulics::HydraulicInputs;
+use hydrometra_sim::hydraulics::{CaseScript, HydraulicInputs};
 use hydrometra_sim::scene::particles::{Particles, TRAVERSE_SUBGRID};
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneError, SceneInputs,
@@ -36,6 +36,9 @@ pub enum SceneCommand {
     Run(RunArgs),
     /// The paper's Table 1 on the real deformed uterus: grid, fluid, voxelization, replay, step.
     Bench(BenchArgs),
+    /// The scene's accuracy table: run time and the error against a fine reference of what a
+    /// trainee sees, at several voxel sizes, with the observed order.
+    Converge(crate::converge::ConvergeArgs),
 }
 
 /// Where the scene comes from and where its atlas is cached.
@@ -184,6 +187,7 @@ pub fn run(cmd: SceneCommand) -> Result<()> {
         }
         SceneCommand::Run(a) => run_offline(&a),
         SceneCommand::Bench(a) => bench(&a),
+        SceneCommand::Converge(a) => crate::converge::run(&a),
     }
 }
 
@@ -198,7 +202,10 @@ pub fn default_cache_dir() -> PathBuf {
     }
 }
 
-fn assets(desc: &SceneDesc, arg: &SceneArg) -> Result<(SceneAssets, prepare::AtlasSource)> {
+pub(crate) fn assets(
+    desc: &SceneDesc,
+    arg: &SceneArg,
+) -> Result<(SceneAssets, prepare::AtlasSource)> {
     let dir = arg.cache_dir.clone().unwrap_or_else(default_cache_dir);
     let t0 = Instant::now();
     let mut progress = |done: usize, total: usize, p: f64, v: f64| {
@@ -218,8 +225,18 @@ fn assets(desc: &SceneDesc, arg: &SceneArg) -> Result<(SceneAssets, prepare::Atl
     Ok((a, s))
 }
 
+/// The scenario's hydraulics, when its case has a `[hydraulics]` table, with the scope's port
+/// areas (one source: the scene's scope).
+pub(crate) fn apply_scenario_hydraulics(desc: &mut SceneDesc, case: &CaseScript) {
+    if let Some(mut p) = case.params.clone() {
+        p.inflow.port_area_mm2 = desc.hydraulics.inflow.port_area_mm2;
+        p.outflow.port_area_mm2 = desc.hydraulics.outflow.port_area_mm2;
+        desc.hydraulics = p;
+    }
+}
+
 /// Rig inputs from a scenario sample (clinical units and mm at the edge, SI inside).
-fn rig_inputs(
+pub(crate) fn rig_inputs(
     s: &hydrometra_drivers::emulator::scenario::ScenarioSample,
     perforation: bool,
 ) -> RigInputs {
@@ -253,13 +270,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
     }
     desc.fluid.cut_cells |= a.cut_cells;
     let (scenario, case) = load_scenario(&a.scenario)?;
-    if let Some(p) = case.params.clone() {
-        // The scenario's hydraulics, with the scope's port areas (one source).
-        let mut p = p;
-        p.inflow.port_area_mm2 = desc.hydraulics.inflow.port_area_mm2;
-        p.outflow.port_area_mm2 = desc.hydraulics.outflow.port_area_mm2;
-        desc.hydraulics = p;
-    }
+    apply_scenario_hydraulics(&mut desc, &case);
     let (assets, _) = assets(&desc, &a.scene)?;
     let mut scene = Scene::new(desc, assets)?;
     std::fs::create_dir_all(a.out.join("vtu"))

@@ -11,6 +11,7 @@
 //! - [`validation`]: the analytic fluid cases (Taylor-Green, square duct, Ethier-Steinman).
 //! - [`pipe`]: Hagen-Poiseuille flow in a pipe tilted to the grid (cut-cell walls).
 //! - [`soak`]: the random stability soak of the fluid solver.
+//! - [`converge`]: the scene's accuracy metrics against a fine reference (`hydrometra scene converge`).
 //! - [`load`]: busy threads, to measure the fork-joins under load.
 //! - [`stage_bench`]: the cavity and particles the vortex and particle benchmarks share.
 
@@ -23,6 +24,7 @@ use crate::fluid::{
 
 pub mod analytic_cavity;
 pub mod benchmark;
+pub mod converge;
 pub mod load;
 pub mod pipe;
 pub mod soak;
