@@ -289,6 +289,27 @@ impl FluidSolver {
         sum
     }
 
+    /// The speed the divergence tolerance is relative to: the largest face speed, the
+    /// parameters' `velocity_scale_m_s`, and the largest speed a boundary flux pushes through
+    /// a cell's side (`|q| / h^2`: walls moving inside cut cells move no face), m/s.
+    fn speed_scale_m_s(&self) -> f64 {
+        let mut u = self.max_speed_m_s().max(self.params.velocity_scale_m_s);
+        let q = self.grid.boundary_fluxes_m3_per_s();
+        if !q.is_empty() {
+            let h = self.grid.spacing_m();
+            let l0 = &self.pressure.mg.levels[0];
+            let mut q_max = 0.0f64;
+            for &[j, k, i0, i1] in &l0.row_spans {
+                let c0 = self.grid.index([0, j as usize, k as usize]);
+                for &v in &q[c0 + i0 as usize..c0 + i1 as usize] {
+                    q_max = q_max.max(v.abs());
+                }
+            }
+            u = u.max(q_max / (h * h));
+        }
+        u.max(1e-12)
+    }
+
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
     pub(super) fn max_divergence_m_s(&self) -> f64 {
         max_abs_spans(&self.pressure.mg.levels[0], &self.pressure.bd)
@@ -339,10 +360,7 @@ impl FluidSolver {
         }
         let h = self.grid.spacing_m();
         let rho = self.params.density_kg_m3;
-        let u_ref = self
-            .max_speed_m_s()
-            .max(self.params.velocity_scale_m_s)
-            .max(1e-12);
+        let u_ref = self.speed_scale_m_s();
         self.pressure
             .set_parallel_rows(self.params.parallel_threshold_cells);
         let mismatch = self.divergence_rhs();
@@ -408,10 +426,7 @@ impl FluidSolver {
         if self.fluid_cells() == 0 {
             return 0.0;
         }
-        let u_ref = self
-            .max_speed_m_s()
-            .max(self.params.velocity_scale_m_s)
-            .max(1e-12);
+        let u_ref = self.speed_scale_m_s();
         self.divergence_rhs();
         self.max_divergence_m_s() / u_ref
     }
