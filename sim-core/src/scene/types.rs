@@ -101,8 +101,9 @@ pub struct FluxBalance {
     /// the open os cells; with cut cells what the os's pieces carry out (there are no open
     /// cells then).
     pub fluid_open_m3_per_s: f64,
-    /// Incompatible flux the projection removed from closed fluid regions (m^3/s): with cut
-    /// cells (every region closed) what the balance `inflow - outflow - walls - os` misses by.
+    /// Incompatible flux the projection removed from closed fluid regions, the sum of the
+    /// regions' sizes (m^3/s): with cut cells (every region closed) and one region, what the
+    /// balance `inflow - outflow - walls - os` misses by.
     pub closed_region_mismatch_m3_per_s: f64,
     /// The wall velocities from the atlas (`dx/dp dp/dt`) were scaled by this to carry dV/dt
     /// exactly over the staircase wall, or with cut cells over the wall pieces (1 when exact; 0
