@@ -281,7 +281,8 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         "frame,time_s,pressure_mmhg,cavity_volume_ml,surface_volume_ml,grid_fluid_volume_ml,fluid_cells,\
          inflow_ml_min,outflow_ml_min,losses_ml_min,dvdt_ml_min,fluid_inflow_ml_min,fluid_outflow_ml_min,\
          fluid_wall_ml_min,fluid_open_ml_min,wall_flux_scale,deficit_ml,step_ms,replay_ms,voxelize_ms,ports_ms,fluid_ms,\
-         fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity\n",
+         fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity,balance_ml_min,\
+         closed_mismatch_ml_min\n",
     );
     let mut pvd = vtk::Collection::new();
     let ml_min = |q: f64| q * 6e7;
@@ -315,7 +316,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         let clarity = clarity.map_or(String::new(), |c| format!("{c:.4}"));
         let _ = writeln!(
             csv,
-            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e},{alive},{clarity}",
+            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e},{alive},{clarity},{:.3e},{:.3e}",
             r.time_s,
             pa_to_mmhg(r.cavity_pressure_pa),
             m3_to_ml(r.cavity_volume_m3),
@@ -339,7 +340,15 @@ fn run_offline(a: &RunArgs) -> Result<()> {
             last(Stage::Fluid),
             u8::from(c.get(Stage::Fluid).ran_last),
             its,
-            div
+            div,
+            // The projected field's net divergence over the fluid (docs/scene.md).
+            ml_min(
+                fl.fluid_inflow_m3_per_s
+                    - fl.fluid_outflow_m3_per_s
+                    - fl.fluid_wall_m3_per_s
+                    - fl.fluid_open_m3_per_s
+            ),
+            ml_min(fl.closed_region_mismatch_m3_per_s)
         );
         if a.every > 0 && (f + 1) % a.every == 0 {
             let name = format!("frame_{written:05}");

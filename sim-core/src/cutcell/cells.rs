@@ -243,6 +243,25 @@ impl CutCells {
     pub fn merge_targets(&self) -> &[u32] {
         &self.targets
     }
+    /// The flux, m^3/s into the fluid, that cell `n`'s walls push when they move at
+    /// `velocity_m_s`: `-h^2 W . v` with `W` its [`CutCells::wall_areas`] (out of the fluid), so
+    /// a wall moving into the fluid pushes fluid in. Over a closed surface moving rigidly the
+    /// cells' fluxes sum to zero (the walls' areas do, up to rounding).
+    pub fn wall_flux_m3_per_s(&self, n: usize, velocity_m_s: [f64; 3]) -> f64 {
+        let h = self.cells.spacing_m;
+        let w = self.interface[n];
+        -h * h * (w[0] * velocity_m_s[0] + w[1] * velocity_m_s[1] + w[2] * velocity_m_s[2])
+    }
+    /// The cell whose fluid carries the walls of cell `n` once the small-cell rule applied: `n`
+    /// itself, or the cell it was merged into (its volume moved there, and so do its walls'
+    /// fluxes). The one rule for placing wall fluxes on the stabilised fractions
+    /// (`FluidGrid::set_boundary_flux_m3_per_s`).
+    pub fn wall_carrier(&self, n: usize) -> usize {
+        match self.targets[n] {
+            NO_TARGET => n,
+            t => t as usize,
+        }
+    }
     /// Per cell, the fluid volume fraction after the small-cell rule: 0 for a merged cell or one
     /// holding only rounding (at most `round_off_fraction`), its own plus what merged into it
     /// otherwise (may exceed 1). Sums to the exact fractions' sum less that rounding.

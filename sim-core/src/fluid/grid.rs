@@ -18,6 +18,9 @@ pub struct FluidGrid {
     velocity_m_s: Vec<[f32; 3]>,
     /// Cut-cell fractions (`None`: every cell and face whole).
     cut: Option<CutFractions>,
+    /// Per cell, the flux the boundaries inside it push into its fluid, m^3/s (empty: all zero,
+    /// nothing allocated until the first one is set).
+    boundary_flux_m3_per_s: Vec<f64>,
     revision: u64,
 }
 
@@ -57,6 +60,7 @@ impl FluidGrid {
             labels: vec![CellLabel::Fluid; n],
             velocity_m_s: vec![[0.0; 3]; n],
             cut: None,
+            boundary_flux_m3_per_s: Vec::new(),
             revision: 1,
         })
     }
@@ -172,6 +176,69 @@ impl FluidGrid {
     #[inline]
     pub fn volume_fraction(&self, index: usize) -> f32 {
         self.cut.as_ref().map_or(1.0, |c| c.volume[index])
+    }
+
+    /// Per cell (x fastest), the flux that the moving boundaries inside the cell (the wall
+    /// pieces of a cut cell, a port) push into its fluid, m^3/s, positive into the fluid: the
+    /// projection makes the flux out of a fluid cell through its faces, `h^2 sum A_f u_f`, equal
+    /// to it (Batty, Bertails and Bridson 2007; Ng, Min and Gibou 2009). Empty when none was ever
+    /// set (all zero). Only fluid cells' values count; a closed fluid region whose values and
+    /// face fluxes do not balance has the mismatch removed (`StepStats::closed_region_*`).
+    pub fn boundary_fluxes_m3_per_s(&self) -> &[f64] {
+        &self.boundary_flux_m3_per_s
+    }
+
+    /// Sets the boundary flux of one cell (see [`FluidGrid::boundary_fluxes_m3_per_s`]); the
+    /// first call allocates the per-cell array, later ones nothing. Does not change the topology.
+    pub fn set_boundary_flux_m3_per_s(
+        &mut self,
+        cell: [usize; 3],
+        flux_m3_per_s: f64,
+    ) -> Result<(), FluidError> {
+        let slot = self.boundary_flux_slot(cell, flux_m3_per_s)?;
+        *slot = flux_m3_per_s;
+        Ok(())
+    }
+
+    /// Adds to the boundary flux of one cell (several boundaries in one cell).
+    pub fn add_boundary_flux_m3_per_s(
+        &mut self,
+        cell: [usize; 3],
+        flux_m3_per_s: f64,
+    ) -> Result<(), FluidError> {
+        let slot = self.boundary_flux_slot(cell, flux_m3_per_s)?;
+        *slot += flux_m3_per_s;
+        Ok(())
+    }
+
+    /// Every cell's boundary flux to zero, keeping the array (no allocation).
+    pub fn clear_boundary_fluxes(&mut self) {
+        self.boundary_flux_m3_per_s.fill(0.0);
+    }
+
+    fn boundary_flux_slot(
+        &mut self,
+        cell: [usize; 3],
+        flux_m3_per_s: f64,
+    ) -> Result<&mut f64, FluidError> {
+        if !self.in_range(cell) {
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
+        }
+        if !flux_m3_per_s.is_finite() {
+            return Err(FluidError::InvalidParameter {
+                key: format!("boundary flux of cell {cell:?}"),
+                value: flux_m3_per_s.to_string(),
+                expected: "a finite flux in m^3/s".into(),
+            });
+        }
+        if self.boundary_flux_m3_per_s.is_empty() {
+            self.boundary_flux_m3_per_s = vec![0.0; self.labels.len()];
+        }
+        let idx = self.index(cell);
+        Ok(&mut self.boundary_flux_m3_per_s[idx])
     }
 
     /// The fluid volume the grid carries (m^3): `sum V_i h^3` over the fluid cells.

@@ -47,6 +47,7 @@
 pub mod clarity;
 pub mod counters;
 mod cut_cells;
+mod cut_walls;
 mod deformation;
 pub mod desc;
 pub mod dispersion;
@@ -68,6 +69,7 @@ use std::time::Instant;
 
 pub use counters::{Counters, Stage, StageCounters};
 pub use cut_cells::CavityFractions;
+pub use cut_walls::CutWalls;
 pub use deformation::Deformation;
 pub use desc::SceneDesc;
 pub use error::SceneError;
@@ -99,6 +101,8 @@ pub struct Scene {
     voxelizer: Voxelizer,
     /// With `[fluid] cut_cells` and a fluid stage: the fractions of the voxelizer's surface.
     fractions: Option<CavityFractions>,
+    /// With the fractions: the fluxes of the walls and the os through the cut cells' pieces.
+    cut_walls: Option<CutWalls>,
     ports: Ports,
     /// Present when the scene has a fluid stage (and then the vortices and particles may run).
     fluid: Option<FluidStage>,
@@ -151,6 +155,9 @@ impl Scene {
                 desc.skip.pressure_tolerance_pa,
             ),
             voxelizer,
+            cut_walls: fractions
+                .as_ref()
+                .map(|_| CutWalls::new(cells.cell_count())),
             fractions,
             ports: Ports::new(cells, &desc),
             fluid: fluid.map(|solver| {
@@ -234,7 +241,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface,
-            fractions: self.fractions.as_ref().map(|f| &f.fractions().volume[..]),
+            fractions: self.fractions.as_ref().map(|f| f.fractions()),
         };
         let ports = self.ports.step(
             &cavity,
@@ -248,6 +255,30 @@ impl Scene {
         }
         if let Some(fractions) = self.fractions.as_mut() {
             fractions.send(fluid.solver_mut().grid_mut())?;
+        }
+        if let (Some(fractions), Some(walls)) = (self.fractions.as_ref(), self.cut_walls.as_mut()) {
+            // When the ports stage set its boundaries, or the pieces moved fluid last time.
+            if ports.relabelled_cells.is_some() || ports.boundaries_flow || walls.moving() {
+                let t = Instant::now();
+                let cavity = CavityCells {
+                    voxels: &self.voxelizer,
+                    surface,
+                    fractions: Some(fractions.fractions()),
+                };
+                walls.set_fluxes(
+                    fractions.cut_cells(),
+                    &cavity,
+                    self.ports.kinds(),
+                    &flows,
+                    fluid.solver_mut(),
+                    &mut self.report.flux,
+                )?;
+                // Part of the ports stage's run (its walls).
+                self.report
+                    .counters
+                    .get_mut(Stage::Ports)
+                    .extend_last_run_since(t);
+            }
         }
         self.report.fluid_cells = self.ports.fluid_cells();
         self.report.grid_fluid_volume_m3 =
@@ -265,6 +296,9 @@ impl Scene {
         if let Some(stats) = stepped.stats {
             self.ports
                 .measure_fluxes(fluid.solver(), &mut self.report.flux);
+            if let Some(walls) = &self.cut_walls {
+                walls.add_to(&mut self.report.flux);
+            }
             self.report.flux.closed_region_mismatch_m3_per_s = stats.closed_region_flux_m3_per_s;
         }
 
@@ -397,7 +431,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface: self.deformation.surface(),
-            fractions: self.fractions.as_ref().map(|f| &f.fractions().volume[..]),
+            fractions: self.fractions.as_ref().map(|f| f.fractions()),
         };
         let solver = self.fluid.as_mut().map(FluidStage::solver_mut);
         let check = self

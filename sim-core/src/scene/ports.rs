@@ -26,7 +26,8 @@ use super::types::{
 };
 use super::voxelize::{state, VoxelBox, Voxelizer, NO_TRIANGLE};
 use crate::fluid::{
-    holds_fluid, range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidSolver,
+    holds_fluid, range_hull, step_along, CellLabel, CutFractions, FluidError, FluidGrid,
+    FluidSolver,
 };
 
 /// The cavity as the ports stage reads it: the voxelizer's cell states and the surface they
@@ -38,8 +39,9 @@ pub struct CavityCells<'a> {
     /// The surface (its cap triangles, triangles and `dx/dp`).
     pub surface: &'a CavitySurface,
     /// With cut cells (`[fluid] cut_cells`), each cell's fluid volume fraction of the same
-    /// surface: a cell holding fluid is fluid (`fluid::holds_fluid`), cut or whole.
-    pub fractions: Option<&'a [f32]>,
+    /// surface (a cell holding fluid is fluid, `fluid::holds_fluid`, cut or whole) and each
+    /// face's open area fraction (a port's face carries its open part's flux).
+    pub fractions: Option<&'a CutFractions>,
 }
 
 /// What one step of the ports stage did.
@@ -250,7 +252,7 @@ impl Ports {
         .any(|q| q.abs() > floor);
         if relabelled_cells.is_some() || boundaries_flow || flux.wall_flux_scale != 0.0 {
             let owners = cavity.voxels.owners();
-            self.set_boundary_velocities(flows, cavity.surface, owners, solver, flux);
+            self.set_boundary_velocities(flows, cavity, owners, solver, flux);
             counters.ran_since(t);
         } else {
             counters.skipped();
@@ -418,9 +420,10 @@ impl Ports {
             let [a, b] = if whole { all } else { range_hull(last, vox) };
             for n in base + a as usize..base + b as usize {
                 // With cut cells the fraction decides what is fluid (every cell holding fluid is
-                // inside or band, so within the row's range); the os stays open.
-                let kind = match (states[n], cavity.fractions) {
-                    (state::BAND, _) if owners[n] < caps => VoxelKind::Open,
+                // inside or band, so within the row's range), the os's cells too (their pieces
+                // carry the losses: `CutWalls`); without, the os is open.
+                let kind = match (states[n], cavity.fractions.map(|f| &f.volume)) {
+                    (state::BAND, None) if owners[n] < caps => VoxelKind::Open,
                     (_, Some(v)) if holds_fluid(v[n]) => VoxelKind::Fluid,
                     (state::INSIDE, None) => VoxelKind::Fluid,
                     (state::BAND, _) => VoxelKind::Wall,
@@ -624,11 +627,12 @@ impl Ports {
         bits
     }
 
-    /// Port and wall velocities with exact fluxes: the frame's `flows`.
+    /// Port and wall velocities with exact fluxes: the frame's `flows`. With cut cells (`cut`)
+    /// the walls are still: their pieces in the cut cells move the fluid (`CutWalls`).
     fn set_boundary_velocities(
         &mut self,
         flows: &FrameFlows,
-        surface: &CavitySurface,
+        cavity: &CavityCells<'_>,
         owners: &[u32],
         solver: &mut FluidSolver,
         flux: &mut FluxBalance,
@@ -639,7 +643,13 @@ impl Ports {
             flows.dvdt_m3_per_s,
         );
         let dpdt = flows.dpdt_pa_per_s;
+        let (surface, cut) = (cavity.surface, cavity.fractions);
         let cells = self.cells;
+        // A port face's flux: with cut cells only its open part carries it.
+        let open = |b: &BoundaryCell, v: [f64; 3]| match cut {
+            Some(cut) => open_face_weight(b, v, cells.dims, cut),
+            None => face_weight(b.faces, v),
+        };
         let h2 = cells.spacing_m * cells.spacing_m;
         let coords = |b: &BoundaryCell| b.at.map(|x| x as usize);
         // Inflow: u d, u = Q_in / G_in.
@@ -660,7 +670,7 @@ impl Ports {
                 .inflow
                 .iter()
                 .enumerate()
-                .map(|(m, b)| share(m) * face_weight(b.faces, sc.dir))
+                .map(|(m, b)| share(m) * open(b, sc.dir))
                 .sum::<f64>()
                 * h2;
             let u = if g_in > 0.0 { q_in / g_in } else { 0.0 };
@@ -676,7 +686,7 @@ impl Ports {
             let mut g_out = 0.0;
             for b in &self.outflow {
                 let r = radial(&sc, cells.centre_m_of(b.cell));
-                g_out += face_weight(b.faces, r) * h2;
+                g_out += open(b, r) * h2;
             }
             let u = if g_out > 0.0 { q_out / g_out } else { 0.0 };
             flux.outflow_blocked = g_out <= 0.0 && q_out > 0.0;
@@ -691,6 +701,21 @@ impl Ports {
             flux.outflow_blocked = q_out > 0.0;
             flux.inflow_jet_speed_m_per_s = 0.0;
             self.inflow_jet_m_per_s = [0.0; 3];
+        }
+        flux.hydraulic_inflow_m3_per_s = q_in;
+        flux.hydraulic_outflow_m3_per_s = q_out;
+        flux.hydraulic_losses_m3_per_s = flows.losses_m3_per_s;
+        flux.hydraulic_dvdt_m3_per_s = dvdt;
+        if cut.is_some() {
+            for b in &self.walls {
+                let _ = still(
+                    &mut self.wall_velocity,
+                    solver.grid_mut(),
+                    b.cell as usize,
+                    coords(b),
+                );
+            }
+            return;
         }
         // Walls: dx/dp dp/dt at the owning triangle, scaled so that the flux into the walls is
         // dV/dt exactly.
@@ -734,10 +759,6 @@ impl Ports {
             self.wall_velocity[b.cell as usize] = v;
             let _ = solver.grid_mut().set_velocity(coords(b), v);
         }
-        flux.hydraulic_inflow_m3_per_s = q_in;
-        flux.hydraulic_outflow_m3_per_s = q_out;
-        flux.hydraulic_losses_m3_per_s = flows.losses_m3_per_s;
-        flux.hydraulic_dvdt_m3_per_s = dvdt;
     }
 
     /// Measures the fluxes through the ports' and walls' fluid faces after a fluid step (with cut
@@ -807,6 +828,24 @@ fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
     for (f, n) in FACE_NORMALS.iter().enumerate() {
         if faces >> f & 1 == 1 {
             s += v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+        }
+    }
+    s
+}
+
+/// [`face_weight`] with each face weighted by its open area fraction in `cut` (the grid of
+/// `dims` cells, not periodic).
+fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CutFractions) -> f64 {
+    let mut s = 0.0;
+    for (f, n) in FACE_NORMALS.iter().enumerate() {
+        if b.faces >> f & 1 == 1 {
+            let a = f / 2;
+            let mut at = b.at.map(|x| x as usize);
+            at[a] += f % 2;
+            let mut d = dims;
+            d[a] += 1;
+            let area = cut.face[a][at[0] + d[0] * (at[1] + d[1] * at[2])] as f64;
+            s += area * (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]);
         }
     }
     s

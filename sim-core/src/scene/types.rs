@@ -93,14 +93,21 @@ pub struct FluxBalance {
     pub fluid_inflow_m3_per_s: f64,
     /// Measured: out of the fluid through the outflow holes (positive out).
     pub fluid_outflow_m3_per_s: f64,
-    /// Measured: out of the fluid into the moving walls (positive out; equals dV/dt).
+    /// Out of the fluid into the moving walls (positive out; equals dV/dt): measured on the
+    /// faces of the wall cells; with cut cells plus what the wall pieces inside the fluid cells
+    /// carry out (the projection's boundary condition there, docs/scene.md "Cut cells").
     pub fluid_wall_m3_per_s: f64,
-    /// Measured: out through the open external os (positive out; carries the losses).
+    /// Out through the external os (positive out; carries the losses): measured on the faces of
+    /// the open os cells; with cut cells what the os's pieces carry out (there are no open
+    /// cells then).
     pub fluid_open_m3_per_s: f64,
-    /// Incompatible flux the projection removed from closed fluid regions (m^3/s).
+    /// Incompatible flux the projection removed from closed fluid regions, the sum of the
+    /// regions' sizes (m^3/s): with cut cells (every region closed) and one region, what the
+    /// balance `inflow - outflow - walls - os` misses by.
     pub closed_region_mismatch_m3_per_s: f64,
     /// The wall velocities from the atlas (`dx/dp dp/dt`) were scaled by this to carry dV/dt
-    /// exactly over the staircase wall (1 when exact; 0 when no wall moved).
+    /// exactly over the staircase wall, or with cut cells over the wall pieces (1 when exact; 0
+    /// when no wall moved).
     pub wall_flux_scale: f64,
     /// The inflow could not enter the fluid (tip in tissue, or not in the grid).
     pub inflow_blocked: bool,

@@ -14,13 +14,26 @@ use crate::scene::voxelize::VoxelBox;
 /// A grid of `dims` cells whose fluid is the inside of `mesh` (solid elsewhere), with its cut
 /// fractions (the small-cell rule's stabilised ones; a merged or empty cell is solid).
 fn cut_grid(mesh: &ClosedMesh, dims: [usize; 3], origin_m: [f64; 3], h: f64) -> FluidGrid {
+    cut_grid_with(mesh, dims, origin_m, h, Phase::Solid, Phase::Fluid).0
+}
+
+/// [`cut_grid`] with the background and the inside of `mesh` as given, and the cut cells the
+/// fractions come from.
+pub(super) fn cut_grid_with(
+    mesh: &ClosedMesh,
+    dims: [usize; 3],
+    origin_m: [f64; 3],
+    h: f64,
+    background: Phase,
+    inside: Phase,
+) -> (FluidGrid, CutCells) {
     let periodic = [false; 3];
     let layer = Layer {
         name: "shape".into(),
         triangles: mesh.triangles().to_vec(),
         vertex_count: mesh.positions_m().len(),
         orientation: Orientation::Outward,
-        inside: Phase::Fluid,
+        inside,
     };
     let cells = VoxelBox {
         dims,
@@ -28,7 +41,7 @@ fn cut_grid(mesh: &ClosedMesh, dims: [usize; 3], origin_m: [f64; 3], h: f64) -> 
         spacing_m: h,
     };
     let mut cut =
-        CutCells::new(cells, Phase::Solid, vec![layer], SmallCellParams::default()).unwrap();
+        CutCells::new(cells, background, vec![layer], SmallCellParams::default()).unwrap();
     cut.full(&[mesh.positions_m()]).unwrap();
     let volume: Vec<f32> = cut
         .stabilised_volume_fractions()
@@ -53,7 +66,7 @@ fn cut_grid(mesh: &ClosedMesh, dims: [usize; 3], origin_m: [f64; 3], h: f64) -> 
         walls: None,
     })
     .unwrap();
-    grid
+    (grid, cut)
 }
 
 /// The staircase's volume: cells whose centre is inside, times `h^3`.

@@ -31,6 +31,8 @@ mod projection;
 mod sampling;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod wall_flux_tests;
 
 pub use params::{FluidParams, StepStats};
 

@@ -201,11 +201,27 @@ impl FluidSolver {
         } else {
             rows_kernel(rows, &mut ps.bd, 0);
         }
+        let q = self.grid.boundary_fluxes_m3_per_s();
+        if !q.is_empty() {
+            let to_rhs = 1.0 / (self.grid.spacing_m() * self.grid.spacing_m());
+            for &[j, k, i0, i1] in rows {
+                let (j, k) = (j as usize, k as usize);
+                let (p0, c0) = (l0.pad(i0 as usize, j, k), self.grid.index([0, j, k]));
+                for i in i0 as usize..i1 as usize {
+                    let (p, qc) = (p0 + i - i0 as usize, q[c0 + i]);
+                    // A zero flux leaves the value (and the sign of a zero) as it is.
+                    if qc != 0.0 && l0.mask[p] != 0.0 {
+                        ps.bd[p] += qc * to_rhs;
+                    }
+                }
+            }
+        }
         ps.regions.remove_closed_means_dense(&mut ps.bd)
     }
 
-    /// [`FluidSolver::divergence_rhs`] with cut cells: `-sum A_f u_f` over each fluid cell's faces
-    /// (`h^2` times the flux out of the cell's fluid part, `A_f` the open area fraction).
+    /// [`FluidSolver::divergence_rhs`] with cut cells: `-(sum A_f u_f - q / h^2)` over each fluid
+    /// cell's faces (`h^2` times the flux out of the cell's fluid part less the flux `q` its
+    /// boundaries push in, [`FluidGrid::boundary_fluxes_m3_per_s`]; `A_f` the open area fraction).
     fn divergence_rhs_cut(&mut self) -> f64 {
         let ps = &mut self.pressure;
         let l0 = &ps.mg.levels[0];
@@ -214,6 +230,8 @@ impl FluidSolver {
         };
         let dims = self.grid.dims();
         let layout = &self.layout;
+        let q = self.grid.boundary_fluxes_m3_per_s();
+        let to_rhs = 1.0 / (self.grid.spacing_m() * self.grid.spacing_m());
         for &[j, k, i0, i1] in &l0.row_spans {
             let (j, k) = (j as usize, k as usize);
             for i in i0 as usize..i1 as usize {
@@ -235,10 +253,61 @@ impl FluidSolver {
                     flux += cut.face[a][fu] as f64 * self.u[a][fu] as f64
                         - cut.face[a][fl] as f64 * self.u[a][fl] as f64;
                 }
+                // `flux - 0.0` is `flux` bit for bit: no boundary flux is today's value.
+                if let Some(&qc) = q.get(self.grid.index(c)) {
+                    flux -= qc * to_rhs;
+                }
                 ps.bd[p] = -flux;
             }
         }
         ps.regions.remove_closed_means_dense(&mut ps.bd)
+    }
+
+    /// The boundary fluxes a projection applies now: [`FluidGrid::boundary_fluxes_m3_per_s`]
+    /// summed over the fluid cells (the others' values do not count), m^3/s into the fluid.
+    pub fn applied_boundary_flux_m3_per_s(&self) -> f64 {
+        let q = self.grid.boundary_fluxes_m3_per_s();
+        if q.is_empty() || self.revision != self.grid.revision() {
+            // Before the first step on these labels the cells are read from the labels.
+            return q
+                .iter()
+                .zip(self.grid.labels())
+                .filter(|(_, &l)| l == CellLabel::Fluid)
+                .map(|(&v, _)| v)
+                .sum();
+        }
+        let l0 = &self.pressure.mg.levels[0];
+        let mut sum = 0.0;
+        for &[j, k, i0, i1] in &l0.row_spans {
+            let c0 = self.grid.index([0, j as usize, k as usize]);
+            for i in i0 as usize..i1 as usize {
+                if l0.mask[l0.pad(i, j as usize, k as usize)] != 0.0 {
+                    sum += q[c0 + i];
+                }
+            }
+        }
+        sum
+    }
+
+    /// The speed the divergence tolerance is relative to: the largest face speed, the
+    /// parameters' `velocity_scale_m_s`, and the largest speed a boundary flux pushes through
+    /// a cell's side (`|q| / h^2`: walls moving inside cut cells move no face), m/s.
+    fn speed_scale_m_s(&self) -> f64 {
+        let mut u = self.max_speed_m_s().max(self.params.velocity_scale_m_s);
+        let q = self.grid.boundary_fluxes_m3_per_s();
+        if !q.is_empty() {
+            let h = self.grid.spacing_m();
+            let l0 = &self.pressure.mg.levels[0];
+            let mut q_max = 0.0f64;
+            for &[j, k, i0, i1] in &l0.row_spans {
+                let c0 = self.grid.index([0, j as usize, k as usize]);
+                for &v in &q[c0 + i0 as usize..c0 + i1 as usize] {
+                    q_max = q_max.max(v.abs());
+                }
+            }
+            u = u.max(q_max / (h * h));
+        }
+        u.max(1e-12)
     }
 
     /// Largest `|h div u|` over the fluid cells from the last [`FluidSolver::divergence_rhs`].
@@ -291,10 +360,7 @@ impl FluidSolver {
         }
         let h = self.grid.spacing_m();
         let rho = self.params.density_kg_m3;
-        let u_ref = self
-            .max_speed_m_s()
-            .max(self.params.velocity_scale_m_s)
-            .max(1e-12);
+        let u_ref = self.speed_scale_m_s();
         self.pressure
             .set_parallel_rows(self.params.parallel_threshold_cells);
         let mismatch = self.divergence_rhs();
@@ -360,10 +426,7 @@ impl FluidSolver {
         if self.fluid_cells() == 0 {
             return 0.0;
         }
-        let u_ref = self
-            .max_speed_m_s()
-            .max(self.params.velocity_scale_m_s)
-            .max(1e-12);
+        let u_ref = self.speed_scale_m_s();
         self.divergence_rhs();
         self.max_divergence_m_s() / u_ref
     }

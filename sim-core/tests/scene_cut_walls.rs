@@ -1,0 +1,90 @@
+//! With cut cells the cavity's walls and its os move the fluid through the wall pieces inside the
+//! cut cells (docs/scene.md, "Consistency of the fluxes"): on the coarse test scene, every fluid
+//! step, the fluxes measured on the projected field balance (inflow - outflow - walls - os within
+//! 1e-4 of the largest flow), the os carries exactly the hydraulics' losses (never drawing fluid
+//! in while they flow out), and the walls carry `dV/dt`.
+
+mod scene_common;
+use scene_common::{coarse, inputs, own, scope_in_cavity, DT};
+
+use hydrometra_sim::scene::Scene;
+
+#[test]
+fn with_cut_cells_the_walls_and_the_os_carry_the_hydraulics_flows_every_fluid_step() {
+    let (mut desc, assets) = coarse(1.2);
+    desc.fluid.cut_cells = true;
+    let mut scene = Scene::new(desc, assets).unwrap();
+    let scope = scope_in_cavity(&scene);
+    let (mut checked, mut worst, mut saw_losses) = (0, 0.0f64, false);
+    // Distend, rinse, a perforation (large losses), then drain.
+    for f in 0..420 {
+        let mut rig = match f {
+            0..=149 => inputs(1.0, 0.0, 100.0, scope),
+            150..=269 => inputs(1.0, 0.6, 100.0, scope),
+            270..=329 => inputs(1.0, 0.3, 100.0, scope),
+            _ => inputs(0.0, 1.0, 0.0, scope),
+        };
+        rig.hydraulic.perforation = (270..330).contains(&f);
+        scene.step(&own(rig), DT).unwrap();
+        let r = scene.report();
+        let Some(stats) = r.fluid else { continue };
+        assert!(stats.projection_converged, "frame {f}: {stats:?}");
+        let fl = r.flux;
+        let flow = scene.flow().unwrap();
+        let solver = flow.solver();
+        // Every fluid region is closed: no open cell takes up a mismatch.
+        let (regions, closed) = solver.regions();
+        assert_eq!(regions, closed, "frame {f}: an open region");
+        // The balance of the fluxes measured on the projected field.
+        let balance = fl.fluid_inflow_m3_per_s
+            - fl.fluid_outflow_m3_per_s
+            - fl.fluid_wall_m3_per_s
+            - fl.fluid_open_m3_per_s;
+        let scale = [
+            fl.hydraulic_inflow_m3_per_s,
+            fl.hydraulic_outflow_m3_per_s,
+            fl.hydraulic_losses_m3_per_s,
+            fl.hydraulic_dvdt_m3_per_s,
+        ]
+        .iter()
+        .fold(1e-12f64, |m, q| m.max(q.abs()));
+        let rel = balance.abs() / scale;
+        worst = worst.max(rel);
+        assert!(
+            rel <= 1e-4,
+            "frame {f}: in {:e} - out {:e} - walls {:e} - os {:e} = {balance:e} ({rel:e} of \
+             {scale:e}); removed {:e}",
+            fl.fluid_inflow_m3_per_s,
+            fl.fluid_outflow_m3_per_s,
+            fl.fluid_wall_m3_per_s,
+            fl.fluid_open_m3_per_s,
+            fl.closed_region_mismatch_m3_per_s
+        );
+        // The os carries the losses with their sign; the walls dV/dt.
+        let losses = fl.hydraulic_losses_m3_per_s;
+        assert!(
+            (fl.fluid_open_m3_per_s - losses).abs() <= 1e-9 * scale,
+            "frame {f}: os {:e}, losses {losses:e}",
+            fl.fluid_open_m3_per_s
+        );
+        assert!(!(losses > 0.0 && fl.fluid_open_m3_per_s < 0.0), "frame {f}");
+        assert!(
+            (fl.fluid_wall_m3_per_s - fl.hydraulic_dvdt_m3_per_s).abs() <= 1e-5 * scale,
+            "frame {f}: walls {:e}, dV/dt {:e}",
+            fl.fluid_wall_m3_per_s,
+            fl.hydraulic_dvdt_m3_per_s
+        );
+        // What the walls' and the os's pieces push in is what the solver applies.
+        let pieces_out = -solver.applied_boundary_flux_m3_per_s();
+        let whole_walls = fl.fluid_wall_m3_per_s + fl.fluid_open_m3_per_s - pieces_out;
+        assert!(
+            whole_walls.abs() <= 1e-9 * scale,
+            "frame {f}: whole wall cells carry {whole_walls:e}"
+        );
+        saw_losses |= losses > 1e-8;
+        checked += 1;
+    }
+    println!("{checked} fluid steps: largest |in - out - walls - os| / flow {worst:.2e}");
+    assert!(checked > 300, "the fluid ran {checked} times");
+    assert!(saw_losses, "the losses flowed");
+}
