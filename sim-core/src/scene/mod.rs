@@ -76,7 +76,7 @@ pub use fluid::{FluidDrive, FluidStage, FluidStep};
 pub use hydraulics::HydraulicStage;
 pub use ports::{CavityCells, Ports, PortsStep};
 pub use prepare::SceneAssets;
-pub use scope::{ScopeGeometry, ScopePart};
+pub use scope::{ScopeDims, ScopeGeometry, ScopePart, SheathMesh};
 pub use surface::CavitySurface;
 pub use types::{
     BoundaryCell, CavityView, FluxBalance, FrameFlows, HydraulicsInput, InflowPort, RigInputs,
@@ -125,7 +125,13 @@ impl Scene {
         };
         let fractions = if desc.stages.fluid && desc.fluid.cut_cells {
             let tris = surface.triangles().to_vec();
-            Some(CavityFractions::new(cells, tris, surface.vertex_count())?)
+            let sheath = SheathMesh::new(ScopeDims::of(&desc.scope), cells.spacing_m);
+            Some(CavityFractions::new(
+                cells,
+                tris,
+                surface.vertex_count(),
+                sheath,
+            )?)
         } else {
             None
         };
@@ -222,11 +228,17 @@ impl Scene {
         // changed; the ports' and walls' velocities for the frame's flows.
         self.ports.track(changed_rows, &inputs.rig.scope);
         if let Some(fractions) = self.fractions.as_mut() {
+            // The sheath layer at the pose the labels are composed for: a moved surface changes
+            // the fractions, so the labels are composed then too.
+            let moved = self.voxelizer.last_stats().moved_vertices > 0;
+            let scope = self.ports.scope_to_compose(moved);
             let cut_rows = fractions.step(
                 &self.voxelizer,
+                scope.as_ref(),
                 self.report.counters.get_mut(Stage::Voxelize),
             )?;
             self.ports.track_rows(cut_rows);
+            self.report.cavity_less_sheath_volume_m3 = Some(fractions.cavity_less_sheath_m3());
         }
         let Some(fluid) = self.fluid.as_mut() else {
             return Ok(self.finish(started));
@@ -247,7 +259,7 @@ impl Scene {
             self.report.relabelled_cells = n;
         }
         if let Some(fractions) = self.fractions.as_mut() {
-            fractions.send(fluid.solver_mut().grid_mut())?;
+            fractions.send(fluid.solver_mut().grid_mut(), self.ports.scope_cells())?;
         }
         self.report.fluid_cells = self.ports.fluid_cells();
         self.report.grid_fluid_volume_m3 =
