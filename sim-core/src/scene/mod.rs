@@ -15,7 +15,7 @@
 //! | [`HydraulicStage`] | the rig's [`crate::hydraulics::HydraulicInputs`], [`HydraulicsInput`] | [`FrameFlows`], its [`crate::hydraulics::HydraulicState`] |
 //! | [`Deformation`] | the hydraulic state | whether the [`CavitySurface`] moved |
 //! | [`Voxelizer`] | the moved surface's positions | the rows whose cell states changed |
-//! | [`CavityFractions`] (`[fluid] cut_cells`) | the voxelizer's held positions | the cells' fluid volume and faces' open area fractions, the rows they changed in; into the solver |
+//! | [`CavityFractions`] (`[fluid] cut_cells`) | the voxelizer's held positions, the scope pose the labels are composed for | the cells' fluid volume and faces' open area fractions inside the cavity and outside the sheath, the rows they changed in, the reference volume; into the solver |
 //! | [`Ports`] | those rows, the [`ScopePose`], [`CavityCells`], [`FrameFlows`] | labels and boundary velocities in the solver, [`FluxBalance`], [`PortsStep`] |
 //! | [`FluidStage`] | [`FluidDrive`] | the step of its solver, [`FluidStep`] |
 //! | [`vortices::Vortices`] | the inflow, the solver | their field (overlaid or injected) |
