@@ -61,6 +61,9 @@ pub struct Ports {
     holes_m: [f64; 2],
     /// The inflow channel's area, m^2.
     inflow_channel_area_m2: f64,
+    /// The sheath is a layer of the cut cells (`[fluid] cut_cells`): cells of its plain part
+    /// that hold fluid are fluid.
+    cut_sheath: bool,
     /// The scope moves the labels when it moved by this fraction of a voxel.
     scope_move_fraction: f64,
     /// Boundaries move fluid from this speed, m/s.
@@ -118,6 +121,7 @@ impl Ports {
             sheath_radius_m: scope.radius_m,
             holes_m: scope.holes_m,
             inflow_channel_area_m2: scope.channel_area_m2,
+            cut_sheath: desc.stages.fluid && desc.fluid.cut_cells,
             scope_move_fraction: desc.skip.scope_move_fraction.max(1e-6),
             rest_speed_m_s: desc.skip.rest_speed_m_s,
             kinds: vec![VoxelKind::Solid; n],
@@ -361,7 +365,11 @@ impl Ports {
             };
             let (ea, eb) = (run(&self.scope_cells, a), run(&self.scope_cells_next, b));
             let (was, now) = (&self.scope_cells[a..ea], &self.scope_cells_next[b..eb]);
-            if was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0) {
+            // With the cut sheath a cell's kind depends on its part (the plain part's cells
+            // holding fluid are fluid), so a row whose cells changed parts is recomposed.
+            let moved_cells =
+                was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0);
+            if moved_cells || (self.cut_sheath && was != now) {
                 self.mark_pending(row);
             } else if was != now {
                 self.mark_relisted(row);
@@ -460,7 +468,8 @@ impl Ports {
                 }
                 let i = (n - base) as u32;
                 now = range_hull(now, [i, i + 1]);
-                let cut_fluid = cavity.fractions.is_some()
+                let cut_fluid = self.cut_sheath
+                    && cavity.fractions.is_some()
                     && part == ScopePart::Sheath
                     && self.kinds[n] == VoxelKind::Fluid;
                 if cut_fluid {
