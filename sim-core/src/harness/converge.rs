@@ -65,7 +65,7 @@ pub fn band_start_z_m(positions_m: &[[f32; 3]], from: f64) -> Option<f64> {
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), z| {
             (lo.min(z), hi.max(z))
         });
-    (lo <= hi).then(|| lo + from * (hi - lo))
+    (lo <= hi).then_some(lo + from * (hi - lo))
 }
 
 /// The volume-weighted mean speed (m/s) of the fluid cells whose centre lies at or above
