@@ -80,9 +80,8 @@ impl CutWalls {
         self.pieces.clear();
         // Raw: the pieces' flux at the atlas's motion, out of the fluid (walls) and the areas.
         let (mut walls_raw_out, mut walls_area, mut os_area) = (0.0, 0.0, 0.0);
-        for row in 0..ny * nz {
+        for (row, &[a, b]) in extents.iter().enumerate().take(ny * nz) {
             // Every cut cell is a band cell of the same surface: within the row's extent.
-            let [a, b] = extents[row];
             for n in nx * row + a as usize..nx * row + b as usize {
                 let w = areas[n];
                 if w == [0.0; 3] {
