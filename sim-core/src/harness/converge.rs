@@ -172,7 +172,7 @@ mod tests {
     ) -> FluidSolver {
         let grid = FluidGrid::new([n; 3], h, origin, periodic).unwrap();
         let mut s = FluidSolver::new(grid, FluidParams::default()).unwrap();
-        s.set_velocity_field(|c, p| field(c, p));
+        s.set_velocity_field(field);
         s
     }
 
