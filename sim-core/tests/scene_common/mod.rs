@@ -2,6 +2,9 @@
 //! to 150 mmHg, its atlas built once per test run and cached under `CARGO_TARGET_TMPDIR`), rig
 //! inputs, a scope pose in the cavity and its periodic move, and the fluid's incompressibility.
 
+// Each test binary that says `mod scene_common;` uses a part of it.
+#![allow(dead_code)]
+
 use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::{
     prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
