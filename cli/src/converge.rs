@@ -14,11 +14,11 @@ use hydrometra_sim::harness::converge::{
     band_start_z_m, in_fluid, mean_speed_above_m_s, probe_points_m, speed_at_m_s, FUNDAL_FROM,
     JET_PROBE_MM,
 };
-use hydrometra_sim::scene::{HydraulicsInput, Scene, SceneDesc, SceneInputs};
+use hydrometra_sim::scene::{Scene, SceneDesc};
 use serde::{Deserialize, Serialize};
 
 use crate::scenario::load_scenario;
-use crate::scene::{apply_scenario_hydraulics, assets, rig_inputs, SceneArg};
+use crate::scene::{apply_scenario_hydraulics, assets, scene_inputs_at, SceneArg};
 
 /// `scene converge`
 #[derive(Args, Debug)]
@@ -321,11 +321,7 @@ fn run_one(a: &ConvergeArgs, mut scene: Scene, key: RunKey) -> Result<RunRecord>
     let mut step_ms_sum = 0.0;
     for f in 0..frames {
         let t = (f + 1) as f64 * dt;
-        let sample = scenario.sample_at(t);
-        let inputs = SceneInputs {
-            rig: rig_inputs(&sample, case.perforated_at(t)),
-            hydraulics: HydraulicsInput::Own,
-        };
+        let inputs = scene_inputs_at(&scenario, &case, t);
         let report = scene.step(&inputs, dt)?;
         step_ms_sum += report.counters.step.last_ms;
         r.time_s.push(report.time_s);

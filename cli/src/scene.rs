@@ -235,12 +235,16 @@ pub(crate) fn apply_scenario_hydraulics(desc: &mut SceneDesc, case: &CaseScript)
     }
 }
 
-/// Rig inputs from a scenario sample (clinical units and mm at the edge, SI inside).
-pub(crate) fn rig_inputs(
-    s: &hydrometra_drivers::emulator::scenario::ScenarioSample,
-    perforation: bool,
-) -> RigInputs {
-    RigInputs {
+/// The scene's inputs at time `t_s` of a scenario, the scene owning the hydraulics: the rig's
+/// sample (clinical units and mm at the edge, SI inside) and the case's perforation.
+pub(crate) fn scene_inputs_at(
+    scenario: &hydrometra_drivers::emulator::scenario::Scenario,
+    case: &CaseScript,
+    t_s: f64,
+) -> SceneInputs<'static> {
+    let s = scenario.sample_at(t_s);
+    let perforation = case.perforated_at(t_s);
+    let rig = RigInputs {
         hydraulic: HydraulicInputs {
             valve_in_opening: s.valve_in,
             valve_out_opening: s.valve_out,
@@ -252,6 +256,10 @@ pub(crate) fn rig_inputs(
             view_direction: s.view_dir,
             valid: s.pose_valid,
         },
+    };
+    SceneInputs {
+        rig,
+        hydraulics: HydraulicsInput::Own,
     }
 }
 
@@ -289,11 +297,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
     let mut written = 0;
     for f in 0..frames {
         let t = (f + 1) as f64 * dt;
-        let sample = scenario.sample_at(t);
-        let inputs = SceneInputs {
-            rig: rig_inputs(&sample, case.perforated_at(t)),
-            hydraulics: HydraulicsInput::Own,
-        };
+        let inputs = scene_inputs_at(&scenario, &case, t);
         scene.step(&inputs, dt)?;
         let deficit_m3 = scene.hydraulic_state().deficit.deficit_m3;
         let r = scene.report();
