@@ -44,7 +44,7 @@ pub fn binary(name: &str) -> PathBuf {
     let path = dir.join(name);
     assert!(
         path.is_file(),
-        "{name} not found at {}: build the binaries first with `cargo build --workspace --bins` \
+        "{name} not found at {}: build the binaries first with `cargo build --workspace --bins --tests` \
          (same profile and CARGO_TARGET_DIR as the tests)",
         path.display()
     );
