@@ -13,6 +13,7 @@ mod record;
 mod rig;
 mod scenario;
 mod scene;
+mod scene_setup;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};

@@ -8,7 +8,7 @@ use hydrometra_sim::harness::converge::{
 };
 use serde::Serialize;
 
-use super::{ConvergeArgs, RunRecord};
+use super::args::{ConvergeArgs, RunRecord};
 
 /// One size's figures (the reference's own row has no errors).
 #[derive(Debug, Serialize)]

@@ -90,6 +90,7 @@
 mod cells;
 mod clip;
 mod crossings;
+mod face_walls;
 mod fractions;
 pub mod mesh;
 mod mesh_io;
@@ -98,7 +99,7 @@ pub mod small;
 
 pub(crate) use cells::round_off;
 pub use cells::{CutCellStats, CutCells, Layer, Phase, SmallCellParams};
-pub use crossings::{FaceWalls, NO_WALL};
+pub use face_walls::{FaceWalls, NO_WALL};
 pub use fractions::{FractionStats, SurfaceFractions, MAX_CELLS_AWAY};
 
 use crate::scene::voxelize::VoxelBox;
