@@ -295,6 +295,38 @@ pub fn test_node() -> Node<ipc::Service> {
         .expect("iceoryx2 node")
 }
 
+/// A daemon on the emulated default rig (status at 100 Hz) running the built-in default scene file
+/// as `edit` changes it (written to a temporary directory named after `tag`), once its scene runs.
+/// Returns the daemon's service prefix, the daemon and a status reader.
+pub fn daemon_on_edited_default_scene(
+    tag: &str,
+    edit: impl FnOnce(&str) -> String,
+) -> (String, Daemon, StatusReader) {
+    let base =
+        std::fs::read_to_string(workspace_root().join("sim-core/src/scene/scenes/default.toml"))
+            .expect("the default scene");
+    let scene = temp_dir(tag).join("scene.toml");
+    std::fs::write(&scene, edit(&base)).expect("write the scene");
+    let scene = scene.to_str().expect("utf-8 temp path");
+    let prefix = unique_prefix(tag);
+    let daemon = Daemon::start(
+        &prefix,
+        &[
+            "--scene",
+            scene,
+            "--emulated",
+            "default",
+            "--status-rate-hz",
+            "100",
+        ],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    reader.until("the scene running", Duration::from_secs(120), |s| {
+        s.scene_state == status::scene_state::RUNNING
+    });
+    (prefix, daemon, reader)
+}
+
 /// A subscriber to a daemon's status.
 pub struct StatusReader {
     // Field order matters: ports drop before the node.

@@ -6,12 +6,8 @@
 //! Needs `python3` (or `$PYTHON`) with iceoryx2 and numpy (`.ci/setup`).
 
 use std::process::Command;
-use std::time::Duration;
 
-use hydrometra_hil_tests::{
-    python_with_numpy, temp_dir, unique_prefix, workspace_root, Daemon, StatusReader,
-};
-use hydrometra_ipc::status::scene_state;
+use hydrometra_hil_tests::{daemon_on_edited_default_scene, python_with_numpy, workspace_root};
 use serde_json::Value;
 
 /// Seconds the example reads: the default scenario's scope goes from the cervical canal into the
@@ -55,36 +51,12 @@ fn check_bounds(line: &Value) -> f64 {
 #[test]
 fn python_flow_example_the_fractions_fill_the_cavity_mesh_with_cut_cells() {
     let python = python_with_numpy();
-    let dir = temp_dir("flow-fractions");
-    let base =
-        std::fs::read_to_string(workspace_root().join("sim-core/src/scene/scenes/default.toml"))
-            .expect("the default scene");
-    assert!(
-        base.contains("cut_cells = false"),
-        "the default scene file changed"
-    );
-    let scene = dir.join("cut-cells.toml");
-    std::fs::write(
-        &scene,
-        base.replace("cut_cells = false", "cut_cells = true"),
-    )
-    .expect("write the scene");
-    let scene = scene.to_str().expect("utf-8 temp path");
-    let prefix = unique_prefix("flow-fractions");
-    let _daemon = Daemon::start(
-        &prefix,
-        &[
-            "--scene",
-            scene,
-            "--emulated",
-            "default",
-            "--status-rate-hz",
-            "100",
-        ],
-    );
-    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
-    reader.until("the scene running", Duration::from_secs(120), |s| {
-        s.scene_state == scene_state::RUNNING
+    let (prefix, _daemon, _reader) = daemon_on_edited_default_scene("flow-fractions", |base| {
+        assert!(
+            base.contains("cut_cells = false"),
+            "the default scene file changed"
+        );
+        base.replace("cut_cells = false", "cut_cells = true")
     });
     let out = Command::new(&python)
         .arg(workspace_root().join("ipc/examples/python/flow_sample.py"))

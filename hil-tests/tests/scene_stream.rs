@@ -8,7 +8,8 @@ use std::time::Duration;
 
 use hydrometra_hil_tests::steal::HostSteal;
 use hydrometra_hil_tests::{
-    python_with_numpy, temp_dir, unique_prefix, workspace_root, Daemon, StatusReader,
+    daemon_on_edited_default_scene, python_with_numpy, temp_dir, unique_prefix, workspace_root,
+    Daemon, StatusReader,
 };
 use hydrometra_ipc::status::{scene_stage, scene_state};
 use serde_json::Value;
@@ -385,30 +386,9 @@ fn particles_of_a_scene_with_the_particle_stage_are_published() {
     use hydrometra_ipc::particles::kind;
     use hydrometra_ipc::slice::{self, Particles};
     use std::time::Instant;
-    let dir = temp_dir("scene-particles");
-    let base =
-        std::fs::read_to_string(workspace_root().join("sim-core/src/scene/scenes/default.toml"))
-            .expect("the default scene");
-    let text = base.replace("particles = false", "particles = true")
-        + "\n[particles]\nbudget = 4096\n\n[particles.bubbles]\nper_ml = 50.0\n";
-    let scene = dir.join("particles.toml");
-    std::fs::write(&scene, text).expect("write the scene");
-    let scene = scene.to_str().expect("utf-8 temp path");
-    let prefix = unique_prefix("scene-particles");
-    let _daemon = Daemon::start(
-        &prefix,
-        &[
-            "--scene",
-            scene,
-            "--emulated",
-            "default",
-            "--status-rate-hz",
-            "100",
-        ],
-    );
-    let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
-    reader.until("the scene running", Duration::from_secs(120), |s| {
-        s.scene_state == scene_state::RUNNING
+    let (prefix, _daemon, reader) = daemon_on_edited_default_scene("scene-particles", |base| {
+        base.replace("particles = false", "particles = true")
+            + "\n[particles]\nbudget = 4096\n\n[particles.bubbles]\nper_ml = 50.0\n"
     });
     let names = hydrometra_ipc::ServiceNames::new(&prefix).expect("prefix");
     let node = hydrometra_hil_tests::test_node();
