@@ -115,26 +115,33 @@ impl FlowLayout {
         header.total_bytes = self.total_bytes as u64;
     }
 
-    /// Byte `n` of the payload, from each cell's label, velocity (m/s) and fluid volume fraction
-    /// (already quantised, [`fraction_to_u8`]): how a publisher fills a loaned slice without a
-    /// buffer of its own. Bytes between the labels and the velocities are 0.
-    #[inline]
-    pub fn byte(
+    /// Writes the whole payload into `out` (resized to [`FlowLayout::total_bytes`]; no allocation
+    /// once its capacity holds that), from each cell's label, velocity (m/s) and fluid volume
+    /// fraction (already quantised, [`fraction_to_u8`]). Bytes between the labels and the
+    /// velocities are 0. Section by section: a publisher copies the result into its loaned sample
+    /// in one `memcpy` (byte by byte through one function, a 0.6 mm field of 312,620 cells cost
+    /// the scene thread milliseconds a frame).
+    pub fn fill(
         &self,
-        n: usize,
+        out: &mut Vec<u8>,
         label: impl Fn(usize) -> u8,
         velocity_m_per_s: impl Fn(usize) -> [f32; 3],
         fraction: impl Fn(usize) -> u8,
-    ) -> u8 {
-        if n >= self.fractions_offset_bytes {
-            fraction(n - self.fractions_offset_bytes)
-        } else if n >= self.velocities_offset_bytes {
-            let b = n - self.velocities_offset_bytes;
-            velocity_m_per_s(b / 12)[(b % 12) / 4].to_ne_bytes()[b % 4]
-        } else if n < self.cell_count {
-            label(n)
-        } else {
-            0
+    ) {
+        out.resize(self.total_bytes, 0);
+        let (labels, rest) = out.split_at_mut(self.velocities_offset_bytes);
+        for (c, byte) in labels.iter_mut().enumerate() {
+            *byte = if c < self.cell_count { label(c) } else { 0 };
+        }
+        let (velocities, fractions) = rest.split_at_mut(12 * self.cell_count);
+        for (c, chunk) in velocities.chunks_exact_mut(12).enumerate() {
+            let v = velocity_m_per_s(c);
+            for (component, bytes) in v.iter().zip(chunk.chunks_exact_mut(4)) {
+                bytes.copy_from_slice(&component.to_ne_bytes());
+            }
+        }
+        for (c, byte) in fractions.iter_mut().enumerate() {
+            *byte = fraction(c);
         }
     }
 }
@@ -188,16 +195,15 @@ mod tests {
     #[test]
     fn every_byte_comes_from_its_cell() {
         let l = FlowLayout::new(5);
-        let bytes: Vec<u8> = (0..l.total_bytes)
-            .map(|n| {
-                l.byte(
-                    n,
-                    |c| 10 + c as u8,
-                    |c| [c as f32, -(c as f32), 0.5],
-                    |c| 200 + c as u8,
-                )
-            })
-            .collect();
+        // A buffer that held a larger payload before: shrunk to this one, every byte rewritten.
+        let mut bytes = vec![0xAA; 2 * l.total_bytes];
+        l.fill(
+            &mut bytes,
+            |c| 10 + c as u8,
+            |c| [c as f32, -(c as f32), 0.5],
+            |c| 200 + c as u8,
+        );
+        assert_eq!(bytes.len(), l.total_bytes);
         assert_eq!(&bytes[..5], &[10, 11, 12, 13, 14]);
         assert_eq!(&bytes[5..8], &[0, 0, 0]);
         let f = |at: usize| f32::from_ne_bytes(bytes[at..at + 4].try_into().unwrap());

@@ -133,9 +133,10 @@ fn a_subscriber_written_from_the_docs_decodes_labels_velocities_and_fractions() 
         ..FlowFieldHeader::default()
     };
     layout.write_offsets(&mut header);
-    let payload: Vec<u8> = (0..layout.total_bytes)
-        .map(|n| layout.byte(n, label, velocity, |c| fraction_to_u8(fraction(c))))
-        .collect();
+    let mut payload = Vec::new();
+    layout.fill(&mut payload, label, velocity, |c| {
+        fraction_to_u8(fraction(c))
+    });
     let decoded = decode(&doc, &header_bytes(&header), &payload);
     let names: Vec<&str> = decoded.iter().map(|d| d.0.as_str()).collect();
     assert_eq!(names, ["labels", "velocities", "fractions"]);

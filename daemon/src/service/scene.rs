@@ -541,6 +541,7 @@ fn run_scene(
 
     let period = Duration::from_secs_f64(1.0 / rate_hz);
     let mut velocities = vec![[0.0f32; 3]; cells];
+    let mut flow_payload = Vec::with_capacity(FlowLayout::new(cells).total_bytes);
     let mut published_revision = None;
     let mut flow_ever = false;
     let mut last_reflected: Option<Instant> = None;
@@ -682,19 +683,19 @@ fn run_scene(
                 ..FlowFieldHeader::default()
             };
             layout.write_offsets(&mut header);
+            layout.fill(
+                &mut flow_payload,
+                |c| kinds.get(c).map_or(0, |k| *k as u8),
+                |c| v.get(c).copied().unwrap_or_default(),
+                |c| fraction_to_u8(flow.fluid_fraction(c)),
+            );
             let sent = ports
                 .flow
                 .loan_slice_uninit(layout.total_bytes)
                 .map(|mut sample| {
                     *sample.user_header_mut() = header;
-                    sample.write_from_fn(|n| {
-                        layout.byte(
-                            n,
-                            |c| kinds.get(c).map_or(0, |k| *k as u8),
-                            |c| v.get(c).copied().unwrap_or_default(),
-                            |c| fraction_to_u8(flow.fluid_fraction(c)),
-                        )
-                    })
+                    // `fill` sizes the payload to the layout the sample was loaned with.
+                    sample.write_from_slice(&flow_payload)
                 })
                 .map_err(|e| format!("{e:?}"))
                 .and_then(|s| s.send().map_err(|e| format!("{e:?}")));
