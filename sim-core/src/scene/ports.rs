@@ -19,7 +19,7 @@ use std::time::Instant;
 use super::counters::StageCounters;
 use super::desc::SceneDesc;
 use super::error::SceneError;
-use super::scope::{unit, ScopeGeometry, ScopePart, FACE_NORMALS};
+use super::scope::{unit, ScopeDims, ScopeGeometry, ScopePart, FACE_NORMALS};
 use super::surface::CavitySurface;
 use super::types::{
     BoundaryCell, FluxBalance, FrameFlows, InflowPort, ScopePose, VoxelKind, WholeBoxCheck,
@@ -63,6 +63,9 @@ pub struct Ports {
     holes_m: [f64; 2],
     /// The inflow channel's area, m^2.
     inflow_channel_area_m2: f64,
+    /// The sheath is a layer of the cut cells (`[fluid] cut_cells`): cells of its plain part
+    /// that hold fluid are fluid.
+    cut_sheath: bool,
     /// The scope moves the labels when it moved by this fraction of a voxel.
     scope_move_fraction: f64,
     /// Boundaries move fluid from this speed, m/s.
@@ -114,11 +117,13 @@ impl Ports {
     pub fn new(cells: VoxelBox, desc: &SceneDesc) -> Self {
         let n = cells.cell_count();
         let rows = cells.dims[1] * cells.dims[2];
+        let scope = ScopeDims::of(&desc.scope);
         Self {
             cells,
-            sheath_radius_m: 0.5e-3 * desc.scope.sheath_outer_diameter_mm,
-            holes_m: desc.scope.outflow_holes_from_tip_mm.map(|v| v * 1e-3),
-            inflow_channel_area_m2: desc.scope.inflow_channel_area_mm2 * 1e-6,
+            sheath_radius_m: scope.radius_m,
+            holes_m: scope.holes_m,
+            inflow_channel_area_m2: scope.channel_area_m2,
+            cut_sheath: desc.stages.fluid && desc.fluid.cut_cells,
             scope_move_fraction: desc.skip.scope_move_fraction.max(1e-6),
             rest_speed_m_s: desc.skip.rest_speed_m_s,
             kinds: vec![VoxelKind::Solid; n],
@@ -188,6 +193,24 @@ impl Ports {
     pub fn fluid_volume_m3(&self) -> f64 {
         let h = self.cells.spacing_m;
         self.fluid_cells as f64 * h * h * h
+    }
+
+    /// The pose the next step composes the labels for (with `compose`, the labels are composed
+    /// whatever else moved): the cut-cell sheath layer is placed there, so the fractions and the
+    /// scope's cells describe one pose.
+    pub fn scope_to_compose(&mut self, compose: bool) -> Option<ScopeGeometry> {
+        self.labels_dirty |= compose;
+        if self.labels_dirty {
+            self.scope
+        } else {
+            self.scope_built
+        }
+    }
+
+    /// The built scope's cells (those whose centres lie in the sheath) and their parts, by cell
+    /// index.
+    pub fn scope_cells(&self) -> &[(u32, ScopePart)] {
+        &self.scope_cells
     }
 
     /// Notes rows of cells whose cavity states or fractions changed: recomposed at the next step.
@@ -344,7 +367,11 @@ impl Ports {
             };
             let (ea, eb) = (run(&self.scope_cells, a), run(&self.scope_cells_next, b));
             let (was, now) = (&self.scope_cells[a..ea], &self.scope_cells_next[b..eb]);
-            if was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0) {
+            // With the cut sheath a cell's kind depends on its part (the plain part's cells
+            // holding fluid are fluid), so a row whose cells changed parts is recomposed.
+            let moved_cells =
+                was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0);
+            if moved_cells || (self.cut_sheath && was != now) {
                 self.mark_pending(row);
             } else if was != now {
                 self.mark_relisted(row);
@@ -432,18 +459,27 @@ impl Ports {
                 fluid += u32::from(kind == VoxelKind::Fluid);
                 self.kinds[n] = kind;
             }
-            // The scope on top.
+            // The scope on top. With cut cells the sheath is a layer of the fractions: a cell of
+            // its plain part that holds fluid beside it is that fluid's; the tip layer and the
+            // hole band stay whole cells for the ports.
             let mut now = vox;
             let first = self.scope_cells.partition_point(|c| (c.0 as usize) < base);
-            for &(n, _) in &self.scope_cells[first..] {
+            for &(n, part) in &self.scope_cells[first..] {
                 let n = n as usize;
                 if n >= base + nx {
                     break;
                 }
-                fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
-                self.kinds[n] = VoxelKind::Scope;
                 let i = (n - base) as u32;
                 now = range_hull(now, [i, i + 1]);
+                let cut_fluid = self.cut_sheath
+                    && cavity.fractions.is_some()
+                    && part == ScopePart::Sheath
+                    && self.kinds[n] == VoxelKind::Fluid;
+                if cut_fluid {
+                    continue;
+                }
+                fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
+                self.kinds[n] = VoxelKind::Scope;
             }
             self.kind_extent[row] = now;
             self.fluid_cells = self.fluid_cells + fluid as usize - self.row_fluid[row] as usize;
