@@ -252,8 +252,35 @@ fn published_fractions_are_the_exact_ones_less_the_scope(scene: &Scene) {
     );
     assert!(merged > 0, "no merged small cell to check");
     assert!((flow.fluid_volume_m3() - expected_m3).abs() <= 1e-12 * surface_m3);
-    // The exact fractions sum to the surface's volume (the cut cells' own check, to 1e-5 here).
-    assert!((expected_m3 + in_scope_m3 - surface_m3).abs() <= 1e-5 * surface_m3);
+    // The exact fractions are the cavity's layer less the sheath's, cell by cell (the layers'
+    // combination rule, `max(0, cavity - sheath)`, exact where one surface cuts): they sum to
+    // the scene's reference (kept per row), and the cavity's layer alone to the surface's
+    // volume (the cut cells' own check, to 1e-5 here); the sheath's part is what the sheath's
+    // own fractions cover of the cavity's.
+    let reference_m3 = scene.report().cavity_less_sheath_volume_m3.unwrap();
+    assert!(
+        (expected_m3 + in_scope_m3 - reference_m3).abs() <= 1e-12 * surface_m3,
+        "exact fractions {:e} m^3, reference {reference_m3:e} m^3",
+        expected_m3 + in_scope_m3
+    );
+    let (cavity, sheath) = (
+        cut.layer(0).volume_fractions(),
+        cut.layer(1).volume_fractions(),
+    );
+    let v = h * h * h;
+    let cavity_m3 = cavity.iter().sum::<f64>() * v;
+    let sheath_part_m3 = cavity
+        .iter()
+        .zip(sheath)
+        .map(|(&c, &s)| c.min(s))
+        .sum::<f64>()
+        * v;
+    assert!((cavity_m3 - surface_m3).abs() <= 1e-5 * surface_m3);
+    assert!(
+        (cavity_m3 - sheath_part_m3 - reference_m3).abs() <= 1e-12 * surface_m3,
+        "cavity {cavity_m3:e} - sheath's part {sheath_part_m3:e} != reference {reference_m3:e}"
+    );
+    assert!(sheath_part_m3 > 0.0, "the scope is in the cavity");
 }
 
 /// Whole cells publish 1 in the fluid and open cells (labels 1 and 6) and 0 elsewhere.

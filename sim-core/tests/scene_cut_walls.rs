@@ -1,8 +1,8 @@
 //! With cut cells the cavity's walls and its os move the fluid through the wall pieces inside the
 //! cut cells (docs/scene.md, "Consistency of the fluxes"): on the coarse test scene, every fluid
 //! step, the fluxes measured on the projected field balance (inflow - outflow - walls - os within
-//! 1e-4 of the largest flow), the os carries exactly the hydraulics' losses (never drawing fluid
-//! in while they flow out), and the walls carry `dV/dt`.
+//! 1e-4 of the largest flow), the ports carry the hydraulics' inflow and outflow, the os exactly
+//! its losses (never drawing fluid in while they flow out), and the walls `dV/dt`.
 
 mod scene_common;
 use scene_common::{coarse, inputs, own, scope_in_cavity, DT};
@@ -60,6 +60,26 @@ fn with_cut_cells_the_walls_and_the_os_carry_the_hydraulics_flows_every_fluid_st
             fl.fluid_open_m3_per_s,
             fl.closed_region_mismatch_m3_per_s
         );
+        // The ports carry the hydraulics' flows (their whole cells' faces open as the cavity
+        // makes them, not closed by the sheath's layer), to the solver's single precision.
+        assert!(!fl.inflow_blocked && !fl.outflow_blocked, "frame {f}");
+        for (what, fluid, hydraulic) in [
+            (
+                "inflow",
+                fl.fluid_inflow_m3_per_s,
+                fl.hydraulic_inflow_m3_per_s,
+            ),
+            (
+                "outflow",
+                fl.fluid_outflow_m3_per_s,
+                fl.hydraulic_outflow_m3_per_s,
+            ),
+        ] {
+            assert!(
+                (fluid - hydraulic).abs() <= 1e-5 * scale,
+                "frame {f}: {what} {fluid:e}, hydraulics {hydraulic:e}"
+            );
+        }
         // The os carries the losses with their sign; the walls dV/dt.
         let losses = fl.hydraulic_losses_m3_per_s;
         assert!(

@@ -143,7 +143,7 @@ impl CavityFractions {
 
     /// Hands the fractions to the solver's `grid` when they changed since it last had them; the
     /// faces of the ports' whole cells (`scope_cells` in the tip layer and the hole band) open as
-    /// the cavity alone makes them.
+    /// the cavity alone makes them ([`CavityFractions::port_face_fraction`]).
     pub fn send(
         &mut self,
         grid: &mut FluidGrid,
@@ -152,8 +152,6 @@ impl CavityFractions {
         if self.unsent {
             let cells = *self.cut.cells();
             let [nx, ny, _] = cells.dims;
-            let eps = self.cut.params().round_off_fraction;
-            let cavity = self.cut.layer(CAVITY);
             for &(n, part) in scope_cells {
                 if !matches!(part, ScopePart::Tip | ScopePart::Holes) {
                     continue;
@@ -167,8 +165,7 @@ impl CavityFractions {
                         let mut f = at;
                         f[a] += up;
                         let idx = f[0] + d[0] * (f[1] + d[1] * f[2]);
-                        let v = round_off(cavity.face_fractions(a)[idx], eps);
-                        self.fractions.face[a][idx] = v as f32;
+                        self.fractions.face[a][idx] = self.port_face_fraction(a, idx);
                     }
                 }
             }
@@ -176,6 +173,15 @@ impl CavityFractions {
             self.unsent = false;
         }
         Ok(())
+    }
+
+    /// The open fraction of face `idx` normal to `axis` (the solver's face layout) where it
+    /// borders a port's whole cell: the cavity's own, rounded as the stabilised faces are, not
+    /// the sheath's (which closes the faces the ports' fluxes cross). The one rule for what the
+    /// ports' velocities are set for (`Ports`) and what the solver's faces carry ([`Self::send`]).
+    pub fn port_face_fraction(&self, axis: usize, idx: usize) -> f32 {
+        let eps = self.cut.params().round_off_fraction;
+        round_off(self.cut.layer(CAVITY).face_fractions(axis)[idx], eps) as f32
     }
 
     /// The fractions (stabilised, the solver's layout; the ports' faces as last sent).

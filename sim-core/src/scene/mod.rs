@@ -253,7 +253,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface,
-            fractions: self.fractions.as_ref().map(|f| f.fractions()),
+            fractions: self.fractions.as_ref(),
         };
         let ports = self.ports.step(
             &cavity,
@@ -275,7 +275,7 @@ impl Scene {
                 let cavity = CavityCells {
                     voxels: &self.voxelizer,
                     surface,
-                    fractions: Some(fractions.fractions()),
+                    fractions: Some(fractions),
                 };
                 walls.set_fluxes(
                     fractions.cut_cells(),
@@ -443,7 +443,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface: self.deformation.surface(),
-            fractions: self.fractions.as_ref().map(|f| f.fractions()),
+            fractions: self.fractions.as_ref(),
         };
         let solver = self.fluid.as_mut().map(FluidStage::solver_mut);
         let check = self

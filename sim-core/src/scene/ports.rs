@@ -17,6 +17,7 @@
 use std::time::Instant;
 
 use super::counters::StageCounters;
+use super::cut_cells::CavityFractions;
 use super::desc::SceneDesc;
 use super::error::SceneError;
 use super::scope::{unit, ScopeDims, ScopeGeometry, ScopePart, FACE_NORMALS};
@@ -26,8 +27,7 @@ use super::types::{
 };
 use super::voxelize::{state, VoxelBox, Voxelizer, NO_TRIANGLE};
 use crate::fluid::{
-    holds_fluid, range_hull, step_along, CellLabel, CutFractions, FluidError, FluidGrid,
-    FluidSolver,
+    holds_fluid, range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidSolver,
 };
 
 /// The cavity as the ports stage reads it: the voxelizer's cell states and the surface they
@@ -39,9 +39,9 @@ pub struct CavityCells<'a> {
     /// The surface (its cap triangles, triangles and `dx/dp`).
     pub surface: &'a CavitySurface,
     /// With cut cells (`[fluid] cut_cells`), each cell's fluid volume fraction of the same
-    /// surface (a cell holding fluid is fluid, `fluid::holds_fluid`, cut or whole) and each
-    /// face's open area fraction (a port's face carries its open part's flux).
-    pub fractions: Option<&'a CutFractions>,
+    /// surface (a cell holding fluid is fluid, `fluid::holds_fluid`, cut or whole) and the open
+    /// fractions of the ports' faces (a port's face carries its open part's flux).
+    pub fractions: Option<&'a CavityFractions>,
 }
 
 /// What one step of the ports stage did.
@@ -449,7 +449,7 @@ impl Ports {
                 // With cut cells the fraction decides what is fluid (every cell holding fluid is
                 // inside or band, so within the row's range), the os's cells too (their pieces
                 // carry the losses: `CutWalls`); without, the os is open.
-                let kind = match (states[n], cavity.fractions.map(|f| &f.volume)) {
+                let kind = match (states[n], cavity.fractions.map(|f| &f.fractions().volume)) {
                     (state::BAND, None) if owners[n] < caps => VoxelKind::Open,
                     (_, Some(v)) if holds_fluid(v[n]) => VoxelKind::Fluid,
                     (state::INSIDE, None) => VoxelKind::Fluid,
@@ -869,9 +869,9 @@ fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
     s
 }
 
-/// [`face_weight`] with each face weighted by its open area fraction in `cut` (the grid of
-/// `dims` cells, not periodic).
-fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CutFractions) -> f64 {
+/// [`face_weight`] with each face of the port cell `b` weighted by its open area fraction
+/// ([`CavityFractions::port_face_fraction`]; the grid of `dims` cells, not periodic).
+fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CavityFractions) -> f64 {
     let mut s = 0.0;
     for (f, n) in FACE_NORMALS.iter().enumerate() {
         if b.faces >> f & 1 == 1 {
@@ -880,7 +880,7 @@ fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CutFr
             at[a] += f % 2;
             let mut d = dims;
             d[a] += 1;
-            let area = cut.face[a][at[0] + d[0] * (at[1] + d[1] * at[2])] as f64;
+            let area = cut.port_face_fraction(a, at[0] + d[0] * (at[1] + d[1] * at[2])) as f64;
             s += area * (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]);
         }
     }
