@@ -208,7 +208,7 @@ fn run_offline(a: &RunArgs) -> Result<()> {
          inflow_ml_min,outflow_ml_min,losses_ml_min,dvdt_ml_min,fluid_inflow_ml_min,fluid_outflow_ml_min,\
          fluid_wall_ml_min,fluid_open_ml_min,wall_flux_scale,deficit_ml,step_ms,replay_ms,voxelize_ms,ports_ms,fluid_ms,\
          fluid_ran,projection_iterations,max_div_rel,particles_alive,clarity,balance_ml_min,\
-         closed_mismatch_ml_min\n",
+         closed_mismatch_ml_min,cavity_less_sheath_volume_ml\n",
     );
     let mut pvd = vtk::Collection::new();
     let ml_min = |q: f64| q * 6e7;
@@ -236,9 +236,13 @@ fn run_offline(a: &RunArgs) -> Result<()> {
             (p.system().map_or(0, |s| s.len()), p.clarity())
         });
         let clarity = clarity.map_or(String::new(), |c| format!("{c:.4}"));
+        // With cut cells: the reference for the grid's fluid volume (empty without).
+        let reference = r
+            .cavity_less_sheath_volume_m3
+            .map_or(String::new(), |v| format!("{:.5}", m3_to_ml(v)));
         let _ = writeln!(
             csv,
-            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e},{alive},{clarity},{:.3e},{:.3e}",
+            "{f},{:.5},{:.4},{:.5},{:.5},{:.5},{},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.3},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{:.3e},{alive},{clarity},{:.3e},{:.3e},{reference}",
             r.time_s,
             pa_to_mmhg(r.cavity_pressure_pa),
             m3_to_ml(r.cavity_volume_m3),

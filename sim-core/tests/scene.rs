@@ -430,25 +430,27 @@ fn steps_with_a_moving_scope_do_not_allocate_once_its_moves_were_seen() {
 }
 
 /// With cut cells the fractions follow a breathing cavity (the pump between 60 and 100 mmHg,
-/// period 2 s, the scope in): once a few periods were seen, 4 s more allocate nothing (the cut
-/// cells' update, the conversion and the copy into the solver's grid reuse their arrays).
+/// period 2 s) and the sheath's layer a sliding and swaying scope (same period): once a few
+/// periods were seen, 4 s more allocate nothing (the sheath's placement, the cut cells' update,
+/// the conversion and the copy into the solver's grid reuse their arrays).
 #[test]
 fn steps_with_cut_cells_and_a_breathing_cavity_do_not_allocate_once_seen() {
     let (mut desc, assets) = coarse(1.2);
     desc.fluid.cut_cells = true;
     let mut scene = Scene::new(desc, assets).unwrap();
-    let scope = scope_in_cavity(&scene);
+    let home = scope_in_cavity(&scene);
+    let scope = |f: usize| slide_and_sway(home, f);
     let pump = |f: usize| 80.0 + 20.0 * (std::f64::consts::TAU * (f % 120) as f64 / 120.0).sin();
     for f in 0..600 {
         scene
-            .step(&own(inputs(1.0, 0.5, pump(f), scope)), DT)
+            .step(&own(inputs(1.0, 0.5, pump(f), scope(f))), DT)
             .unwrap();
     }
     let before = ALLOCS.load(Ordering::Relaxed);
     let mut moved = 0;
     for f in 600..840 {
         let r = scene
-            .step(&own(inputs(1.0, 0.5, pump(f), scope)), DT)
+            .step(&own(inputs(1.0, 0.5, pump(f), scope(f))), DT)
             .unwrap();
         moved += usize::from(r.counters.get(Stage::Voxelize).ran_last);
     }

@@ -604,8 +604,9 @@ impl CutCells {
     }
 }
 
+/// `v` with rounding removed: below `eps` 0, above `1 - eps` 1 (the stabilised faces' rule).
 #[inline]
-fn round_off(v: f64, eps: f64) -> f64 {
+pub(crate) fn round_off(v: f64, eps: f64) -> f64 {
     if v < eps {
         0.0
     } else if v > 1.0 - eps {

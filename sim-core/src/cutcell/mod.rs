@@ -97,6 +97,7 @@ mod mesh_io;
 pub mod shapes;
 pub mod small;
 
+pub(crate) use cells::round_off;
 pub use cells::{CutCellStats, CutCells, Layer, Phase, SmallCellParams};
 pub use face_walls::{FaceWalls, NO_WALL};
 pub use fractions::{FractionStats, SurfaceFractions, MAX_CELLS_AWAY};

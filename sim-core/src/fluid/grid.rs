@@ -21,6 +21,9 @@ pub struct FluidGrid {
     /// Per cell, the flux the boundaries inside it push into its fluid, m^3/s (empty: all zero,
     /// nothing allocated until the first one is set).
     boundary_flux_m3_per_s: Vec<f64>,
+    /// Per cell, the share of its closed region's mismatch its boundaries take up, m^2 (empty:
+    /// none, nothing allocated until the first one is set).
+    boundary_flux_weight_m2: Vec<f64>,
     revision: u64,
 }
 
@@ -61,6 +64,7 @@ impl FluidGrid {
             velocity_m_s: vec![[0.0; 3]; n],
             cut: None,
             boundary_flux_m3_per_s: Vec::new(),
+            boundary_flux_weight_m2: Vec::new(),
             revision: 1,
         })
     }
@@ -183,9 +187,50 @@ impl FluidGrid {
     /// projection makes the flux out of a fluid cell through its faces, `h^2 sum A_f u_f`, equal
     /// to it (Batty, Bertails and Bridson 2007; Ng, Min and Gibou 2009). Empty when none was ever
     /// set (all zero). Only fluid cells' values count; a closed fluid region whose values and
-    /// face fluxes do not balance has the mismatch removed (`StepStats::closed_region_*`).
+    /// face fluxes do not balance has the mismatch taken up by the boundary fluxes of its cells
+    /// with a weight ([`FluidGrid::boundary_flux_weights_m2`]), else removed as a uniform mean
+    /// (`StepStats::closed_region_*`).
     pub fn boundary_fluxes_m3_per_s(&self) -> &[f64] {
         &self.boundary_flux_m3_per_s
+    }
+
+    /// Per cell (x fastest), how much of its closed fluid region's mismatch (the region's
+    /// boundary fluxes and prescribed face fluxes not summing to zero) the cell's boundary flux
+    /// takes up, m^2 (e.g. the area of the wall pieces in it): the projection shifts the
+    /// boundary flux of each such cell by `-mismatch w_c / sum w` over the region, so every
+    /// closed region with some weight balances by itself (`StepStats::boundary_flux_shift_m3_per_s`).
+    /// Empty when none was ever set (all zero: the mismatch is removed as a uniform mean).
+    pub fn boundary_flux_weights_m2(&self) -> &[f64] {
+        &self.boundary_flux_weight_m2
+    }
+
+    /// Sets the weight of one cell (see [`FluidGrid::boundary_flux_weights_m2`]): finite and
+    /// `>= 0`. The first call allocates the per-cell array, later ones nothing. Does not change
+    /// the topology.
+    pub fn set_boundary_flux_weight_m2(
+        &mut self,
+        cell: [usize; 3],
+        weight_m2: f64,
+    ) -> Result<(), FluidError> {
+        if !self.in_range(cell) {
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
+        }
+        if !(weight_m2.is_finite() && weight_m2 >= 0.0) {
+            return Err(FluidError::InvalidParameter {
+                key: format!("boundary flux weight of cell {cell:?}"),
+                value: weight_m2.to_string(),
+                expected: "a finite area >= 0 in m^2".into(),
+            });
+        }
+        if self.boundary_flux_weight_m2.is_empty() {
+            self.boundary_flux_weight_m2 = vec![0.0; self.labels.len()];
+        }
+        let idx = self.index(cell);
+        self.boundary_flux_weight_m2[idx] = weight_m2;
+        Ok(())
     }
 
     /// Sets the boundary flux of one cell (see [`FluidGrid::boundary_fluxes_m3_per_s`]); the

@@ -69,6 +69,9 @@ pub(crate) struct PressureSolver {
     /// [`PressureSolver::solve`], the solution on return; zero off the fluid cells).
     pub bd: Vec<f64>,
     pub dq: Vec<f64>,
+    /// Dense (padded) boundary-flux weights of the fluid cells (`FluidGrid::boundary_flux_weights_m2`;
+    /// sized with `bd` when the first weight is read).
+    pub wd: Vec<f64>,
     /// Compressed rows of the reference solvers.
     q: Vec<f64>,
     b: Vec<f64>,
@@ -148,6 +151,9 @@ impl PressureSolver {
                     let r = s as usize..e as usize;
                     self.dq[r.clone()].fill(0.0);
                     self.bd[r.clone()].fill(0.0);
+                    if !self.wd.is_empty() {
+                        self.wd[r.clone()].fill(0.0);
+                    }
                     self.dp[r].fill(0.0);
                 }
             }
@@ -155,6 +161,10 @@ impl PressureSolver {
                 for v in [&mut self.dq, &mut self.bd] {
                     v.clear();
                     v.resize(len, 0.0);
+                }
+                if !self.wd.is_empty() {
+                    self.wd.clear();
+                    self.wd.resize(len, 0.0);
                 }
                 for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
                     v.clear();

@@ -37,6 +37,7 @@ pub(crate) struct Regions {
     region: Vec<u32>,
     /// Scratch accumulators, one per region.
     sum: Vec<f64>,
+    weight: Vec<f64>,
     /// Sum over the closed regions of `|sum of v|` removed by the last `remove_closed_means*`
     /// (for the divergence right-hand side `h div u`, times `h^2` it is the flux removed, m^3/s).
     pub removed_total: f64,
@@ -205,6 +206,8 @@ impl Regions {
         self.cells = row as usize;
         self.sum.clear();
         self.sum.resize(self.closed.len(), 0.0);
+        self.weight.clear();
+        self.weight.resize(self.closed.len(), 0.0);
     }
 
     /// Number of regions.
@@ -244,6 +247,44 @@ impl Regions {
             }
         }
         worst
+    }
+
+    /// Makes each closed region with some weight sum to zero by itself: its sum of `v` (a dense,
+    /// padded vector of the level the regions were built on) is taken from its cells in
+    /// proportion to their weights `w` (same layout, `>= 0`), `v -= sum w / sum w`. Regions without
+    /// weight are left as they are (for [`Regions::remove_closed_means_dense`]). Returns the
+    /// signed total taken, summed in f64.
+    pub fn shift_closed_sums_dense(&mut self, v: &mut [f64], w: &[f64]) -> f64 {
+        if !self.any_closed() {
+            return 0.0;
+        }
+        self.sum.fill(0.0);
+        self.weight.fill(0.0);
+        for &[id, s, e] in &self.closed_runs {
+            let r = s as usize..e as usize;
+            self.sum[id as usize] += v[r.clone()].iter().sum::<f64>();
+            self.weight[id as usize] += w[r].iter().sum::<f64>();
+        }
+        let mut total = 0.0;
+        for (s, &wt) in self.sum.iter_mut().zip(&self.weight) {
+            if wt > 0.0 {
+                total += *s;
+                *s /= wt;
+            } else {
+                *s = 0.0;
+            }
+        }
+        for &[id, s, e] in &self.closed_runs {
+            let per_weight = self.sum[id as usize];
+            if per_weight == 0.0 {
+                continue;
+            }
+            let r = s as usize..e as usize;
+            for (x, &wx) in v[r.clone()].iter_mut().zip(&w[r]) {
+                *x -= per_weight * wx;
+            }
+        }
+        total
     }
 
     /// Largest `|v|` over the closed regions' cells of a dense (padded) vector, NaN skipped.

@@ -1,39 +1,55 @@
 //! The cut cells of the cavity (`[fluid] cut_cells`): per cell the fluid volume fraction and per
-//! face the open area fraction of the region inside the cavity surface ([`crate::cutcell`], small
-//! cells merged), from the voxelizer's held positions, so the fractions and the cell states belong
-//! to one surface. Incremental: only the rows the moved triangles reach are recomputed, equal to a
-//! full recomputation bit for bit (the cutcell module's guarantee, tested on the scene).
+//! face the open area fraction of the region inside the cavity surface and outside the scope's
+//! sheath ([`crate::cutcell`], small cells merged), from the voxelizer's held positions and the
+//! pose the ports compose, so the fractions and the cell states belong to one surface and one
+//! pose. Incremental: only the rows the moved triangles reach are recomputed, equal to a full
+//! recomputation bit for bit (the cutcell module's guarantee, tested on the scene).
 //!
-//! The scope is not a layer here: its sheath stays the whole cells whose centres lie in it (the
-//! ports stage's rasterization), whose fluid part is not the fluid's (docs/scene.md, "Cut cells").
+//! The sheath ([`SheathMesh`]) is a solid layer over the cavity's fluid, moved rigidly with the
+//! pose. The ports still need whole cells: the tip layer's and hole band's cells (the ports
+//! stage's rasterization) keep the cavity's own open fractions on their faces, so their
+//! prescribed velocities carry the hydraulics' flows as without the sheath layer, and their
+//! fluid is not the fluid's (docs/scene.md, "Cut cells").
 
 use std::time::Instant;
 
 use super::counters::StageCounters;
 use super::error::SceneError;
+use super::scope::{ScopeGeometry, ScopePart, SheathMesh};
 use super::voxelize::{VoxelBox, Voxelizer};
-use crate::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
+use crate::cutcell::{round_off, CutCells, Layer, Orientation, Phase, SmallCellParams};
 use crate::fluid::{CutFractions, FluidGrid};
 
 /// The scene's grid is not periodic.
 const PERIODIC: [bool; 3] = [false; 3];
 
-/// The fractions of the fluid inside the cavity surface, kept with the voxelizer.
+/// The cavity's layer and the sheath's, in the stack.
+const CAVITY: usize = 0;
+
+/// The fractions of the fluid inside the cavity surface and outside the sheath, kept with the
+/// voxelizer.
 pub struct CavityFractions {
     cut: CutCells,
+    sheath: SheathMesh,
+    /// Where the sheath waits while there is no scope pose: above the box.
+    parked_m: [f64; 3],
     /// The stabilised fractions in the solver's layout.
     fractions: CutFractions,
     /// The fractions changed since the solver's grid last had them.
     unsent: bool,
+    /// Per row, the sum of the exact fluid fractions of its cells; their total, m^3.
+    row_volume: Vec<f64>,
+    volume_m3: f64,
 }
 
 impl CavityFractions {
-    /// The fractions of the surface of `triangles` (normals into the fluid) on `cells`; nothing
-    /// is computed until the first step.
+    /// The fractions of the surface of `triangles` (normals into the fluid) less the `sheath` on
+    /// `cells`; nothing is computed until the first step.
     pub fn new(
         cells: VoxelBox,
         triangles: Vec<[u32; 3]>,
         vertex_count: usize,
+        sheath: SheathMesh,
     ) -> Result<Self, SceneError> {
         let cavity = Layer {
             name: "cavity".into(),
@@ -42,10 +58,17 @@ impl CavityFractions {
             orientation: Orientation::Inward,
             inside: Phase::Fluid,
         };
+        let scope = Layer {
+            name: "sheath".into(),
+            triangles: sheath.triangles().to_vec(),
+            vertex_count: sheath.positions_m().len(),
+            orientation: Orientation::Outward,
+            inside: Phase::Solid,
+        };
         let cut = CutCells::new(
             cells,
             Phase::Solid,
-            vec![cavity],
+            vec![cavity, scope],
             SmallCellParams::default(),
         )?;
         let fractions = CutFractions {
@@ -58,27 +81,42 @@ impl CavityFractions {
             // The scene's viscous step keeps the staircase wall (no wall distances per frame).
             walls: None,
         };
+        let h = cells.spacing_m;
+        let parked_m = [
+            cells.origin_m[0] + 0.5 * h * cells.dims[0] as f64,
+            cells.origin_m[1] + 0.5 * h * cells.dims[1] as f64,
+            cells.origin_m[2] + h * (cells.dims[2] as f64 + 2.0),
+        ];
         Ok(Self {
             cut,
+            sheath,
+            parked_m,
             fractions,
             unsent: true,
+            row_volume: vec![0.0; cells.dims[1] * cells.dims[2]],
+            volume_m3: 0.0,
         })
     }
 
-    /// The cut-cell part of the voxelize stage: when the voxelizer moved vertices in this frame,
-    /// the fractions at its held positions (the first time in full). Returns the rows whose
-    /// fractions changed (empty when none did); the time joins the voxelize stage's run.
+    /// The cut-cell part of the voxelize stage: when the voxelizer moved vertices in this frame
+    /// or the sheath's pose `scope` (the one the ports compose) changed, the fractions at the held
+    /// positions (the first time in full). Returns the rows whose fractions changed (empty when
+    /// none did); the time joins the voxelize stage's run.
     pub fn step(
         &mut self,
         voxels: &Voxelizer,
+        scope: Option<&ScopeGeometry>,
         counters: &mut StageCounters,
     ) -> Result<&[u32], SceneError> {
-        if voxels.last_stats().moved_vertices == 0 {
+        let t = Instant::now();
+        let moved = self.sheath.place(scope, self.parked_m);
+        if voxels.last_stats().moved_vertices == 0 && !moved {
             return Ok(&[]);
         }
-        let t = Instant::now();
-        // Threshold 0: exactly the vertices whose held position the voxelizer moved.
-        let stats = self.cut.update(&[voxels.voxel_positions_m()], 0.0)?;
+        // Threshold 0: exactly the vertices whose held position the voxelizer moved, and the
+        // sheath's when it moved.
+        let positions = [voxels.voxel_positions_m(), self.sheath.positions_m()];
+        let stats = self.cut.update(&positions, 0.0)?;
         if stats.changed_rows > 0 {
             let cut = &self.cut;
             let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
@@ -86,6 +124,14 @@ impl CavityFractions {
             self.fractions
                 .assign_from_box(dims, PERIODIC, volume, faces);
             self.unsent = true;
+            let nx = dims[0];
+            let exact = cut.volume_fractions();
+            for &r in cut.changed_rows() {
+                let r = r as usize;
+                self.row_volume[r] = exact[nx * r..nx * (r + 1)].iter().sum();
+            }
+            let h = cut.cells().spacing_m;
+            self.volume_m3 = self.row_volume.iter().sum::<f64>() * h * h * h;
         }
         counters.extend_last_run_since(t);
         Ok(if stats.changed_rows > 0 {
@@ -95,22 +141,68 @@ impl CavityFractions {
         })
     }
 
-    /// Hands the fractions to the solver's `grid` when they changed since it last had them.
-    pub fn send(&mut self, grid: &mut FluidGrid) -> Result<(), SceneError> {
+    /// Hands the fractions to the solver's `grid` when they changed since it last had them; the
+    /// faces of the ports' whole cells (`scope_cells` in the tip layer and the hole band) open as
+    /// the cavity alone makes them ([`CavityFractions::port_face_fraction`]).
+    pub fn send(
+        &mut self,
+        grid: &mut FluidGrid,
+        scope_cells: &[(u32, ScopePart)],
+    ) -> Result<(), SceneError> {
         if self.unsent {
+            let cells = *self.cut.cells();
+            let [nx, ny, _] = cells.dims;
+            for &(n, part) in scope_cells {
+                if !matches!(part, ScopePart::Tip | ScopePart::Holes) {
+                    continue;
+                }
+                let n = n as usize;
+                let at = [n % nx, (n / nx) % ny, n / (nx * ny)];
+                for a in 0..3 {
+                    let mut d = cells.dims;
+                    d[a] += 1;
+                    for up in 0..2 {
+                        let mut f = at;
+                        f[a] += up;
+                        let idx = f[0] + d[0] * (f[1] + d[1] * f[2]);
+                        self.fractions.face[a][idx] = self.port_face_fraction(a, idx);
+                    }
+                }
+            }
             grid.copy_cut_fractions(&self.fractions)?;
             self.unsent = false;
         }
         Ok(())
     }
 
-    /// The fractions (stabilised, the solver's layout).
+    /// The open fraction of face `idx` normal to `axis` (the solver's face layout) where it
+    /// borders a port's whole cell: the cavity's own, rounded as the stabilised faces are, not
+    /// the sheath's (which closes the faces the ports' fluxes cross). The one rule for what the
+    /// ports' velocities are set for (`Ports`) and what the solver's faces carry ([`Self::send`]).
+    pub fn port_face_fraction(&self, axis: usize, idx: usize) -> f32 {
+        let eps = self.cut.params().round_off_fraction;
+        round_off(self.cut.layer(CAVITY).face_fractions(axis)[idx], eps) as f32
+    }
+
+    /// The fractions (stabilised, the solver's layout; the ports' faces as last sent).
     pub fn fractions(&self) -> &CutFractions {
         &self.fractions
     }
 
-    /// The cut cells (exact and stabilised fractions, counts).
+    /// The cut cells (exact and stabilised fractions, counts; layer 0 the cavity, 1 the sheath).
     pub fn cut_cells(&self) -> &CutCells {
         &self.cut
+    }
+
+    /// The sheath's surface where last placed.
+    pub fn sheath(&self) -> &SheathMesh {
+        &self.sheath
+    }
+
+    /// The fluid the cavity surface encloses less the sheath's part of it, m^3: the sum of the
+    /// exact fractions, exact for the polygonal surfaces except in the cells both cut (see
+    /// [`CutCells`]).
+    pub fn cavity_less_sheath_m3(&self) -> f64 {
+        self.volume_m3
     }
 }

@@ -10,8 +10,13 @@
 //! - The os's pieces (cells a cap triangle touches) carry exactly the hydraulics' losses, with
 //!   their sign, shared in proportion to the pieces' areas.
 //!
-//! With the ports prescribing `Q_in` and `Q_out`, every fluid region is then closed and its right-
-//! hand side compatible by the hydraulics' own balance `in - out - losses = dV/dt`.
+//! With the ports prescribing `Q_in` and `Q_out`, every fluid region is then closed and, while the
+//! fluid is one region, its right-hand side compatible by the hydraulics' own balance
+//! `in - out - losses = dV/dt`. When it splits, each region balances by itself: the wall pieces'
+//! areas are the solver's boundary-flux weights (`FluidGrid::set_boundary_flux_weight_m2`), so
+//! the projection shifts each region's wall fluxes by area until its ports, os and walls sum to
+//! zero; summed over the regions the shifts cancel (the same balance), so the walls still carry
+//! `dV/dt` and the os the losses.
 
 use super::ports::CavityCells;
 use super::types::{FluxBalance, FrameFlows, VoxelKind};
@@ -35,6 +40,8 @@ pub struct CutWalls {
     pieces: Vec<Piece>,
     /// The cells whose boundary flux is set in the solver's grid, to zero next time.
     carriers: Vec<u32>,
+    /// The cells whose boundary-flux weight (their wall pieces' area) is set, to zero next time.
+    weighted: Vec<u32>,
     /// Out of the fluid through the wall pieces and through the os's pieces, m^3/s.
     walls_out_m3_per_s: f64,
     os_out_m3_per_s: f64,
@@ -46,14 +53,15 @@ impl CutWalls {
         Self {
             pieces: Vec::with_capacity(cells),
             carriers: Vec::with_capacity(cells),
+            weighted: Vec::with_capacity(cells),
             walls_out_m3_per_s: 0.0,
             os_out_m3_per_s: 0.0,
         }
     }
 
-    /// Whether the last [`CutWalls::set_fluxes`] set any flux.
+    /// Whether the last [`CutWalls::set_fluxes`] set any flux or weight.
     pub fn moving(&self) -> bool {
-        !self.carriers.is_empty()
+        !self.carriers.is_empty() || !self.weighted.is_empty()
     }
 
     /// Sets the frame's fluxes of the pieces of `cut` (the cavity's cut cells, whose cells'
@@ -136,8 +144,20 @@ impl CutWalls {
             grid.set_boundary_flux_m3_per_s(cells_at(c, nx, ny), 0.0)?;
         }
         self.carriers.clear();
+        for &c in &self.weighted {
+            grid.set_boundary_flux_weight_m2(cells_at(c, nx, ny), 0.0)?;
+        }
+        self.weighted.clear();
         let (mut walls_out, mut os_out) = (0.0, 0.0);
         for p in &self.pieces {
+            let at = cells_at(p.carrier, nx, ny);
+            if !p.os {
+                // The walls take up their region's mismatch by area (the os keeps the losses).
+                let w = grid.boundary_flux_weights_m2().get(p.carrier as usize);
+                let w = w.copied().unwrap_or(0.0);
+                grid.set_boundary_flux_weight_m2(at, w + p.area_m2)?;
+                self.weighted.push(p.carrier);
+            }
             let q = if p.os {
                 -os_per_m2 * p.area_m2
             } else if along_normals {
@@ -154,7 +174,7 @@ impl CutWalls {
             } else {
                 walls_out -= q;
             }
-            grid.add_boundary_flux_m3_per_s(cells_at(p.carrier, nx, ny), q)?;
+            grid.add_boundary_flux_m3_per_s(at, q)?;
             self.carriers.push(p.carrier);
         }
         self.walls_out_m3_per_s = walls_out;
@@ -163,9 +183,11 @@ impl CutWalls {
     }
 
     /// Adds what the pieces carried out of the fluid in the last step to the measured wall and
-    /// os fluxes of `flux` (their flux through whole wall cells' faces is measured there).
-    pub fn add_to(&self, flux: &mut FluxBalance) {
-        flux.fluid_wall_m3_per_s += self.walls_out_m3_per_s;
+    /// os fluxes of `flux` (their flux through whole wall cells' faces is measured there):
+    /// `shift_m3_per_s`, the solver's shift of the wall pieces' fluxes into the fluid that
+    /// balanced each region (`StepStats::boundary_flux_shift_m3_per_s`), is the walls'.
+    pub fn add_to(&self, flux: &mut FluxBalance, shift_m3_per_s: f64) {
+        flux.fluid_wall_m3_per_s += self.walls_out_m3_per_s - shift_m3_per_s;
         flux.fluid_open_m3_per_s += self.os_out_m3_per_s;
     }
 }

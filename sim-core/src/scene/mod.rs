@@ -15,7 +15,7 @@
 //! | [`HydraulicStage`] | the rig's [`crate::hydraulics::HydraulicInputs`], [`HydraulicsInput`] | [`FrameFlows`], its [`crate::hydraulics::HydraulicState`] |
 //! | [`Deformation`] | the hydraulic state | whether the [`CavitySurface`] moved |
 //! | [`Voxelizer`] | the moved surface's positions | the rows whose cell states changed |
-//! | [`CavityFractions`] (`[fluid] cut_cells`) | the voxelizer's held positions | the cells' fluid volume and faces' open area fractions, the rows they changed in; into the solver |
+//! | [`CavityFractions`] (`[fluid] cut_cells`) | the voxelizer's held positions, the scope pose the labels are composed for | the cells' fluid volume and faces' open area fractions inside the cavity and outside the sheath, the rows they changed in, the reference volume; into the solver |
 //! | [`Ports`] | those rows, the [`ScopePose`], [`CavityCells`], [`FrameFlows`] | labels and boundary velocities in the solver, [`FluxBalance`], [`PortsStep`] |
 //! | [`FluidStage`] | [`FluidDrive`] | the step of its solver, [`FluidStep`] |
 //! | [`vortices::Vortices`] | the inflow, the solver | their field (overlaid or injected) |
@@ -78,7 +78,7 @@ pub use fluid::{FluidDrive, FluidStage, FluidStep};
 pub use hydraulics::HydraulicStage;
 pub use ports::{CavityCells, Ports, PortsStep};
 pub use prepare::SceneAssets;
-pub use scope::{ScopeGeometry, ScopePart};
+pub use scope::{ScopeDims, ScopeGeometry, ScopePart, SheathMesh};
 pub use surface::CavitySurface;
 pub use types::{
     BoundaryCell, CavityView, FluxBalance, FrameFlows, HydraulicsInput, InflowPort, RigInputs,
@@ -129,7 +129,13 @@ impl Scene {
         };
         let fractions = if desc.stages.fluid && desc.fluid.cut_cells {
             let tris = surface.triangles().to_vec();
-            Some(CavityFractions::new(cells, tris, surface.vertex_count())?)
+            let sheath = SheathMesh::new(ScopeDims::of(&desc.scope), cells.spacing_m);
+            Some(CavityFractions::new(
+                cells,
+                tris,
+                surface.vertex_count(),
+                sheath,
+            )?)
         } else {
             None
         };
@@ -229,11 +235,17 @@ impl Scene {
         // changed; the ports' and walls' velocities for the frame's flows.
         self.ports.track(changed_rows, &inputs.rig.scope);
         if let Some(fractions) = self.fractions.as_mut() {
+            // The sheath layer at the pose the labels are composed for: a moved surface changes
+            // the fractions, so the labels are composed then too.
+            let moved = self.voxelizer.last_stats().moved_vertices > 0;
+            let scope = self.ports.scope_to_compose(moved);
             let cut_rows = fractions.step(
                 &self.voxelizer,
+                scope.as_ref(),
                 self.report.counters.get_mut(Stage::Voxelize),
             )?;
             self.ports.track_rows(cut_rows);
+            self.report.cavity_less_sheath_volume_m3 = Some(fractions.cavity_less_sheath_m3());
         }
         let Some(fluid) = self.fluid.as_mut() else {
             return Ok(self.finish(started));
@@ -241,7 +253,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface,
-            fractions: self.fractions.as_ref().map(|f| f.fractions()),
+            fractions: self.fractions.as_ref(),
         };
         let ports = self.ports.step(
             &cavity,
@@ -254,7 +266,7 @@ impl Scene {
             self.report.relabelled_cells = n;
         }
         if let Some(fractions) = self.fractions.as_mut() {
-            fractions.send(fluid.solver_mut().grid_mut())?;
+            fractions.send(fluid.solver_mut().grid_mut(), self.ports.scope_cells())?;
         }
         if let (Some(fractions), Some(walls)) = (self.fractions.as_ref(), self.cut_walls.as_mut()) {
             // When the ports stage set its boundaries, or the pieces moved fluid last time.
@@ -263,7 +275,7 @@ impl Scene {
                 let cavity = CavityCells {
                     voxels: &self.voxelizer,
                     surface,
-                    fractions: Some(fractions.fractions()),
+                    fractions: Some(fractions),
                 };
                 walls.set_fluxes(
                     fractions.cut_cells(),
@@ -297,7 +309,7 @@ impl Scene {
             self.ports
                 .measure_fluxes(fluid.solver(), &mut self.report.flux);
             if let Some(walls) = &self.cut_walls {
-                walls.add_to(&mut self.report.flux);
+                walls.add_to(&mut self.report.flux, stats.boundary_flux_shift_m3_per_s);
             }
             self.report.flux.closed_region_mismatch_m3_per_s = stats.closed_region_flux_m3_per_s;
         }
@@ -431,7 +443,7 @@ impl Scene {
         let cavity = CavityCells {
             voxels: &self.voxelizer,
             surface: self.deformation.surface(),
-            fractions: self.fractions.as_ref().map(|f| f.fractions()),
+            fractions: self.fractions.as_ref(),
         };
         let solver = self.fluid.as_mut().map(FluidStage::solver_mut);
         let check = self

@@ -17,17 +17,17 @@
 use std::time::Instant;
 
 use super::counters::StageCounters;
+use super::cut_cells::CavityFractions;
 use super::desc::SceneDesc;
 use super::error::SceneError;
-use super::scope::{unit, ScopeGeometry, ScopePart, FACE_NORMALS};
+use super::scope::{unit, ScopeDims, ScopeGeometry, ScopePart, FACE_NORMALS};
 use super::surface::CavitySurface;
 use super::types::{
     BoundaryCell, FluxBalance, FrameFlows, InflowPort, ScopePose, VoxelKind, WholeBoxCheck,
 };
 use super::voxelize::{state, VoxelBox, Voxelizer, NO_TRIANGLE};
 use crate::fluid::{
-    holds_fluid, range_hull, step_along, CellLabel, CutFractions, FluidError, FluidGrid,
-    FluidSolver,
+    holds_fluid, range_hull, step_along, CellLabel, FluidError, FluidGrid, FluidSolver,
 };
 
 /// The cavity as the ports stage reads it: the voxelizer's cell states and the surface they
@@ -39,9 +39,9 @@ pub struct CavityCells<'a> {
     /// The surface (its cap triangles, triangles and `dx/dp`).
     pub surface: &'a CavitySurface,
     /// With cut cells (`[fluid] cut_cells`), each cell's fluid volume fraction of the same
-    /// surface (a cell holding fluid is fluid, `fluid::holds_fluid`, cut or whole) and each
-    /// face's open area fraction (a port's face carries its open part's flux).
-    pub fractions: Option<&'a CutFractions>,
+    /// surface (a cell holding fluid is fluid, `fluid::holds_fluid`, cut or whole) and the open
+    /// fractions of the ports' faces (a port's face carries its open part's flux).
+    pub fractions: Option<&'a CavityFractions>,
 }
 
 /// What one step of the ports stage did.
@@ -63,6 +63,9 @@ pub struct Ports {
     holes_m: [f64; 2],
     /// The inflow channel's area, m^2.
     inflow_channel_area_m2: f64,
+    /// The sheath is a layer of the cut cells (`[fluid] cut_cells`): cells of its plain part
+    /// that hold fluid are fluid.
+    cut_sheath: bool,
     /// The scope moves the labels when it moved by this fraction of a voxel.
     scope_move_fraction: f64,
     /// Boundaries move fluid from this speed, m/s.
@@ -114,11 +117,13 @@ impl Ports {
     pub fn new(cells: VoxelBox, desc: &SceneDesc) -> Self {
         let n = cells.cell_count();
         let rows = cells.dims[1] * cells.dims[2];
+        let scope = ScopeDims::of(&desc.scope);
         Self {
             cells,
-            sheath_radius_m: 0.5e-3 * desc.scope.sheath_outer_diameter_mm,
-            holes_m: desc.scope.outflow_holes_from_tip_mm.map(|v| v * 1e-3),
-            inflow_channel_area_m2: desc.scope.inflow_channel_area_mm2 * 1e-6,
+            sheath_radius_m: scope.radius_m,
+            holes_m: scope.holes_m,
+            inflow_channel_area_m2: scope.channel_area_m2,
+            cut_sheath: desc.stages.fluid && desc.fluid.cut_cells,
             scope_move_fraction: desc.skip.scope_move_fraction.max(1e-6),
             rest_speed_m_s: desc.skip.rest_speed_m_s,
             kinds: vec![VoxelKind::Solid; n],
@@ -188,6 +193,24 @@ impl Ports {
     pub fn fluid_volume_m3(&self) -> f64 {
         let h = self.cells.spacing_m;
         self.fluid_cells as f64 * h * h * h
+    }
+
+    /// The pose the next step composes the labels for (with `compose`, the labels are composed
+    /// whatever else moved): the cut-cell sheath layer is placed there, so the fractions and the
+    /// scope's cells describe one pose.
+    pub fn scope_to_compose(&mut self, compose: bool) -> Option<ScopeGeometry> {
+        self.labels_dirty |= compose;
+        if self.labels_dirty {
+            self.scope
+        } else {
+            self.scope_built
+        }
+    }
+
+    /// The built scope's cells (those whose centres lie in the sheath) and their parts, by cell
+    /// index.
+    pub fn scope_cells(&self) -> &[(u32, ScopePart)] {
+        &self.scope_cells
     }
 
     /// Notes rows of cells whose cavity states or fractions changed: recomposed at the next step.
@@ -344,7 +367,11 @@ impl Ports {
             };
             let (ea, eb) = (run(&self.scope_cells, a), run(&self.scope_cells_next, b));
             let (was, now) = (&self.scope_cells[a..ea], &self.scope_cells_next[b..eb]);
-            if was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0) {
+            // With the cut sheath a cell's kind depends on its part (the plain part's cells
+            // holding fluid are fluid), so a row whose cells changed parts is recomposed.
+            let moved_cells =
+                was.len() != now.len() || was.iter().zip(now).any(|(x, y)| x.0 != y.0);
+            if moved_cells || (self.cut_sheath && was != now) {
                 self.mark_pending(row);
             } else if was != now {
                 self.mark_relisted(row);
@@ -422,7 +449,7 @@ impl Ports {
                 // With cut cells the fraction decides what is fluid (every cell holding fluid is
                 // inside or band, so within the row's range), the os's cells too (their pieces
                 // carry the losses: `CutWalls`); without, the os is open.
-                let kind = match (states[n], cavity.fractions.map(|f| &f.volume)) {
+                let kind = match (states[n], cavity.fractions.map(|f| &f.fractions().volume)) {
                     (state::BAND, None) if owners[n] < caps => VoxelKind::Open,
                     (_, Some(v)) if holds_fluid(v[n]) => VoxelKind::Fluid,
                     (state::INSIDE, None) => VoxelKind::Fluid,
@@ -432,18 +459,27 @@ impl Ports {
                 fluid += u32::from(kind == VoxelKind::Fluid);
                 self.kinds[n] = kind;
             }
-            // The scope on top.
+            // The scope on top. With cut cells the sheath is a layer of the fractions: a cell of
+            // its plain part that holds fluid beside it is that fluid's; the tip layer and the
+            // hole band stay whole cells for the ports.
             let mut now = vox;
             let first = self.scope_cells.partition_point(|c| (c.0 as usize) < base);
-            for &(n, _) in &self.scope_cells[first..] {
+            for &(n, part) in &self.scope_cells[first..] {
                 let n = n as usize;
                 if n >= base + nx {
                     break;
                 }
-                fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
-                self.kinds[n] = VoxelKind::Scope;
                 let i = (n - base) as u32;
                 now = range_hull(now, [i, i + 1]);
+                let cut_fluid = self.cut_sheath
+                    && cavity.fractions.is_some()
+                    && part == ScopePart::Sheath
+                    && self.kinds[n] == VoxelKind::Fluid;
+                if cut_fluid {
+                    continue;
+                }
+                fluid -= u32::from(self.kinds[n] == VoxelKind::Fluid);
+                self.kinds[n] = VoxelKind::Scope;
             }
             self.kind_extent[row] = now;
             self.fluid_cells = self.fluid_cells + fluid as usize - self.row_fluid[row] as usize;
@@ -833,9 +869,9 @@ fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
     s
 }
 
-/// [`face_weight`] with each face weighted by its open area fraction in `cut` (the grid of
-/// `dims` cells, not periodic).
-fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CutFractions) -> f64 {
+/// [`face_weight`] with each face of the port cell `b` weighted by its open area fraction
+/// ([`CavityFractions::port_face_fraction`]; the grid of `dims` cells, not periodic).
+fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CavityFractions) -> f64 {
     let mut s = 0.0;
     for (f, n) in FACE_NORMALS.iter().enumerate() {
         if b.faces >> f & 1 == 1 {
@@ -844,7 +880,7 @@ fn open_face_weight(b: &BoundaryCell, v: [f64; 3], dims: [usize; 3], cut: &CutFr
             at[a] += f % 2;
             let mut d = dims;
             d[a] += 1;
-            let area = cut.face[a][at[0] + d[0] * (at[1] + d[1] * at[2])] as f64;
+            let area = cut.port_face_fraction(a, at[0] + d[0] * (at[1] + d[1] * at[2])) as f64;
             s += area * (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]);
         }
     }

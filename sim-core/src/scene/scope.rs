@@ -9,8 +9,33 @@
 //! - the **hole band** (`-far <= s <= -near`) holds the outflow holes;
 //! - the rest is sheath (a wall at rest).
 
+use super::desc::ScopeSpec;
+use crate::mesh::cross;
+
 /// Sheath length behind the tip, m (longer than any grid).
 pub const SHEATH_LENGTH_M: f64 = 0.2;
+
+/// The scope's dimensions in SI units, from the scene file's `[scope]` (the one conversion).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScopeDims {
+    /// Outer radius of the sheath, m.
+    pub radius_m: f64,
+    /// Hole band, m behind the tip: `[near, far]`.
+    pub holes_m: [f64; 2],
+    /// The inflow channel's area, m^2.
+    pub channel_area_m2: f64,
+}
+
+impl ScopeDims {
+    /// The dimensions of `spec`.
+    pub fn of(spec: &ScopeSpec) -> Self {
+        Self {
+            radius_m: 0.5e-3 * spec.sheath_outer_diameter_mm,
+            holes_m: spec.outflow_holes_from_tip_mm.map(|v| v * 1e-3),
+            channel_area_m2: spec.inflow_channel_area_mm2 * 1e-6,
+        }
+    }
+}
 
 /// The scope pose the ports were built for.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -141,6 +166,132 @@ impl ScopeGeometry {
             return None;
         }
         Some((a.max(0.0) as usize, z.min(nx as f64 - 1.0) as usize))
+    }
+}
+
+/// The sheath as a closed triangle surface (normals outward) for the cut-cell layers: the
+/// cylinder of [`ScopeGeometry`] with a flat tip, from the tip back [`SHEATH_LENGTH_M`], placed
+/// rigidly at a pose. Tessellated once for the grid spacing `h` (in the scope's own frame) with
+/// the rule of [`crate::cutcell::shapes::Tessellation::for_spacing`]: `n` sides of at most
+/// `h / 2`, their circumradius scaled so the polygon's cross-section is the circle's (so its
+/// volume is `pi r^2 L`), rings at most `4 h` apart along the axis and one at each end of the hole
+/// band, and on the tip a ring at the inflow channel's radius (area matched too). Placing it
+/// writes the vertices into the same buffer (no allocation after [`SheathMesh::new`]).
+#[derive(Debug, Clone)]
+pub struct SheathMesh {
+    /// Vertices in the scope's frame: `[radial u, radial w, axial s]` (`s <= 0` behind the tip).
+    local: Vec<[f64; 3]>,
+    triangles: Vec<[u32; 3]>,
+    positions_m: Vec<[f32; 3]>,
+    /// The pose the positions are at (`None`: parked out of the grid).
+    placed: Option<Option<ScopeGeometry>>,
+}
+
+impl SheathMesh {
+    /// The sheath of `dims` for cells of edge `spacing_m`.
+    pub fn new(dims: ScopeDims, spacing_m: f64) -> Self {
+        use std::f64::consts::PI;
+        let ScopeDims {
+            radius_m,
+            holes_m,
+            channel_area_m2,
+        } = dims;
+        let max_edge = 0.5 * spacing_m;
+        let n = (2.0 * PI * radius_m / max_edge).ceil().max(12.0) as usize;
+        // The n-gon of circumradius r has area n r^2 sin(2 pi / n) / 2.
+        let area_scale = (2.0 * PI / (n as f64 * (2.0 * PI / n as f64).sin())).sqrt();
+        let channel_r = (channel_area_m2 / PI).sqrt().min(0.9 * radius_m);
+        // Ring positions from the far end to the tip, with the hole band's ends among them.
+        let mut marks = vec![-SHEATH_LENGTH_M];
+        for s in [-holes_m[1], -holes_m[0]] {
+            if s > -SHEATH_LENGTH_M && s < 0.0 {
+                marks.push(s);
+            }
+        }
+        marks.push(0.0);
+        marks.sort_by(f64::total_cmp);
+        marks.dedup();
+        let step = 8.0 * max_edge;
+        let mut rings = vec![marks[0]];
+        for w in marks.windows(2) {
+            let parts = ((w[1] - w[0]) / step).ceil().max(1.0) as usize;
+            for p in 1..=parts {
+                rings.push(w[0] + (w[1] - w[0]) * p as f64 / parts as f64);
+            }
+        }
+        let ring = |r: f64, s: f64, local: &mut Vec<[f64; 3]>| {
+            for i in 0..n {
+                let th = 2.0 * PI * i as f64 / n as f64;
+                local.push([r * th.cos(), r * th.sin(), s]);
+            }
+        };
+        let mut local = Vec::with_capacity((rings.len() + 1) * n + 2);
+        for &s in &rings {
+            ring(area_scale * radius_m, s, &mut local);
+        }
+        let inner = local.len() as u32;
+        ring(area_scale * channel_r, 0.0, &mut local);
+        let (tip, far) = (local.len() as u32, local.len() as u32 + 1);
+        local.push([0.0, 0.0, 0.0]);
+        local.push([0.0, 0.0, -SHEATH_LENGTH_M]);
+        let at = |ring: usize, i: usize| (ring * n + i % n) as u32;
+        let top = rings.len() - 1;
+        let mut triangles = Vec::with_capacity(2 * n * rings.len() + 2 * n);
+        for r in 0..top {
+            for i in 0..n {
+                triangles.push([at(r, i), at(r, i + 1), at(r + 1, i + 1)]);
+                triangles.push([at(r, i), at(r + 1, i + 1), at(r + 1, i)]);
+            }
+        }
+        let ch = |i: usize| inner + (i % n) as u32;
+        for i in 0..n {
+            // The tip: the channel's disk fanned from the centre, the annulus to the side.
+            triangles.push([tip, ch(i), ch(i + 1)]);
+            triangles.push([ch(i), at(top, i), at(top, i + 1)]);
+            triangles.push([ch(i), at(top, i + 1), ch(i + 1)]);
+            triangles.push([far, at(0, i + 1), at(0, i)]);
+        }
+        let positions_m = vec![[0.0; 3]; local.len()];
+        Self {
+            local,
+            triangles,
+            positions_m,
+            placed: None,
+        }
+    }
+
+    /// Its triangles (normals out of the sheath).
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+    /// Its vertices where last placed.
+    pub fn positions_m(&self) -> &[[f32; 3]] {
+        &self.positions_m
+    }
+
+    /// Places the sheath at `scope`'s pose, or with none parks it `parked_m` (a point out of the
+    /// grid, the sheath running away from it along +z); whether its vertices moved.
+    pub fn place(&mut self, scope: Option<&ScopeGeometry>, parked_m: [f64; 3]) -> bool {
+        if self.placed == Some(scope.copied()) {
+            return false;
+        }
+        self.placed = Some(scope.copied());
+        let (tip, a) = match scope {
+            Some(sc) => (sc.tip_m, sc.dir),
+            None => (parked_m, [0.0, 0.0, -1.0]),
+        };
+        // (u, w, a) right-handed, u across the axis's least component.
+        let least = (0..3)
+            .min_by(|&i, &j| a[i].abs().total_cmp(&a[j].abs()))
+            .unwrap_or(0);
+        let mut e = [0.0; 3];
+        e[least] = 1.0;
+        let u = unit(cross(a, e)).unwrap_or([1.0, 0.0, 0.0]);
+        let w = cross(a, u);
+        for (p, l) in self.positions_m.iter_mut().zip(&self.local) {
+            *p = std::array::from_fn(|k| (tip[k] + l[0] * u[k] + l[1] * w[k] + l[2] * a[k]) as f32);
+        }
+        true
     }
 }
 

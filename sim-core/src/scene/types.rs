@@ -142,6 +142,11 @@ pub struct StepReport {
     /// fluid cells (`FluidGrid::fluid_volume_m3`), else the whole fluid cells' volume (the
     /// conservative voxelization's).
     pub grid_fluid_volume_m3: f64,
+    /// With `[fluid] cut_cells`: the fluid the renderer's picture holds, m^3: the volume the
+    /// replayed surface encloses less the scope's sheath inside it (the sum of the exact cut-cell
+    /// fractions of the two surfaces; exact for the polygonal surfaces except in the cells both
+    /// cut). The reference for `grid_fluid_volume_m3`.
+    pub cavity_less_sheath_volume_m3: Option<f64>,
     /// Whether the fluid stage idled for too few fluid cells.
     pub fluid_idle: bool,
     /// Cells whose label changed in this step.

@@ -91,6 +91,9 @@ pub struct FluidSolver {
     /// Whether `pressure_pa` is a step's pressure (false before the first step and after
     /// [`FluidSolver::project_now`], whose pressure is no step's): only then is it reflected.
     pressure_from_step: bool,
+    /// The boundary fluxes the last projection shifted to balance closed regions, m^3/s into the
+    /// fluid (`FluidGrid::boundary_flux_weights_m2`).
+    boundary_flux_shift_m3_per_s: f64,
     /// Padded (level 0) index of the upper cell of the first face of each active run
     /// (`FaceSet::runs`), for the pressure-gradient update.
     run_cells: [Vec<u32>; 3],
@@ -142,6 +145,7 @@ impl FluidSolver {
             outflow_faces: Vec::new(),
             lagged_applied: false,
             pressure_from_step: false,
+            boundary_flux_shift_m3_per_s: 0.0,
             run_cells: Default::default(),
             cut_closed: Default::default(),
             open_rows: Vec::new(),

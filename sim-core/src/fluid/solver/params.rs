@@ -147,6 +147,10 @@ pub struct StepStats {
     /// The whole incompatible flux removed from closed regions, summed over them (m^3/s; largest
     /// over the substeps).
     pub closed_region_flux_m3_per_s: f64,
+    /// What the last projection added to the weighted cells' boundary fluxes so that each closed
+    /// region with some weight balances by itself (`FluidGrid::boundary_flux_weights_m2`), summed
+    /// over the regions, m^3/s into the fluid (0 without weights).
+    pub boundary_flux_shift_m3_per_s: f64,
     /// Fluid cells.
     pub fluid_cells: usize,
 }

@@ -216,7 +216,10 @@ impl FluidSolver {
                 }
             }
         }
-        ps.regions.remove_closed_means_dense(&mut ps.bd)
+        self.shift_weighted_boundaries();
+        self.pressure
+            .regions
+            .remove_closed_means_dense(&mut self.pressure.bd)
     }
 
     /// [`FluidSolver::divergence_rhs`] with cut cells: `-(sum A_f u_f - q / h^2)` over each fluid
@@ -260,12 +263,58 @@ impl FluidSolver {
                 ps.bd[p] = -flux;
             }
         }
-        ps.regions.remove_closed_means_dense(&mut ps.bd)
+        self.shift_weighted_boundaries();
+        self.pressure
+            .regions
+            .remove_closed_means_dense(&mut self.pressure.bd)
+    }
+
+    /// Closed regions with weighted boundaries (`FluidGrid::boundary_flux_weights_m2`) balance
+    /// by shifting those boundaries' fluxes in the right-hand side `bd`; the rest of a mismatch
+    /// is removed as a uniform mean after this. Nothing changes without weights.
+    fn shift_weighted_boundaries(&mut self) {
+        self.boundary_flux_shift_m3_per_s = 0.0;
+        let ps = &mut self.pressure;
+        let l0 = &ps.mg.levels[0];
+        let w = self.grid.boundary_flux_weights_m2();
+        if w.is_empty() || !ps.regions.any_closed() {
+            return;
+        }
+        if ps.wd.len() != ps.bd.len() {
+            ps.wd.clear();
+            ps.wd.resize(ps.bd.len(), 0.0);
+        }
+        for &[j, k, i0, i1] in &l0.row_spans {
+            let (j, k) = (j as usize, k as usize);
+            let (p0, c0) = (
+                l0.pad(i0 as usize, j, k),
+                self.grid.index([i0 as usize, j, k]),
+            );
+            let n = (i1 - i0) as usize;
+            for (x, (&wc, &mk)) in ps.wd[p0..p0 + n]
+                .iter_mut()
+                .zip(w[c0..c0 + n].iter().zip(&l0.mask[p0..p0 + n]))
+            {
+                *x = if mk != 0.0 { wc } else { 0.0 };
+            }
+        }
+        let taken = ps.regions.shift_closed_sums_dense(&mut ps.bd, &ps.wd);
+        // `bd` is `q / h^2 - flux out`: taking `s` from it takes `s h^2` from the fluxes in.
+        let h = self.grid.spacing_m();
+        self.boundary_flux_shift_m3_per_s = -taken * h * h;
     }
 
     /// The boundary fluxes a projection applies now: [`FluidGrid::boundary_fluxes_m3_per_s`]
-    /// summed over the fluid cells (the others' values do not count), m^3/s into the fluid.
+    /// summed over the fluid cells (the others' values do not count) plus the last projection's
+    /// shift of the weighted ones (`StepStats::boundary_flux_shift_m3_per_s`), m^3/s into the
+    /// fluid.
     pub fn applied_boundary_flux_m3_per_s(&self) -> f64 {
+        self.boundary_flux_shift_m3_per_s + self.set_boundary_flux_m3_per_s()
+    }
+
+    /// [`FluidGrid::boundary_fluxes_m3_per_s`] summed over the fluid cells, as set (without the
+    /// last projection's shift), m^3/s into the fluid.
+    fn set_boundary_flux_m3_per_s(&self) -> f64 {
         let q = self.grid.boundary_fluxes_m3_per_s();
         if q.is_empty() || self.revision != self.grid.revision() {
             // Before the first step on these labels the cells are read from the labels.
@@ -368,6 +417,7 @@ impl FluidSolver {
         stats.closed_region_flux_m3_per_s = stats
             .closed_region_flux_m3_per_s
             .max(self.pressure.regions.removed_total * h * h);
+        stats.boundary_flux_shift_m3_per_s = self.boundary_flux_shift_m3_per_s;
         let to_q = dt / (rho * h);
         let periodic = self.grid.periodic().iter().any(|&p| p);
         self.pressure_to_dq(to_q);

@@ -317,3 +317,99 @@ fn zero_boundary_fluxes_are_the_projection_without_them() {
     assert!(e.contains("[1, 2, 3]"), "{e}");
     assert!(grid.set_boundary_flux_m3_per_s([99, 0, 0], 1.0).is_err());
 }
+
+/// Two closed regions whose boundary fluxes do not balance (a wall plane splits a box): the one
+/// with weighted cells (`FluidGrid::set_boundary_flux_weight_m2`) balances by itself, its
+/// mismatch taken from its weighted cells in proportion to their weights (each cell's net flux
+/// out of its faces is its flux less that share); the one without weights has its mismatch
+/// removed as a uniform mean, as before.
+#[test]
+fn a_closed_region_with_weights_takes_its_mismatch_from_its_weighted_cells() {
+    use crate::fluid::CutFractions;
+    let (dims, h) = ([12, 6, 5], 1e-3);
+    let mut grid = FluidGrid::new(dims, h, [0.0; 3], [false; 3]).unwrap();
+    for n in 0..grid.cell_count() {
+        let c = grid.coords(n);
+        if is_boundary(c, dims) || c[0] == 6 {
+            grid.set_label(c, CellLabel::Solid).unwrap();
+        }
+    }
+    grid.set_cut_fractions(CutFractions::whole(dims, [false; 3]))
+        .unwrap();
+    // Region A (x 1..=5): unbalanced fluxes in, weights on two columns (1 and 3 per cell);
+    // region B (x 7..=10): unbalanced, no weights.
+    let q_cell = 2e-9;
+    let (mut net_a, mut net_b, mut weights_a) = (0.0, 0.0, 0.0);
+    for n in 0..grid.cell_count() {
+        let c = grid.coords(n);
+        if grid.label_at(n) != CellLabel::Fluid {
+            continue;
+        }
+        // Arbitrary, unbalanced: more in at low y, out at high z.
+        let q = q_cell * (1.0 + c[1] as f64 - 0.7 * c[2] as f64);
+        grid.set_boundary_flux_m3_per_s(c, q).unwrap();
+        if c[0] < 6 {
+            net_a += q;
+            let w = match c[0] {
+                1 => 1e-6,
+                4 => 3e-6,
+                _ => 0.0,
+            };
+            grid.set_boundary_flux_weight_m2(c, w).unwrap();
+            weights_a += w;
+        } else {
+            net_b += q;
+        }
+    }
+    assert!(net_a.abs() > 10.0 * q_cell && net_b.abs() > 10.0 * q_cell);
+    let mut s = FluidSolver::new(
+        grid,
+        FluidParams {
+            velocity_scale_m_s: q_cell / (h * h),
+            ..params()
+        },
+    )
+    .unwrap();
+    let stats = s.project_now(1e-2);
+    assert!(stats.projection_converged, "{stats:?}");
+    assert_eq!(s.regions(), (2, 2));
+    println!(
+        "A {net_a:.3e}, B {net_b:.3e} m^3/s: shifted {:.3e}, removed {:.3e}",
+        stats.boundary_flux_shift_m3_per_s, stats.closed_region_flux_m3_per_s
+    );
+    let tol = 1e-9 * (net_a.abs() + net_b.abs());
+    assert!(
+        (stats.boundary_flux_shift_m3_per_s + net_a).abs() <= tol,
+        "{stats:?}"
+    );
+    assert!(
+        (stats.closed_region_flux_m3_per_s - net_b.abs()).abs() <= tol,
+        "{stats:?}"
+    );
+    let set: f64 = s.grid().boundary_fluxes_m3_per_s().iter().sum();
+    assert!((s.applied_boundary_flux_m3_per_s() - (set - net_a)).abs() <= tol);
+    // Each cell of A: out through its faces = its flux less its weight's share of A's net.
+    let g = s.grid();
+    let mut worst = 0.0f64;
+    for n in 0..g.cell_count() {
+        let c = g.coords(n);
+        if g.label_at(n) != CellLabel::Fluid || c[0] > 5 {
+            continue;
+        }
+        let out: f64 = (0..6)
+            .map(|f| {
+                let u = s.cell_face_velocity_m_s(c, f) as f64;
+                if f % 2 == 1 {
+                    u * h * h
+                } else {
+                    -u * h * h
+                }
+            })
+            .sum();
+        let w = g.boundary_flux_weights_m2()[n];
+        let want = g.boundary_fluxes_m3_per_s()[n] - net_a * w / weights_a;
+        worst = worst.max((out - want).abs() / q_cell);
+    }
+    println!("largest cell error in A: {worst:.2e} of a cell's flux");
+    assert!(worst < 1e-4, "{worst}");
+}
