@@ -23,8 +23,14 @@ pub struct CavityFractions {
     cut: CutCells,
     /// The stabilised fractions in the solver's layout.
     fractions: CutFractions,
-    /// The fractions changed since the solver's grid last had them.
+    /// Whether `fractions` were ever converted whole (afterwards only changed rows are).
+    converted: bool,
+    /// The fractions changed since the solver's grid last had them: all of them, or in the rows
+    /// `unsent_rows` (flagged in `row_unsent`) alone.
     unsent: bool,
+    unsent_all: bool,
+    unsent_rows: Vec<u32>,
+    row_unsent: Vec<bool>,
 }
 
 impl CavityFractions {
@@ -58,10 +64,15 @@ impl CavityFractions {
             // The scene's viscous step keeps the staircase wall (no wall distances per frame).
             walls: None,
         };
+        let rows = cells.dims[1] * cells.dims[2];
         Ok(Self {
             cut,
             fractions,
+            converted: false,
             unsent: true,
+            unsent_all: true,
+            unsent_rows: Vec::with_capacity(rows),
+            row_unsent: vec![false; rows],
         })
     }
 
@@ -83,8 +94,23 @@ impl CavityFractions {
             let cut = &self.cut;
             let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
             let (dims, volume) = (cut.cells().dims, cut.stabilised_volume_fractions());
-            self.fractions
-                .assign_from_box(dims, PERIODIC, volume, faces);
+            let rows = cut.changed_rows();
+            // Only the changed rows convert (the rest equals what it was): the surface moves in
+            // most frames and the box is many times the band of cut cells.
+            if self.converted {
+                self.fractions
+                    .assign_rows_from_box(dims, rows, volume, faces);
+            } else {
+                self.fractions
+                    .assign_from_box(dims, PERIODIC, volume, faces);
+                self.converted = true;
+                self.unsent_all = true;
+            }
+            for &r in rows {
+                if !std::mem::replace(&mut self.row_unsent[r as usize], true) {
+                    self.unsent_rows.push(r);
+                }
+            }
             self.unsent = true;
         }
         counters.extend_last_run_since(t);
@@ -98,8 +124,17 @@ impl CavityFractions {
     /// Hands the fractions to the solver's `grid` when they changed since it last had them.
     pub fn send(&mut self, grid: &mut FluidGrid) -> Result<(), SceneError> {
         if self.unsent {
-            grid.copy_cut_fractions(&self.fractions)?;
+            if self.unsent_all {
+                grid.copy_cut_fractions(&self.fractions)?;
+            } else {
+                grid.copy_cut_fraction_rows(&self.fractions, &self.unsent_rows)?;
+            }
             self.unsent = false;
+            self.unsent_all = false;
+            for &r in &self.unsent_rows {
+                self.row_unsent[r as usize] = false;
+            }
+            self.unsent_rows.clear();
         }
         Ok(())
     }
