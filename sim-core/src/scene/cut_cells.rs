@@ -121,7 +121,9 @@ impl CavityFractions {
         })
     }
 
-    /// Hands the fractions to the solver's `grid` when they changed since it last had them.
+    /// Hands the fractions to the solver's `grid` when they changed since it last had them: the
+    /// first time whole, then only the rows changed since (the grid's fractions are this stage's
+    /// alone, so the other rows are already there).
     pub fn send(&mut self, grid: &mut FluidGrid) -> Result<(), SceneError> {
         if self.unsent {
             if self.unsent_all {
