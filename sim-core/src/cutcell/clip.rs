@@ -26,15 +26,6 @@ impl Polygon {
         v: [[0.0; 3]; MAX_VERTICES],
     };
 
-    pub fn triangle(a: P3, b: P3, c: P3) -> Polygon {
-        let mut p = Polygon::EMPTY;
-        p.v[0] = a;
-        p.v[1] = b;
-        p.v[2] = c;
-        p.n = 3;
-        p
-    }
-
     #[inline]
     fn push(&mut self, p: P3) {
         if self.n < MAX_VERTICES {
@@ -151,32 +142,134 @@ pub(crate) fn split(src: &Polygon, axis: usize, m: f64, below: &mut Polygon, abo
     }
 }
 
-/// Keeps the part of `poly` with `lo < coordinate <= hi` along `axis` (in place).
-#[inline]
-pub(crate) fn clip_slab(poly: &mut Polygon, axis: usize, lo: f64, hi: f64) {
-    let (min, max) = poly.extent(axis);
-    if min > lo && max <= hi {
-        return;
+/// A polygon being clipped, in three buffers used in turn: a clip or a cut along x writes its
+/// parts into the free buffers and the part kept becomes the current one, so no polygon is zeroed
+/// or copied whole per piece (the cut cells clip every triangle of the moving surface for every
+/// row it crosses, each frame the scene's surface moves). The arithmetic is [`split`]'s.
+#[derive(Clone, Copy)]
+pub(crate) struct Clipper {
+    bufs: [Polygon; 3],
+    cur: usize,
+}
+
+impl std::fmt::Debug for Clipper {
+    // Scratch between calls: nothing worth printing.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Clipper")
     }
-    if max <= lo || min > hi {
-        poly.n = 0;
-        return;
-    }
-    let mut below = Polygon::EMPTY;
-    let mut above = Polygon::EMPTY;
-    if min <= lo {
-        split(poly, axis, lo, &mut below, &mut above);
-        *poly = above;
-        if poly.n < 3 {
-            poly.n = 0;
-            return;
+}
+
+impl Default for Clipper {
+    fn default() -> Self {
+        Self {
+            bufs: [Polygon::EMPTY; 3],
+            cur: 0,
         }
     }
-    if max > hi {
-        split(poly, axis, hi, &mut below, &mut above);
-        *poly = below;
-        if poly.n < 3 {
-            poly.n = 0;
+}
+
+/// The buffer `s` and the two others, in turn.
+#[inline]
+fn parts(bufs: &mut [Polygon; 3], s: usize) -> (&mut Polygon, &mut Polygon, &mut Polygon) {
+    let [p0, p1, p2] = bufs;
+    match s {
+        0 => (p0, p1, p2),
+        1 => (p1, p2, p0),
+        _ => (p2, p0, p1),
+    }
+}
+
+impl Clipper {
+    /// Starts on the triangle `a b c`.
+    #[inline]
+    pub fn start(&mut self, a: P3, b: P3, c: P3) {
+        let p = &mut self.bufs[self.cur];
+        p.v[0] = a;
+        p.v[1] = b;
+        p.v[2] = c;
+        p.n = 3;
+    }
+
+    /// The polygon as clipped so far.
+    #[inline]
+    pub fn poly(&self) -> &Polygon {
+        &self.bufs[self.cur]
+    }
+
+    /// Keeps the part with `lo < coordinate <= hi` along `axis`.
+    #[inline]
+    pub fn clip_slab(&mut self, axis: usize, lo: f64, hi: f64) {
+        let (min, max) = self.poly().extent(axis);
+        if min > lo && max <= hi {
+            return;
+        }
+        if max <= lo || min > hi {
+            self.bufs[self.cur].n = 0;
+            return;
+        }
+        if min <= lo {
+            let (poly, below, above) = parts(&mut self.bufs, self.cur);
+            split(poly, axis, lo, below, above);
+            self.cur = (self.cur + 2) % 3;
+            if self.bufs[self.cur].n < 3 {
+                self.bufs[self.cur].n = 0;
+                return;
+            }
+        }
+        if max > hi {
+            let (poly, below, above) = parts(&mut self.bufs, self.cur);
+            split(poly, axis, hi, below, above);
+            self.cur = (self.cur + 1) % 3;
+            if self.bufs[self.cur].n < 3 {
+                self.bufs[self.cur].n = 0;
+            }
+        }
+    }
+
+    /// Cuts the polygon along x into cells `(c, c+1]` and calls `f(c, piece)` for every cell
+    /// `c < nx` it reaches, with `c = -1` for its part left of the box (`x <= 0`); with `forced =
+    /// Some(c)` the whole polygon goes to cell `c` (a triangle in an x-plane under the tie rule's
+    /// exception). The polygon is used up.
+    #[inline]
+    pub fn split_along_x(
+        &mut self,
+        nx: usize,
+        forced: Option<f64>,
+        mut f: impl FnMut(i64, &Polygon),
+    ) {
+        let nxf = nx as f64;
+        if let Some(c) = forced {
+            if c < nxf {
+                f((c as i64).max(-1), self.poly());
+            }
+            return;
+        }
+        let (xmin, xmax) = self.poly().extent(0);
+        let mut c = cell_of(xmin);
+        let last = cell_of(xmax);
+        if c >= nxf {
+            return;
+        }
+        if c < 0.0 {
+            if last < 0.0 {
+                f(-1, self.poly());
+                return;
+            }
+            let (poly, below, above) = parts(&mut self.bufs, self.cur);
+            split(poly, 0, 0.0, below, above);
+            f(-1, below);
+            self.cur = (self.cur + 2) % 3;
+            c = 0.0;
+        }
+        while c < last && c < nxf {
+            let (poly, below, above) = parts(&mut self.bufs, self.cur);
+            split(poly, 0, c + 1.0, below, above);
+            f(c as i64, below);
+            self.cur = (self.cur + 2) % 3;
+            c += 1.0;
+        }
+        if c < nxf {
+            f(c as i64, self.poly());
         }
     }
 }
@@ -262,50 +355,4 @@ pub(crate) fn flat_below_region(v: &[P3; 3], axis: usize, sign: f64) -> Option<f
     let (b, c) = ((axis + 1) % 3, (axis + 2) % 3);
     let n = (v[1][b] - v[0][b]) * (v[2][c] - v[0][c]) - (v[1][c] - v[0][c]) * (v[2][b] - v[0][b]);
     (sign * n < 0.0).then_some(m)
-}
-
-/// Cuts `poly` along x into cells `(c, c+1]` and calls `f(c, piece)` for every cell `c < nx` it
-/// reaches, with `c = -1` for its part left of the box (`x <= 0`); with `forced = Some(c)` the
-/// whole polygon goes to cell `c` (a triangle in an x-plane under the tie rule's exception).
-#[inline]
-pub(crate) fn split_along_x(
-    mut poly: Polygon,
-    nx: usize,
-    forced: Option<f64>,
-    mut f: impl FnMut(i64, &Polygon),
-) {
-    let nxf = nx as f64;
-    if let Some(c) = forced {
-        if c < nxf {
-            f((c as i64).max(-1), &poly);
-        }
-        return;
-    }
-    let (xmin, xmax) = poly.extent(0);
-    let mut c = cell_of(xmin);
-    let last = cell_of(xmax);
-    if c >= nxf {
-        return;
-    }
-    let mut below = Polygon::EMPTY;
-    let mut above = Polygon::EMPTY;
-    if c < 0.0 {
-        if last < 0.0 {
-            f(-1, &poly);
-            return;
-        }
-        split(&poly, 0, 0.0, &mut below, &mut above);
-        f(-1, &below);
-        poly = above;
-        c = 0.0;
-    }
-    while c < last && c < nxf {
-        split(&poly, 0, c + 1.0, &mut below, &mut above);
-        f(c as i64, &below);
-        poly = above;
-        c += 1.0;
-    }
-    if c < nxf {
-        f(c as i64, &poly);
-    }
 }

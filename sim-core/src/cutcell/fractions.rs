@@ -19,7 +19,7 @@
 //! cross-section's `integral of n_x dl` left of it. Everything is exact for the polygonal surface
 //! up to rounding; the tie rule of [`super::clip`] decides what lies exactly on a grid plane.
 
-use super::clip::{self, cell_of, Polygon, Segment, P3};
+use super::clip::{self, cell_of, Clipper, Segment, P3};
 use super::{CutCellError, Orientation};
 use crate::scene::voxelize::VoxelBox;
 
@@ -95,6 +95,7 @@ pub struct SurfaceFractions {
     candidates: Vec<u32>,
     acc_moment: Vec<f64>,
     acc_area: Vec<[f64; 3]>,
+    clipper: Clipper,
 }
 
 #[inline]
@@ -178,6 +179,7 @@ impl SurfaceFractions {
             candidates: Vec::with_capacity(t),
             acc_moment: vec![0.0; nx],
             acc_area: vec![[0.0; 3]; nx],
+            clipper: Clipper::default(),
             triangles,
         })
     }
@@ -539,26 +541,27 @@ impl SurfaceFractions {
         for n in 0..self.candidates.len() {
             let t = self.candidates[n] as usize;
             let v = self.triangles[t].map(|i| self.pos[i as usize]);
-            let mut poly = Polygon::triangle(v[0], v[1], v[2]);
+            let clipper = &mut self.clipper;
+            clipper.start(v[0], v[1], v[2]);
             // A triangle in a y- or z-plane with the region above belongs to the row above.
             match clip::flat_below_region(&v, 1, sign) {
                 Some(m) if m != y0 => continue,
                 Some(_) => {}
-                None => clip::clip_slab(&mut poly, 1, y0, y0 + 1.0),
+                None => clipper.clip_slab(1, y0, y0 + 1.0),
             }
-            if poly.n == 0 {
+            if clipper.poly().n == 0 {
                 continue;
             }
             match clip::flat_below_region(&v, 2, sign) {
                 Some(m) if m != z0 => continue,
                 Some(_) => {}
-                None => clip::clip_slab(&mut poly, 2, z0, z0 + 1.0),
+                None => clipper.clip_slab(2, z0, z0 + 1.0),
             }
-            if poly.n == 0 {
+            if clipper.poly().n == 0 {
                 continue;
             }
             let forced = clip::flat_below_region(&v, 0, sign);
-            clip::split_along_x(poly, nx, forced, |c, piece| {
+            clipper.split_along_x(nx, forced, |c, piece| {
                 if piece.n < 3 {
                     return;
                 }
@@ -644,12 +647,13 @@ impl SurfaceFractions {
             let ids = self.triangles[t];
             let v = ids.map(|i| self.pos[i as usize]);
             if clip::flat_below_region(&v, axis, self.sign) == Some(m) {
-                let mut poly = Polygon::triangle(v[0], v[1], v[2]);
-                clip::clip_slab(&mut poly, across_axis, lo, lo + 1.0);
-                if poly.n < 3 {
+                let clipper = &mut self.clipper;
+                clipper.start(v[0], v[1], v[2]);
+                clipper.clip_slab(across_axis, lo, lo + 1.0);
+                if clipper.poly().n < 3 {
                     continue;
                 }
-                clip::split_along_x(poly, nx, None, |c, piece| {
+                clipper.split_along_x(nx, None, |c, piece| {
                     if c >= 0 && piece.n >= 3 {
                         self.acc_area[c as usize][1] += piece.area_and_x_moment(0.0).0[axis];
                     }

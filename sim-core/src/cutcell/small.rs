@@ -73,6 +73,7 @@ pub(crate) fn stabilised(
     round_off: f64,
     (i, j, k): (usize, usize, usize),
 ) -> f64 {
+    let [nx, ny, nz] = cells.dims;
     let n = cells.index(i, j, k);
     let own = volume[n];
     let mut v = if targets[n] == NO_TARGET && own > round_off {
@@ -80,10 +81,32 @@ pub(crate) fn stabilised(
     } else {
         0.0
     };
-    for (_, m, _) in neighbours(cells, i, j, k).into_iter().flatten() {
-        if targets[m] == n as u32 {
+    // The neighbours of [`neighbours`], in its order, by cell alone: this runs for every cell of
+    // every row near a change (each frame the scene's surface moves), the faces are not needed.
+    let me = n as u32;
+    let (sy, sz) = (nx, nx * ny);
+    let mut add = |m: usize| {
+        if targets[m] == me {
             v += volume[m];
         }
+    };
+    if i > 0 {
+        add(n - 1);
+    }
+    if i + 1 < nx {
+        add(n + 1);
+    }
+    if j > 0 {
+        add(n - sy);
+    }
+    if j + 1 < ny {
+        add(n + sy);
+    }
+    if k > 0 {
+        add(n - sz);
+    }
+    if k + 1 < nz {
+        add(n + sz);
     }
     v
 }

@@ -162,6 +162,115 @@ impl CutFractions {
 }
 
 impl CutFractions {
+    /// Checks the sizes against a non-periodic grid of `dims` cells and the values of the parts
+    /// of cell rows `rows` ([`row_parts`]): [`CutFractions::validate`] for fractions known to
+    /// differ from checked ones only there. The error names the array, the index and the value.
+    pub fn validate_rows(&self, dims: [usize; 3], rows: &[u32]) -> Result<(), FluidError> {
+        let bad = |what: String| Err(FluidError::InvalidGrid(format!("cut fractions: {what}")));
+        let cells: usize = dims.iter().product();
+        if self.volume.len() != cells {
+            return bad(format!(
+                "{} volume fractions for {cells} cells ({dims:?})",
+                self.volume.len()
+            ));
+        }
+        for c in 0..3 {
+            let n = face_count(dims, [false; 3], c);
+            if self.face[c].len() != n {
+                let len = self.face[c].len();
+                return bad(format!(
+                    "{len} area fractions of component {c} for {n} faces"
+                ));
+            }
+        }
+        let rows_total = dims[1] * dims[2];
+        for &row in rows {
+            if row as usize >= rows_total {
+                return bad(format!("row {row} beyond the {rows_total} cell rows"));
+            }
+            for (array, range) in row_parts(dims, row as usize) {
+                let (values, max) = match array {
+                    0 => (&self.volume, MAX_VOLUME_FRACTION),
+                    a => (&self.face[a - 1], 1.0),
+                };
+                let start = range.start;
+                if let Some((i, v)) = values[range]
+                    .iter()
+                    .enumerate()
+                    .find(|(_, v)| !(v.is_finite() && (0.0..=max).contains(*v)))
+                {
+                    let i = start + i;
+                    return bad(match array {
+                        0 => format!("volume fraction of cell {i} is {v}: expected 0..={max}"),
+                        a => format!(
+                            "area fraction of face {i} of component {} is {v}: expected 0..=1",
+                            a - 1
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// [`CutFractions::assign_from_box`] on a non-periodic grid for the parts of cell rows `rows`
+    /// alone ([`row_parts`]; the rest stands): for box fractions that changed only there.
+    pub fn assign_rows_from_box(
+        &mut self,
+        dims: [usize; 3],
+        rows: &[u32],
+        volume: &[f64],
+        faces: [&[f64]; 3],
+    ) {
+        for &row in rows {
+            for (array, range) in row_parts(dims, row as usize) {
+                let (dst, src) = match array {
+                    0 => (&mut self.volume, volume),
+                    a => (&mut self.face[a - 1], faces[a - 1]),
+                };
+                for (d, &s) in dst[range.clone()].iter_mut().zip(&src[range]) {
+                    *d = s as f32;
+                }
+            }
+        }
+    }
+
+    /// Copies the parts of cell rows `rows` ([`row_parts`]) from `from`, of the same sizes.
+    pub(crate) fn copy_rows(&mut self, dims: [usize; 3], rows: &[u32], from: &CutFractions) {
+        for &row in rows {
+            for (array, range) in row_parts(dims, row as usize) {
+                let (dst, src) = match array {
+                    0 => (&mut self.volume, &from.volume),
+                    a => (&mut self.face[a - 1], &from.face[a - 1]),
+                };
+                dst[range.clone()].copy_from_slice(&src[range]);
+            }
+        }
+    }
+}
+
+/// What belongs to cell row `row` (`j + ny k`) of a non-periodic grid of `dims` cells (where the
+/// solver's layout is the cutcell module's box layout): its cells' volumes, its `nx + 1` x
+/// faces, and the y faces of the planes `j` and `j + 1` and the z faces of the planes `k` and
+/// `k + 1` along it, as (0 for the volumes or 1 + the face axis, index range). The rows a change
+/// lists ([`crate::cutcell::CutCells::changed_rows`]: a changed y or z face lists the rows on
+/// both sides) so cover every changed value.
+pub(crate) fn row_parts(dims: [usize; 3], row: usize) -> [(usize, std::ops::Range<usize>); 6] {
+    let [nx, ny, _] = dims;
+    let (j, k) = (row % ny, row / ny);
+    let y = |j: usize| nx * (j + (ny + 1) * k);
+    let z = |k: usize| nx * (j + ny * k);
+    [
+        (0, nx * row..nx * (row + 1)),
+        (1, (nx + 1) * row..(nx + 1) * (row + 1)),
+        (2, y(j)..y(j) + nx),
+        (2, y(j + 1)..y(j + 1) + nx),
+        (3, z(k)..z(k) + nx),
+        (3, z(k + 1)..z(k + 1) + nx),
+    ]
+}
+
+impl CutFractions {
     /// Wall distances of the cutcell module's box layout ([`crate::cutcell::CutCells::face_walls`])
     /// in the solver's, for a grid of `dims` cells with the periodic axes `periodic` (on a
     /// periodic axis the box's last face, the same face as its first, is dropped).
@@ -259,5 +368,69 @@ mod tests {
         let s = CutFractions::face_from_box([3, 3, 2], [false, true, false], 1, &boxed);
         assert_eq!(s.len(), 3 * 3 * 2);
         assert_eq!(s[3 * 3], boxed[3 * 4] as f32);
+    }
+
+    /// The parts of the changed rows, converted or copied, give the fractions of a whole
+    /// conversion, the parts cover every value of the box once per row (faces between two rows
+    /// in both), and a bad value in a listed row is named.
+    #[test]
+    fn row_parts_convert_copy_and_check_what_changed() {
+        let dims = [5, 4, 3];
+        let rows_total = dims[1] * dims[2];
+        let mut rng = fastrand::Rng::with_seed(9);
+        let box_faces: [Vec<f64>; 3] = std::array::from_fn(|a| {
+            let mut d = dims;
+            d[a] += 1;
+            (0..d.iter().product::<usize>())
+                .map(|_| rng.f64())
+                .collect()
+        });
+        let volume: Vec<f64> = (0..60).map(|_| rng.f64()).collect();
+        let faces = std::array::from_fn(|a| &box_faces[a][..]);
+        let old = CutFractions::from_box(dims, [false; 3], &volume, faces);
+        // Every value reached by some row.
+        let mut seen: [Vec<u32>; 4] = std::array::from_fn(|a| match a {
+            0 => vec![0; old.volume.len()],
+            a => vec![0; old.face[a - 1].len()],
+        });
+        for row in 0..rows_total {
+            for (array, range) in row_parts(dims, row) {
+                seen[array][range].iter_mut().for_each(|n| *n += 1);
+            }
+        }
+        assert!(seen.iter().all(|s| s.iter().all(|&n| n >= 1)), "{seen:?}");
+        // Change the values of two rows' parts; convert and copy only those rows.
+        let rows = [2u32, 7];
+        let (mut volume2, mut box2) = (volume.clone(), box_faces.clone());
+        for &row in &rows {
+            for (array, range) in row_parts(dims, row as usize) {
+                let values = match array {
+                    0 => &mut volume2,
+                    a => &mut box2[a - 1],
+                };
+                values[range].iter_mut().for_each(|v| *v *= 0.5);
+            }
+        }
+        let faces2 = std::array::from_fn(|a| &box2[a][..]);
+        let want = CutFractions::from_box(dims, [false; 3], &volume2, faces2);
+        let mut converted = old.clone();
+        converted.assign_rows_from_box(dims, &rows, &volume2, faces2);
+        assert_eq!(converted, want);
+        let mut copied = old.clone();
+        copied.copy_rows(dims, &rows, &want);
+        assert_eq!(copied, want);
+        want.validate_rows(dims, &rows).unwrap();
+        // A bad value in a listed row is named; one in an unlisted row is not looked at.
+        let mut bad = want.clone();
+        let z = row_parts(dims, 7)[5].1.start + 1;
+        bad.face[2][z] = 1.5;
+        let e = bad.validate_rows(dims, &rows).unwrap_err().to_string();
+        assert!(
+            e.contains(&format!("face {z} of component 2 is 1.5")),
+            "{e}"
+        );
+        bad.validate_rows(dims, &[0]).unwrap();
+        let e = bad.validate_rows(dims, &[12]).unwrap_err().to_string();
+        assert!(e.contains("row 12 beyond the 12 cell rows"), "{e}");
     }
 }

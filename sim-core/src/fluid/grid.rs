@@ -156,6 +156,41 @@ impl FluidGrid {
         Ok(())
     }
 
+    /// [`FluidGrid::copy_cut_fractions`] for fractions that differ from those the grid holds only
+    /// in the cell rows `rows` (`j + ny k`): only those rows' parts are checked and copied
+    /// ([`CutFractions::validate_rows`]), the scene's moving surface each frame. A periodic grid,
+    /// wall distances, or a grid without fractions of these sizes yet take the whole copy.
+    pub fn copy_cut_fraction_rows(
+        &mut self,
+        fractions: &CutFractions,
+        rows: &[u32],
+    ) -> Result<(), FluidError> {
+        let sizes = |c: &CutFractions| {
+            (
+                c.volume.len(),
+                c.face.each_ref().map(Vec::len),
+                c.walls.is_some(),
+            )
+        };
+        let rows_apply = self.periodic == [false; 3]
+            && fractions.walls.is_none()
+            && self
+                .cut
+                .as_ref()
+                .is_some_and(|c| sizes(c) == sizes(fractions));
+        if !rows_apply {
+            return self.copy_cut_fractions(fractions);
+        }
+        fractions.validate_rows(self.dims, rows)?;
+        if fractions.is_whole() {
+            self.cut = None;
+        } else if let Some(cut) = &mut self.cut {
+            cut.copy_rows(self.dims, rows, fractions);
+        }
+        self.revision += 1;
+        Ok(())
+    }
+
     /// Sets cut-cell fractions without the all-ones shortcut (tests of the weighted path).
     #[cfg(test)]
     pub(crate) fn set_cut_fractions_weighted(&mut self, fractions: CutFractions) {

@@ -35,8 +35,16 @@ pub struct CavityFractions {
     parked_m: [f64; 3],
     /// The stabilised fractions in the solver's layout.
     fractions: CutFractions,
-    /// The fractions changed since the solver's grid last had them.
+    /// Whether `fractions` were ever converted whole (afterwards only changed rows are).
+    converted: bool,
+    /// The fractions changed since the solver's grid last had them: all of them, or in the rows
+    /// `unsent_rows` (flagged in `row_unsent`) alone.
     unsent: bool,
+    unsent_all: bool,
+    unsent_rows: Vec<u32>,
+    row_unsent: Vec<bool>,
+    /// The rows whose port faces [`Self::send`] set last time (restored before the next).
+    patched_rows: Vec<u32>,
     /// Per row, the sum of the exact fluid fractions of its cells; their total, m^3.
     row_volume: Vec<f64>,
     volume_m3: f64,
@@ -87,13 +95,19 @@ impl CavityFractions {
             cells.origin_m[1] + 0.5 * h * cells.dims[1] as f64,
             cells.origin_m[2] + h * (cells.dims[2] as f64 + 2.0),
         ];
+        let rows = cells.dims[1] * cells.dims[2];
         Ok(Self {
             cut,
             sheath,
             parked_m,
             fractions,
+            converted: false,
             unsent: true,
-            row_volume: vec![0.0; cells.dims[1] * cells.dims[2]],
+            unsent_all: true,
+            unsent_rows: Vec::with_capacity(rows),
+            row_unsent: vec![false; rows],
+            patched_rows: Vec::with_capacity(rows),
+            row_volume: vec![0.0; rows],
             volume_m3: 0.0,
         })
     }
@@ -121,8 +135,23 @@ impl CavityFractions {
             let cut = &self.cut;
             let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
             let (dims, volume) = (cut.cells().dims, cut.stabilised_volume_fractions());
-            self.fractions
-                .assign_from_box(dims, PERIODIC, volume, faces);
+            let rows = cut.changed_rows();
+            // Only the changed rows convert (the rest equals what it was): the surface moves in
+            // most frames and the box is many times the band of cut cells.
+            if self.converted {
+                self.fractions
+                    .assign_rows_from_box(dims, rows, volume, faces);
+            } else {
+                self.fractions
+                    .assign_from_box(dims, PERIODIC, volume, faces);
+                self.converted = true;
+                self.unsent_all = true;
+            }
+            for &r in rows {
+                if !std::mem::replace(&mut self.row_unsent[r as usize], true) {
+                    self.unsent_rows.push(r);
+                }
+            }
             self.unsent = true;
             let nx = dims[0];
             let exact = cut.volume_fractions();
@@ -141,9 +170,12 @@ impl CavityFractions {
         })
     }
 
-    /// Hands the fractions to the solver's `grid` when they changed since it last had them; the
-    /// faces of the ports' whole cells (`scope_cells` in the tip layer and the hole band) open as
-    /// the cavity alone makes them ([`CavityFractions::port_face_fraction`]).
+    /// Hands the fractions to the solver's `grid` when they changed since it last had them: the
+    /// first time whole, then only the rows changed since (the grid's fractions are this stage's
+    /// alone, so the other rows are already there). The faces of the ports' whole cells
+    /// (`scope_cells` in the tip layer and the hole band) open as the cavity alone makes them
+    /// ([`CavityFractions::port_face_fraction`]); the rows set so last time are restored first,
+    /// since the ports may have moved off them.
     pub fn send(
         &mut self,
         grid: &mut FluidGrid,
@@ -152,6 +184,19 @@ impl CavityFractions {
         if self.unsent {
             let cells = *self.cut.cells();
             let [nx, ny, _] = cells.dims;
+            if !self.patched_rows.is_empty() {
+                let cut = &self.cut;
+                let faces = std::array::from_fn(|a| cut.stabilised_face_fractions(a));
+                let volume = cut.stabilised_volume_fractions();
+                self.fractions
+                    .assign_rows_from_box(cells.dims, &self.patched_rows, volume, faces);
+                for &r in &self.patched_rows {
+                    if !std::mem::replace(&mut self.row_unsent[r as usize], true) {
+                        self.unsent_rows.push(r);
+                    }
+                }
+                self.patched_rows.clear();
+            }
             for &(n, part) in scope_cells {
                 if !matches!(part, ScopePart::Tip | ScopePart::Holes) {
                     continue;
@@ -168,9 +213,24 @@ impl CavityFractions {
                         self.fractions.face[a][idx] = self.port_face_fraction(a, idx);
                     }
                 }
+                // Every face of cell `n` is in its row's parts (`row_parts`).
+                let row = (n / nx) as u32;
+                self.patched_rows.push(row);
+                if !std::mem::replace(&mut self.row_unsent[row as usize], true) {
+                    self.unsent_rows.push(row);
+                }
             }
-            grid.copy_cut_fractions(&self.fractions)?;
+            if self.unsent_all {
+                grid.copy_cut_fractions(&self.fractions)?;
+            } else {
+                grid.copy_cut_fraction_rows(&self.fractions, &self.unsent_rows)?;
+            }
             self.unsent = false;
+            self.unsent_all = false;
+            for &r in &self.unsent_rows {
+                self.row_unsent[r as usize] = false;
+            }
+            self.unsent_rows.clear();
         }
         Ok(())
     }

@@ -495,7 +495,7 @@ fn clip_x_extent(v: &[[f64; 3]; 3], y0: f64, y1: f64, z0: f64, z1: f64) -> Optio
         let mut m = 0;
         for s in 0..n {
             let p = a[s];
-            let q = a[(s + 1) % n];
+            let q = a[if s + 1 == n { 0 } else { s + 1 }];
             let (kp, kq) = (keep(&p), keep(&q));
             if kp {
                 b[m] = p;
