@@ -24,6 +24,10 @@ pub struct FluidGrid {
     /// Per cell, the share of its closed region's mismatch its boundaries take up, m^2 (empty:
     /// none, nothing allocated until the first one is set).
     boundary_flux_weight_m2: Vec<f64>,
+    /// A flux shared over the cells with a share weight, m^3/s into the fluid, and the weights,
+    /// m^2 (empty: none, nothing allocated until the first one is set).
+    shared_flux_m3_per_s: f64,
+    shared_flux_weight_m2: Vec<f64>,
     revision: u64,
 }
 
@@ -65,6 +69,8 @@ impl FluidGrid {
             cut: None,
             boundary_flux_m3_per_s: Vec::new(),
             boundary_flux_weight_m2: Vec::new(),
+            shared_flux_m3_per_s: 0.0,
+            shared_flux_weight_m2: Vec::new(),
             revision: 1,
         })
     }
@@ -265,6 +271,65 @@ impl FluidGrid {
         }
         let idx = self.index(cell);
         self.boundary_flux_weight_m2[idx] = weight_m2;
+        Ok(())
+    }
+
+    /// A boundary flux (m^3/s into the fluid, e.g. an opening's losses) the projection shares
+    /// over the fluid cells with a share weight ([`FluidGrid::shared_flux_weights_m2`]) in
+    /// proportion to it, but only over the cells whose region can carry it: an open region, or a
+    /// closed one with some boundary-flux weight ([`FluidGrid::boundary_flux_weights_m2`]) to take
+    /// up its mismatch. A closed region without (an isolated pocket) gets no share, as its
+    /// share could only be removed again. When no carrying cell has a share weight, all weighted
+    /// fluid cells share it; with no weighted fluid cell it is not applied
+    /// (`StepStats::shared_flux_m3_per_s` is what the last projection applied).
+    pub fn shared_flux_m3_per_s(&self) -> f64 {
+        self.shared_flux_m3_per_s
+    }
+
+    /// Sets the shared flux (see [`FluidGrid::shared_flux_m3_per_s`]): finite.
+    pub fn set_shared_flux_m3_per_s(&mut self, flux_m3_per_s: f64) -> Result<(), FluidError> {
+        if !flux_m3_per_s.is_finite() {
+            return Err(FluidError::InvalidParameter {
+                key: "shared boundary flux".into(),
+                value: flux_m3_per_s.to_string(),
+                expected: "a finite flux in m^3/s".into(),
+            });
+        }
+        self.shared_flux_m3_per_s = flux_m3_per_s;
+        Ok(())
+    }
+
+    /// Per cell (x fastest), its share weight of [`FluidGrid::shared_flux_m3_per_s`], m^2 (e.g.
+    /// the area of the opening's pieces in it). Empty when none was ever set.
+    pub fn shared_flux_weights_m2(&self) -> &[f64] {
+        &self.shared_flux_weight_m2
+    }
+
+    /// Sets the share weight of one cell: finite and `>= 0`. The first call allocates the
+    /// per-cell array, later ones nothing. Does not change the topology.
+    pub fn set_shared_flux_weight_m2(
+        &mut self,
+        cell: [usize; 3],
+        weight_m2: f64,
+    ) -> Result<(), FluidError> {
+        if !self.in_range(cell) {
+            return Err(FluidError::OutOfRange {
+                cell,
+                dims: self.dims,
+            });
+        }
+        if !(weight_m2.is_finite() && weight_m2 >= 0.0) {
+            return Err(FluidError::InvalidParameter {
+                key: format!("shared flux weight of cell {cell:?}"),
+                value: weight_m2.to_string(),
+                expected: "a finite area >= 0 in m^2".into(),
+            });
+        }
+        if self.shared_flux_weight_m2.is_empty() {
+            self.shared_flux_weight_m2 = vec![0.0; self.labels.len()];
+        }
+        let idx = self.index(cell);
+        self.shared_flux_weight_m2[idx] = weight_m2;
         Ok(())
     }
 

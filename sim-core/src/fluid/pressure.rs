@@ -72,6 +72,9 @@ pub(crate) struct PressureSolver {
     /// Dense (padded) boundary-flux weights of the fluid cells (`FluidGrid::boundary_flux_weights_m2`;
     /// sized with `bd` when the first weight is read).
     pub wd: Vec<f64>,
+    /// Dense (padded) share weights of the fluid cells (`FluidGrid::shared_flux_weights_m2`;
+    /// sized with `bd` when the first weight is read).
+    pub sd: Vec<f64>,
     /// Compressed rows of the reference solvers.
     q: Vec<f64>,
     b: Vec<f64>,
@@ -151,8 +154,10 @@ impl PressureSolver {
                     let r = s as usize..e as usize;
                     self.dq[r.clone()].fill(0.0);
                     self.bd[r.clone()].fill(0.0);
-                    if !self.wd.is_empty() {
-                        self.wd[r.clone()].fill(0.0);
+                    for v in [&mut self.wd, &mut self.sd] {
+                        if !v.is_empty() {
+                            v[r.clone()].fill(0.0);
+                        }
                     }
                     self.dp[r].fill(0.0);
                 }
@@ -162,9 +167,11 @@ impl PressureSolver {
                     v.clear();
                     v.resize(len, 0.0);
                 }
-                if !self.wd.is_empty() {
-                    self.wd.clear();
-                    self.wd.resize(len, 0.0);
+                for v in [&mut self.wd, &mut self.sd] {
+                    if !v.is_empty() {
+                        v.clear();
+                        v.resize(len, 0.0);
+                    }
                 }
                 for v in [&mut self.dd, &mut self.dp, &mut self.dap] {
                     v.clear();

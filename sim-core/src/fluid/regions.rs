@@ -287,6 +287,31 @@ impl Regions {
         total
     }
 
+    /// Zeroes the share weights `s` (a dense, padded vector of the level the regions were built
+    /// on) of the closed regions whose boundary-flux weights `w` (same layout; `None`: none) sum
+    /// to zero: such a region cannot take up a share of a flux (nothing in it balances it).
+    /// Returns the sum of the weights zeroed.
+    pub fn zero_stranded_dense(&mut self, s: &mut [f64], w: Option<&[f64]>) -> f64 {
+        if !self.any_closed() {
+            return 0.0;
+        }
+        self.weight.fill(0.0);
+        if let Some(w) = w {
+            for &[id, a, e] in &self.closed_runs {
+                self.weight[id as usize] += w[a as usize..e as usize].iter().sum::<f64>();
+            }
+        }
+        let mut zeroed = 0.0;
+        for &[id, a, e] in &self.closed_runs {
+            if self.weight[id as usize] == 0.0 {
+                let run = &mut s[a as usize..e as usize];
+                zeroed += run.iter().sum::<f64>();
+                run.fill(0.0);
+            }
+        }
+        zeroed
+    }
+
     /// Largest `|v|` over the closed regions' cells of a dense (padded) vector, NaN skipped.
     pub fn closed_max_abs_dense(&self, v: &[f32]) -> f32 {
         self.closed_runs.iter().fold(0.0f32, |m, &[_, s, e]| {

@@ -8,7 +8,9 @@
 //!   the hydraulics' `dV/dt` (`FluxBalance::wall_flux_scale`); if that motion does not carry
 //!   `dV/dt`'s sign, they move along their normals instead, scaled the same way.
 //! - The os's pieces (cells a cap triangle touches) carry exactly the hydraulics' losses, with
-//!   their sign, shared in proportion to the pieces' areas.
+//!   their sign, as the solver's shared flux (`FluidGrid::set_shared_flux_m3_per_s`) shared in
+//!   proportion to the pieces' areas over the regions that can carry it: a pocket cut off from
+//!   the cavity with os pieces but no wall pieces gets no share (nothing in it could supply it).
 //!
 //! With the ports prescribing `Q_in` and `Q_out`, every fluid region is then closed and, while the
 //! fluid is one region, its right-hand side compatible by the hydraulics' own balance
@@ -22,7 +24,7 @@ use super::ports::CavityCells;
 use super::types::{FluxBalance, FrameFlows, VoxelKind};
 use super::voxelize::NO_TRIANGLE;
 use crate::cutcell::CutCells;
-use crate::fluid::{FluidError, FluidSolver};
+use crate::fluid::{FluidError, FluidSolver, StepStats};
 
 /// A piece of wall: the fluid cell that carries it, its raw flux (m^3/s into the fluid) and its
 /// area (`|W| h^2`, m^2), whether it is the os's.
@@ -42,9 +44,10 @@ pub struct CutWalls {
     carriers: Vec<u32>,
     /// The cells whose boundary-flux weight (their wall pieces' area) is set, to zero next time.
     weighted: Vec<u32>,
-    /// Out of the fluid through the wall pieces and through the os's pieces, m^3/s.
+    /// The cells whose share weight of the losses (their os pieces' area) is set, likewise.
+    os_cells: Vec<u32>,
+    /// Out of the fluid through the wall pieces, m^3/s.
     walls_out_m3_per_s: f64,
-    os_out_m3_per_s: f64,
 }
 
 impl CutWalls {
@@ -54,14 +57,14 @@ impl CutWalls {
             pieces: Vec::with_capacity(cells),
             carriers: Vec::with_capacity(cells),
             weighted: Vec::with_capacity(cells),
+            os_cells: Vec::with_capacity(cells),
             walls_out_m3_per_s: 0.0,
-            os_out_m3_per_s: 0.0,
         }
     }
 
     /// Whether the last [`CutWalls::set_fluxes`] set any flux or weight.
     pub fn moving(&self) -> bool {
-        !self.carriers.is_empty() || !self.weighted.is_empty()
+        !self.carriers.is_empty() || !self.weighted.is_empty() || !self.os_cells.is_empty()
     }
 
     /// Sets the frame's fluxes of the pieces of `cut` (the cavity's cut cells, whose cells'
@@ -137,7 +140,6 @@ impl CutWalls {
         };
         flux.wall_flux_scale = scale;
         let losses = flows.losses_m3_per_s;
-        let os_per_m2 = if os_area > 0.0 { losses / os_area } else { 0.0 };
         // Into the solver: last frame's carriers to zero, this frame's pieces added.
         let grid = solver.grid_mut();
         for &c in &self.carriers {
@@ -148,19 +150,29 @@ impl CutWalls {
             grid.set_boundary_flux_weight_m2(cells_at(c, nx, ny), 0.0)?;
         }
         self.weighted.clear();
-        let (mut walls_out, mut os_out) = (0.0, 0.0);
+        for &c in &self.os_cells {
+            grid.set_shared_flux_weight_m2(cells_at(c, nx, ny), 0.0)?;
+        }
+        self.os_cells.clear();
+        // The os's pieces share the losses by area, in the regions that can carry them (the
+        // solver's rule: not in a pocket without wall pieces, which nothing could supply).
+        grid.set_shared_flux_m3_per_s(if os_area > 0.0 { -losses } else { 0.0 })?;
+        let mut walls_out = 0.0;
         for p in &self.pieces {
             let at = cells_at(p.carrier, nx, ny);
-            if !p.os {
-                // The walls take up their region's mismatch by area (the os keeps the losses).
-                let w = grid.boundary_flux_weights_m2().get(p.carrier as usize);
+            if p.os {
+                let w = grid.shared_flux_weights_m2().get(p.carrier as usize);
                 let w = w.copied().unwrap_or(0.0);
-                grid.set_boundary_flux_weight_m2(at, w + p.area_m2)?;
-                self.weighted.push(p.carrier);
+                grid.set_shared_flux_weight_m2(at, w + p.area_m2)?;
+                self.os_cells.push(p.carrier);
+                continue;
             }
-            let q = if p.os {
-                -os_per_m2 * p.area_m2
-            } else if along_normals {
+            // The walls take up their region's mismatch by area (the os keeps the losses).
+            let w = grid.boundary_flux_weights_m2().get(p.carrier as usize);
+            let w = w.copied().unwrap_or(0.0);
+            grid.set_boundary_flux_weight_m2(at, w + p.area_m2)?;
+            self.weighted.push(p.carrier);
+            let q = if along_normals {
                 // Outward along the normals: the walls move away from the fluid.
                 -scale * p.area_m2
             } else {
@@ -169,26 +181,22 @@ impl CutWalls {
             if q == 0.0 {
                 continue;
             }
-            if p.os {
-                os_out -= q;
-            } else {
-                walls_out -= q;
-            }
+            walls_out -= q;
             grid.add_boundary_flux_m3_per_s(at, q)?;
             self.carriers.push(p.carrier);
         }
         self.walls_out_m3_per_s = walls_out;
-        self.os_out_m3_per_s = os_out;
         Ok(())
     }
 
     /// Adds what the pieces carried out of the fluid in the last step to the measured wall and
     /// os fluxes of `flux` (their flux through whole wall cells' faces is measured there):
-    /// `shift_m3_per_s`, the solver's shift of the wall pieces' fluxes into the fluid that
-    /// balanced each region (`StepStats::boundary_flux_shift_m3_per_s`), is the walls'.
-    pub fn add_to(&self, flux: &mut FluxBalance, shift_m3_per_s: f64) {
-        flux.fluid_wall_m3_per_s += self.walls_out_m3_per_s - shift_m3_per_s;
-        flux.fluid_open_m3_per_s += self.os_out_m3_per_s;
+    /// the solver's shift of the wall pieces' fluxes into the fluid that balanced each region
+    /// (`StepStats::boundary_flux_shift_m3_per_s`) is the walls', the shared flux it applied over
+    /// the os's pieces (`StepStats::shared_flux_m3_per_s`) the os's.
+    pub fn add_to(&self, flux: &mut FluxBalance, stats: &StepStats) {
+        flux.fluid_wall_m3_per_s += self.walls_out_m3_per_s - stats.boundary_flux_shift_m3_per_s;
+        flux.fluid_open_m3_per_s -= stats.shared_flux_m3_per_s;
     }
 }
 

@@ -309,7 +309,7 @@ impl Scene {
             self.ports
                 .measure_fluxes(fluid.solver(), &mut self.report.flux);
             if let Some(walls) = &self.cut_walls {
-                walls.add_to(&mut self.report.flux, stats.boundary_flux_shift_m3_per_s);
+                walls.add_to(&mut self.report.flux, &stats);
             }
             self.report.flux.closed_region_mismatch_m3_per_s = stats.closed_region_flux_m3_per_s;
         }

@@ -94,6 +94,9 @@ pub struct FluidSolver {
     /// The boundary fluxes the last projection shifted to balance closed regions, m^3/s into the
     /// fluid (`FluidGrid::boundary_flux_weights_m2`).
     boundary_flux_shift_m3_per_s: f64,
+    /// The shared flux the last projection applied, m^3/s into the fluid
+    /// (`FluidGrid::shared_flux_m3_per_s`).
+    shared_flux_m3_per_s: f64,
     /// Padded (level 0) index of the upper cell of the first face of each active run
     /// (`FaceSet::runs`), for the pressure-gradient update.
     run_cells: [Vec<u32>; 3],
@@ -146,6 +149,7 @@ impl FluidSolver {
             lagged_applied: false,
             pressure_from_step: false,
             boundary_flux_shift_m3_per_s: 0.0,
+            shared_flux_m3_per_s: 0.0,
             run_cells: Default::default(),
             cut_closed: Default::default(),
             open_rows: Vec::new(),

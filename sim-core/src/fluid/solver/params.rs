@@ -151,6 +151,10 @@ pub struct StepStats {
     /// region with some weight balances by itself (`FluidGrid::boundary_flux_weights_m2`), summed
     /// over the regions, m^3/s into the fluid (0 without weights).
     pub boundary_flux_shift_m3_per_s: f64,
+    /// The shared flux (`FluidGrid::shared_flux_m3_per_s`) the last projection applied over the
+    /// weighted cells of the regions that can carry it, m^3/s into the fluid (0 when it had no
+    /// weighted fluid cell).
+    pub shared_flux_m3_per_s: f64,
     /// Fluid cells.
     pub fluid_cells: usize,
 }

@@ -269,47 +269,94 @@ impl FluidSolver {
             .remove_closed_means_dense(&mut self.pressure.bd)
     }
 
-    /// Closed regions with weighted boundaries (`FluidGrid::boundary_flux_weights_m2`) balance
-    /// by shifting those boundaries' fluxes in the right-hand side `bd`; the rest of a mismatch
-    /// is removed as a uniform mean after this. Nothing changes without weights.
+    /// `dst` (a dense, padded vector like `bd`) sized and set to `src` (per cell) on the fluid
+    /// cells, 0 elsewhere in the spans; returns its sum.
+    fn fill_padded(
+        dst: &mut Vec<f64>,
+        len: usize,
+        src: &[f64],
+        l0: &Level,
+        grid: &FluidGrid,
+    ) -> f64 {
+        if dst.len() != len {
+            dst.clear();
+            dst.resize(len, 0.0);
+        }
+        let mut sum = 0.0;
+        for &[j, k, i0, i1] in &l0.row_spans {
+            let (j, k) = (j as usize, k as usize);
+            let (p0, c0) = (l0.pad(i0 as usize, j, k), grid.index([i0 as usize, j, k]));
+            let n = (i1 - i0) as usize;
+            for (x, (&wc, &mk)) in dst[p0..p0 + n]
+                .iter_mut()
+                .zip(src[c0..c0 + n].iter().zip(&l0.mask[p0..p0 + n]))
+            {
+                *x = if mk != 0.0 { wc } else { 0.0 };
+                sum += *x;
+            }
+        }
+        sum
+    }
+
+    /// The shared flux (`FluidGrid::shared_flux_m3_per_s`) into the right-hand side `bd`, over
+    /// the weighted fluid cells of the regions that can carry it; then closed regions with
+    /// weighted boundaries (`FluidGrid::boundary_flux_weights_m2`) balance by shifting those
+    /// boundaries' fluxes in `bd`; the rest of a mismatch is removed as a uniform mean after
+    /// this. Nothing changes without weights.
     fn shift_weighted_boundaries(&mut self) {
         self.boundary_flux_shift_m3_per_s = 0.0;
+        self.shared_flux_m3_per_s = 0.0;
         let ps = &mut self.pressure;
         let l0 = &ps.mg.levels[0];
+        let len = ps.bd.len();
         let w = self.grid.boundary_flux_weights_m2();
+        let h = self.grid.spacing_m();
+        if !w.is_empty() {
+            Self::fill_padded(&mut ps.wd, len, w, l0, &self.grid);
+        }
+        let (shared, s) = (
+            self.grid.shared_flux_m3_per_s(),
+            self.grid.shared_flux_weights_m2(),
+        );
+        if shared != 0.0 && !s.is_empty() {
+            let all = Self::fill_padded(&mut ps.sd, len, s, l0, &self.grid);
+            let wd = (!w.is_empty()).then_some(&ps.wd[..]);
+            let zeroed = ps.regions.zero_stranded_dense(&mut ps.sd, wd);
+            let mut carrying = all - zeroed;
+            // Only pockets hold weight (the difference is rounding): all of them share it.
+            if carrying <= 1e-9 * all {
+                carrying = Self::fill_padded(&mut ps.sd, len, s, l0, &self.grid);
+            }
+            if carrying > 0.0 {
+                let per_weight = shared / (carrying * h * h);
+                for &[j, k, i0, i1] in &l0.row_spans {
+                    let p0 = l0.pad(i0 as usize, j as usize, k as usize);
+                    let r = p0..p0 + (i1 - i0) as usize;
+                    for (b, &sc) in ps.bd[r.clone()].iter_mut().zip(&ps.sd[r]) {
+                        if sc != 0.0 {
+                            *b += per_weight * sc;
+                        }
+                    }
+                }
+                self.shared_flux_m3_per_s = shared;
+            }
+        }
         if w.is_empty() || !ps.regions.any_closed() {
             return;
         }
-        if ps.wd.len() != ps.bd.len() {
-            ps.wd.clear();
-            ps.wd.resize(ps.bd.len(), 0.0);
-        }
-        for &[j, k, i0, i1] in &l0.row_spans {
-            let (j, k) = (j as usize, k as usize);
-            let (p0, c0) = (
-                l0.pad(i0 as usize, j, k),
-                self.grid.index([i0 as usize, j, k]),
-            );
-            let n = (i1 - i0) as usize;
-            for (x, (&wc, &mk)) in ps.wd[p0..p0 + n]
-                .iter_mut()
-                .zip(w[c0..c0 + n].iter().zip(&l0.mask[p0..p0 + n]))
-            {
-                *x = if mk != 0.0 { wc } else { 0.0 };
-            }
-        }
         let taken = ps.regions.shift_closed_sums_dense(&mut ps.bd, &ps.wd);
         // `bd` is `q / h^2 - flux out`: taking `s` from it takes `s h^2` from the fluxes in.
-        let h = self.grid.spacing_m();
         self.boundary_flux_shift_m3_per_s = -taken * h * h;
     }
 
     /// The boundary fluxes a projection applies now: [`FluidGrid::boundary_fluxes_m3_per_s`]
     /// summed over the fluid cells (the others' values do not count) plus the last projection's
-    /// shift of the weighted ones (`StepStats::boundary_flux_shift_m3_per_s`), m^3/s into the
-    /// fluid.
+    /// shift of the weighted ones (`StepStats::boundary_flux_shift_m3_per_s`) and its shared flux
+    /// (`StepStats::shared_flux_m3_per_s`), m^3/s into the fluid.
     pub fn applied_boundary_flux_m3_per_s(&self) -> f64 {
-        self.boundary_flux_shift_m3_per_s + self.set_boundary_flux_m3_per_s()
+        self.boundary_flux_shift_m3_per_s
+            + self.shared_flux_m3_per_s
+            + self.set_boundary_flux_m3_per_s()
     }
 
     /// [`FluidGrid::boundary_fluxes_m3_per_s`] summed over the fluid cells, as set (without the
@@ -418,6 +465,7 @@ impl FluidSolver {
             .closed_region_flux_m3_per_s
             .max(self.pressure.regions.removed_total * h * h);
         stats.boundary_flux_shift_m3_per_s = self.boundary_flux_shift_m3_per_s;
+        stats.shared_flux_m3_per_s = self.shared_flux_m3_per_s;
         let to_q = dt / (rho * h);
         let periodic = self.grid.periodic().iter().any(|&p| p);
         self.pressure_to_dq(to_q);

@@ -413,3 +413,133 @@ fn a_closed_region_with_weights_takes_its_mismatch_from_its_weighted_cells() {
     println!("largest cell error in A: {worst:.2e} of a cell's flux");
     assert!(worst < 1e-4, "{worst}");
 }
+
+/// A shared flux (`FluidGrid::set_shared_flux_m3_per_s`, an os's losses) over two regions split by
+/// a wall plane: region A has weighted walls, region B none. B closed (a pocket) gets no share:
+/// all of it goes to A's share cells by weight, A's walls balance A, nothing is removed. B open
+/// (its mismatch leaves through the open cell) carries its share by weight. With share weights
+/// only in the pocket, the pocket takes it all (and its mismatch is removed).
+#[test]
+fn a_shared_flux_goes_only_to_the_regions_that_can_carry_it() {
+    use crate::fluid::CutFractions;
+    let (dims, h) = ([13, 6, 5], 1e-3);
+    let q_cell = 2e-9;
+    // Arbitrary: the shared flux out of the fluid, A's and B's share weights per cell.
+    let shared = -7.3 * q_cell;
+    let (share_a, share_b) = (2e-6, 5e-7);
+    for (b_open, a_shares) in [(false, true), (true, true), (false, false)] {
+        let at = format!("B open {b_open}, A shares {a_shares}");
+        let mut grid = FluidGrid::new(dims, h, [0.0; 3], [false; 3]).unwrap();
+        for n in 0..grid.cell_count() {
+            let c = grid.coords(n);
+            if is_boundary(c, dims) || c[0] == 6 {
+                grid.set_label(c, CellLabel::Solid).unwrap();
+            }
+        }
+        if b_open {
+            grid.set_label([9, 3, 0], CellLabel::Outflow).unwrap();
+        }
+        grid.set_cut_fractions(CutFractions::whole(dims, [false; 3]))
+            .unwrap();
+        grid.set_shared_flux_m3_per_s(shared).unwrap();
+        let (mut net_a, mut walls_a, mut s_a, mut s_b) = (0.0, 0.0, 0.0, 0.0);
+        for n in 0..grid.cell_count() {
+            let c = grid.coords(n);
+            if grid.label_at(n) != CellLabel::Fluid {
+                continue;
+            }
+            if c[0] < 6 {
+                // A: unbalanced boundary fluxes, walls on column 1, share cells on column 4.
+                let q = q_cell * (1.0 + c[1] as f64 - 0.7 * c[2] as f64);
+                grid.set_boundary_flux_m3_per_s(c, q).unwrap();
+                net_a += q;
+                if c[0] == 1 {
+                    grid.set_boundary_flux_weight_m2(c, 1e-6).unwrap();
+                    walls_a += 1e-6;
+                }
+                if c[0] == 4 && a_shares {
+                    grid.set_shared_flux_weight_m2(c, share_a).unwrap();
+                    s_a += share_a;
+                }
+            } else if c[0] == 10 {
+                grid.set_shared_flux_weight_m2(c, share_b).unwrap();
+                s_b += share_b;
+            }
+        }
+        // What A's share cells get per m^2 of weight.
+        let per_a = match (b_open, a_shares) {
+            (false, true) => shared / s_a,
+            (true, true) => shared / (s_a + s_b),
+            _ => 0.0,
+        };
+        let mut s = FluidSolver::new(
+            grid,
+            FluidParams {
+                velocity_scale_m_s: q_cell / (h * h),
+                ..params()
+            },
+        )
+        .unwrap();
+        let stats = s.project_now(1e-2);
+        assert!(stats.projection_converged, "{at}: {stats:?}");
+        assert_eq!(s.regions(), (2, if b_open { 1 } else { 2 }), "{at}");
+        let tol = 1e-9 * (net_a.abs() + shared.abs());
+        assert!(
+            (stats.shared_flux_m3_per_s - shared).abs() <= tol,
+            "{at}: {stats:?}"
+        );
+        let into_a = net_a + per_a * s_a;
+        assert!(
+            (stats.boundary_flux_shift_m3_per_s + into_a).abs() <= tol,
+            "{at}: {stats:?}"
+        );
+        // Removed: only the pocket's share when it takes it all.
+        let removed = if a_shares { 0.0 } else { shared.abs() };
+        assert!(
+            (stats.closed_region_flux_m3_per_s - removed).abs() <= tol,
+            "{at}: {stats:?}"
+        );
+        let set: f64 = s.grid().boundary_fluxes_m3_per_s().iter().sum();
+        let applied = s.applied_boundary_flux_m3_per_s();
+        assert!((applied - (set + shared - into_a)).abs() <= tol, "{at}");
+        // Each cell of A, and of the closed pocket when it gets nothing: out through its faces =
+        // its flux and share less its wall weight's part of A's net.
+        let g = s.grid();
+        let mut worst = 0.0f64;
+        for n in 0..g.cell_count() {
+            let c = g.coords(n);
+            let pocket = c[0] > 6 && !b_open && a_shares;
+            if g.label_at(n) != CellLabel::Fluid || !(c[0] < 6 || pocket) {
+                continue;
+            }
+            let out: f64 = (0..6)
+                .map(|f| {
+                    let u = s.cell_face_velocity_m_s(c, f) as f64;
+                    if f % 2 == 1 {
+                        u * h * h
+                    } else {
+                        -u * h * h
+                    }
+                })
+                .sum();
+            let want = if c[0] < 6 {
+                let (q, w) = (
+                    g.boundary_fluxes_m3_per_s()[n],
+                    g.boundary_flux_weights_m2()[n],
+                );
+                q + per_a * g.shared_flux_weights_m2()[n] - into_a * w / walls_a
+            } else {
+                0.0
+            };
+            worst = worst.max((out - want).abs() / q_cell);
+        }
+        println!("{at}: largest cell error {worst:.2e} of a cell's flux");
+        assert!(worst < 1e-4, "{at}: {worst}");
+    }
+    // Bad input is refused, naming the cell.
+    let mut grid = FluidGrid::new(dims, h, [0.0; 3], [false; 3]).unwrap();
+    assert!(grid.set_shared_flux_m3_per_s(f64::INFINITY).is_err());
+    let e = grid.set_shared_flux_weight_m2([1, 2, 3], -1.0).unwrap_err();
+    assert!(e.to_string().contains("[1, 2, 3]"), "{e}");
+    assert!(grid.set_shared_flux_weight_m2([99, 0, 0], 1.0).is_err());
+}
