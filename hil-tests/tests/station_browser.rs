@@ -1,0 +1,311 @@
+//! `hydrometra station` in a real browser (Debian's headless Chromium over the DevTools protocol)
+//! against `hydrometrad --emulated default` with the default scene: the page's numbers equal the
+//! status a subscriber reads at the same moment, both 3D canvases show something and change as the
+//! cavity pressure changes, "New procedure" starts a new procedure, and the recordings and their
+//! debriefs are listed. Screenshots are kept under `target/station-artifacts/`.
+
+use std::collections::BTreeMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use hydrometra_hil_tests::station::{artifacts, open_page, Station};
+use hydrometra_hil_tests::{temp_dir, unique_prefix, Daemon, StatusReader};
+use hydrometra_ipc::status::scene_state;
+use hydrometra_station::browser::Chromium;
+use serde_json::Value;
+
+const PA_PER_MMHG: f64 = hydrometra_units::PA_PER_MMHG;
+
+/// A subscriber thread keeping every status by sequence (pressure, deficit, procedure id).
+struct Recorder {
+    seen: Arc<Mutex<BTreeMap<u64, (f64, f64, u64)>>>,
+    stop: Arc<AtomicBool>,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Recorder {
+    fn start(prefix: &str) -> Recorder {
+        let seen = Arc::new(Mutex::new(BTreeMap::new()));
+        let stop = Arc::new(AtomicBool::new(false));
+        let (s, st, prefix) = (seen.clone(), stop.clone(), prefix.to_string());
+        let thread = std::thread::spawn(move || {
+            let reader = StatusReader::connect(&prefix, Duration::from_secs(30));
+            while !st.load(Ordering::Relaxed) {
+                let batch = reader.drain();
+                let mut m = s.lock().unwrap();
+                for x in batch {
+                    m.insert(
+                        x.sequence,
+                        (x.cavity_pressure_pa, x.deficit_m3, x.procedure_id),
+                    );
+                }
+                while m.len() > 120_000 {
+                    m.pop_first();
+                }
+                drop(m);
+                std::thread::sleep(Duration::from_millis(2));
+            }
+        });
+        Recorder {
+            seen,
+            stop,
+            thread: Some(thread),
+        }
+    }
+
+    fn get(&self, seq: u64) -> Option<(f64, f64, u64)> {
+        self.seen.lock().unwrap().get(&seq).copied()
+    }
+
+    fn newest(&self) -> Option<(u64, (f64, f64, u64))> {
+        self.seen
+            .lock()
+            .unwrap()
+            .last_key_value()
+            .map(|(k, v)| (*k, *v))
+    }
+}
+
+impl Drop for Recorder {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
+    }
+}
+
+/// Pixel statistics of a canvas: luminance variance and a 48 × 36 luminance grid.
+const CANVAS_STATS: &str = r#"(id) => {
+  const c = document.getElementById(id);
+  const t = document.createElement('canvas'); t.width = 48; t.height = 36;
+  const g = t.getContext('2d'); g.drawImage(c, 0, 0, 48, 36);
+  const big = document.createElement('canvas'); big.width = 240; big.height = 180;
+  const gb = big.getContext('2d'); gb.drawImage(c, 0, 0, 240, 180);
+  const d = gb.getImageData(0, 0, 240, 180).data;
+  let s = 0, s2 = 0, n = 0;
+  for (let i = 0; i < d.length; i += 4) { const l = 0.299*d[i] + 0.587*d[i+1] + 0.114*d[i+2]; s += l; s2 += l*l; n++; }
+  const small = g.getImageData(0, 0, 48, 36).data; const grid = [];
+  for (let i = 0; i < small.length; i += 4) grid.push(0.299*small[i] + 0.587*small[i+1] + 0.114*small[i+2]);
+  return { variance: s2/n - (s/n)*(s/n), grid };
+}"#;
+
+fn canvas_stats(c: &mut Chromium, rt: &tokio::runtime::Runtime, id: &str) -> (f64, Vec<f64>) {
+    let v = rt
+        .block_on(c.eval(&format!("({CANVAS_STATS})('{id}')")))
+        .expect("canvas stats");
+    let grid = v["grid"]
+        .as_array()
+        .expect("grid")
+        .iter()
+        .map(|x| x.as_f64().unwrap_or(0.0))
+        .collect();
+    (v["variance"].as_f64().expect("variance"), grid)
+}
+
+fn mean_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>() / a.len().max(1) as f64
+}
+
+/// What the page shows for the selected rig: status sequence, pressure (mmHg text), deficit (ml
+/// text), procedure id.
+fn page_numbers(c: &mut Chromium, rt: &tokio::runtime::Runtime) -> (u64, f64, f64, String) {
+    let v: Value = rt
+        .block_on(c.eval(
+            "(() => { const p = document.getElementById('v-pressure'), d = document.getElementById('v-deficit');
+               return { seq: p.dataset.seq, dseq: d.dataset.seq, p: p.textContent, d: d.textContent,
+                        proc: document.getElementById('procedure').dataset.procedureId }; })()",
+        ))
+        .expect("page numbers");
+    let seq: u64 = v["seq"].as_str().unwrap_or("0").parse().unwrap();
+    assert_eq!(
+        v["seq"], v["dseq"],
+        "pressure and deficit of different statuses"
+    );
+    let num = |k: &str| -> f64 {
+        v[k].as_str()
+            .and_then(|t| t.parse().ok())
+            .unwrap_or_else(|| panic!("page shows {k} = {:?}", v[k]))
+    };
+    (
+        seq,
+        num("p"),
+        num("d"),
+        v["proc"].as_str().unwrap_or("").to_string(),
+    )
+}
+
+#[test]
+fn the_page_shows_the_rig_live_in_a_real_browser_and_starts_a_new_procedure() {
+    let prefix = unique_prefix("station");
+    let records = temp_dir("station-recordings");
+    let records_arg = records.display().to_string();
+    let daemon = Daemon::start(
+        &prefix,
+        &[
+            "--emulated",
+            "default",
+            "--scene",
+            "default",
+            "--record-dir",
+            &records_arg,
+        ],
+    );
+    let reader = StatusReader::connect(&prefix, Duration::from_secs(30));
+    reader.until("the scene running", Duration::from_secs(600), |s| {
+        matches!(s.scene_state, scene_state::RUNNING | scene_state::IDLE)
+    });
+    drop(reader);
+    let recorder = Recorder::start(&prefix);
+    let station = Station::start(&["--service-prefix", &prefix]);
+    let (rt, mut c) = open_page(&station.url, 1600, 1150);
+    rt.block_on(c.wait_for(
+        "(() => { const S = window.hydrometraStation; const r = S && S.rigs[0];
+                  return S && S.webgl && S.statusFrames > 10 && r && r.topology && r.positions
+                         && S.renders3d > 2 && S.rendersEndoscope > 2; })()",
+        Duration::from_secs(90),
+    ))
+    .unwrap_or_else(|e| {
+        let errors =
+            rt.block_on(c.eval("window.hydrometraStation && window.hydrometraStation.errors"));
+        panic!(
+            "page never showed the rig: {e}; page errors {errors:?}; daemon log:\n{}",
+            daemon.log()
+        )
+    });
+    assert_eq!(
+        rt.block_on(c.eval("window.hydrometraStation.control"))
+            .unwrap(),
+        Value::Bool(true),
+        "the token in the URL unlocks control"
+    );
+
+    // 1. The numbers equal status of the same sequence, and that status is current.
+    for _ in 0..5 {
+        let (seq, p_mmhg, d_ml, _) = page_numbers(&mut c, &rt);
+        let (newest_seq, _) = recorder.newest().expect("statuses");
+        let (p_pa, d_m3, _) = recorder
+            .get(seq)
+            .unwrap_or_else(|| panic!("the page shows status {seq}, the subscriber never saw it"));
+        // The page rounds to 0.1 mmHg and 0.1 ml.
+        assert!(
+            (p_mmhg - p_pa / PA_PER_MMHG).abs() <= 0.05 + 1e-9,
+            "pressure: page {p_mmhg} mmHg, status #{seq} {} mmHg",
+            p_pa / PA_PER_MMHG
+        );
+        assert!(
+            (d_ml - d_m3 * 1e6).abs() <= 0.05 + 1e-9,
+            "deficit: page {d_ml} ml, status #{seq} {} ml",
+            d_m3 * 1e6
+        );
+        // At the same moment: the page is at most 250 statuses (250 ms at 1 kHz) behind.
+        assert!(
+            newest_seq.saturating_sub(seq) <= 250,
+            "page shows #{seq}, newest status #{newest_seq}"
+        );
+        std::thread::sleep(Duration::from_millis(400));
+    }
+
+    // 2. Both canvases show something, and change as the cavity pressure changes.
+    let (var3d, grid3d) = canvas_stats(&mut c, &rt, "view3d");
+    let (var_endo, grid_endo) = canvas_stats(&mut c, &rt, "endoscope");
+    assert!(var3d > 20.0, "3D view blank: luminance variance {var3d}");
+    assert!(
+        var_endo > 20.0,
+        "endoscope blank: luminance variance {var_endo}"
+    );
+    let (_, p0, _, _) = page_numbers(&mut c, &rt);
+    let deadline = Instant::now() + Duration::from_secs(90);
+    loop {
+        let (_, p, _, _) = page_numbers(&mut c, &rt);
+        if (p - p0).abs() >= 5.0 {
+            break;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "cavity pressure stayed at {p0} mmHg for 90 s"
+        );
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let (_, grid3d_b) = canvas_stats(&mut c, &rt, "view3d");
+    let (_, grid_endo_b) = canvas_stats(&mut c, &rt, "endoscope");
+    let (d3, de) = (
+        mean_abs_diff(&grid3d, &grid3d_b),
+        mean_abs_diff(&grid_endo, &grid_endo_b),
+    );
+    assert!(d3 > 0.5, "3D view unchanged after a pressure change: {d3}");
+    assert!(
+        de > 0.5,
+        "endoscope unchanged after a pressure change: {de}"
+    );
+    let shot = artifacts().join("station-page.png");
+    rt.block_on(c.screenshot(&shot)).expect("screenshot");
+    println!("screenshot: {}", shot.display());
+
+    // 3. "New procedure" (two clicks: arm, confirm) starts a new procedure id.
+    let (_, _, _, old_id) = page_numbers(&mut c, &rt);
+    let (_, (_, _, status_id)) = recorder.newest().unwrap();
+    assert_eq!(old_id, status_id.to_string());
+    rt.block_on(c.eval(
+        "(() => { const b = document.getElementById('new-procedure'); b.click(); b.click(); return true; })()",
+    ))
+    .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(15);
+    let new_id = loop {
+        let (_, (_, _, id)) = recorder.newest().unwrap();
+        if id != status_id {
+            break id;
+        }
+        assert!(
+            Instant::now() < deadline,
+            "status kept procedure {status_id}"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(new_id > status_id, "{new_id} after {status_id}");
+    rt.block_on(c.wait_for(
+        &format!("document.getElementById('procedure').dataset.procedureId === '{new_id}'"),
+        Duration::from_secs(10),
+    ))
+    .expect("the page shows the new procedure id");
+    let result = rt
+        .block_on(c.wait_for(
+            "document.getElementById('control-result').textContent",
+            Duration::from_secs(10),
+        ))
+        .unwrap();
+    assert!(
+        result
+            .as_str()
+            .unwrap_or("")
+            .starts_with("new_procedure: ok"),
+        "{result}"
+    );
+
+    // 4. The recordings (the ended procedure's and the new one's) and a debrief.
+    rt.block_on(c.eval("document.getElementById('refresh-recordings').click()"))
+        .unwrap();
+    rt.block_on(c.wait_for(
+        "document.querySelectorAll('#recordings tbody button').length >= 2",
+        Duration::from_secs(15),
+    ))
+    .expect("two recordings listed");
+    rt.block_on(c.eval(
+        "(() => { const b = document.querySelectorAll('#recordings tbody button'); b[b.length - 1].click(); return true; })()",
+    ))
+    .unwrap();
+    rt.block_on(c.wait_for(
+        "document.querySelectorAll('#debrief-metrics tr').length > 10",
+        Duration::from_secs(30),
+    ))
+    .expect("a debrief shown");
+    let shot = artifacts().join("station-page-debrief.png");
+    rt.block_on(c.screenshot(&shot)).expect("screenshot");
+    println!("screenshot: {}", shot.display());
+    let errors = rt
+        .block_on(c.eval("window.hydrometraStation.errors"))
+        .unwrap();
+    assert_eq!(errors, serde_json::json!([]), "page errors");
+}
