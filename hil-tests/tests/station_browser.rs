@@ -1,8 +1,10 @@
 //! `hydrometra station` in a real browser (Debian's headless Chromium over the DevTools protocol)
-//! against `hydrometrad --emulated default` with the default scene: the page's numbers equal the
-//! status a subscriber reads at the same moment, both 3D canvases show something and change as the
-//! cavity pressure changes, "New procedure" starts a new procedure, and the recordings and their
-//! debriefs are listed. Screenshots are kept under `target/station-artifacts/`.
+//! against `hydrometrad --emulated default` with the `bleed` scene (the default uterus with every
+//! stage on, particles included): the page's numbers equal the status a subscriber reads at the
+//! same moment, both 3D canvases show something and change as the cavity pressure changes, the
+//! flow arrows and the particles reach the page, "New procedure" starts a new procedure, the
+//! recordings and their debriefs are listed, and a terminated procedure is impossible to miss.
+//! Screenshots are kept under `target/station-artifacts/`.
 
 use std::collections::BTreeMap;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -147,7 +149,7 @@ fn the_page_shows_the_rig_live_in_a_real_browser_and_starts_a_new_procedure() {
             "--emulated",
             "default",
             "--scene",
-            "default",
+            "bleed",
             "--record-dir",
             &records_arg,
         ],
@@ -240,6 +242,15 @@ fn the_page_shows_the_rig_live_in_a_real_browser_and_starts_a_new_procedure() {
         de > 0.5,
         "endoscope unchanged after a pressure change: {de}"
     );
+
+    // The flow (arrows) and the bleed's particles reach the page (the bleed starts at 12 s).
+    rt.block_on(c.wait_for(
+        "(() => { const r = window.hydrometraStation.rigs[0];
+                  return r.flow && r.flow.arrows.length >= 6 * 50 && r.particles && r.particles.count > 0; })()",
+        Duration::from_secs(120),
+    ))
+    .unwrap_or_else(|e| panic!("no flow arrows or particles on the page: {e}"));
+    std::thread::sleep(Duration::from_secs(1));
     let shot = artifacts().join("station-page.png");
     rt.block_on(c.screenshot(&shot)).expect("screenshot");
     println!("screenshot: {}", shot.display());
@@ -304,6 +315,96 @@ fn the_page_shows_the_rig_live_in_a_real_browser_and_starts_a_new_procedure() {
     let shot = artifacts().join("station-page-debrief.png");
     rt.block_on(c.screenshot(&shot)).expect("screenshot");
     println!("screenshot: {}", shot.display());
+    let errors = rt
+        .block_on(c.eval("window.hydrometraStation.errors"))
+        .unwrap();
+    assert_eq!(errors, serde_json::json!([]), "page errors");
+}
+
+/// An alarm the instructor must not miss: with a deficit limit of a few ml and an overpressure
+/// threshold below the pump setting, the procedure terminates within seconds; the page then shows
+/// a flashing red banner across the top of the window naming the termination, the deficit in an
+/// alarm cell, and the alarm spans shaded on the plots.
+#[test]
+fn termination_and_alarms_are_impossible_to_miss() {
+    let prefix = unique_prefix("station-alarm");
+    let dir = temp_dir("station-alarm");
+    let config = dir.join("hydrometrad.toml");
+    std::fs::write(
+        &config,
+        "[hydraulics.params.deficit]\nlimit = \"custom\"\ncustom_limit_ml = 3.0\n\
+         overpressure_mmhg = 40.0\n",
+    )
+    .expect("config");
+    let config_arg = config.display().to_string();
+    let daemon = Daemon::start(
+        &prefix,
+        &[
+            "--emulated",
+            "default",
+            "--no-record",
+            "--config",
+            &config_arg,
+        ],
+    );
+    let station = Station::start(&["--service-prefix", &prefix]);
+    let (rt, mut c) = open_page(&station.url, 1600, 1150);
+    // Plots of the last minute: the run's first seconds fill a third of them.
+    rt.block_on(c.wait_for(
+        "(() => { const w = document.getElementById('window'); if (!w) return false; w.value = '60'; return true; })()",
+        Duration::from_secs(30),
+    ))
+    .expect("the page loads");
+    rt.block_on(c.wait_for(
+        "(() => { const b = document.getElementById('banner');
+                  return !b.classList.contains('hidden') && b.textContent.includes('PROCEDURE TERMINATED'); })()",
+        Duration::from_secs(120),
+    ))
+    .unwrap_or_else(|e| {
+        panic!(
+            "the page never showed the termination: {e}; daemon log:\n{}",
+            daemon.log()
+        )
+    });
+    // Seconds of the terminated state in the history, and plot redraws (every 200 ms).
+    std::thread::sleep(Duration::from_secs(4));
+    let v = rt
+        .block_on(c.eval(
+            "(() => { const b = document.getElementById('banner'), r = b.getBoundingClientRect();
+               const cs = getComputedStyle(b);
+               const plot = (id) => { const c = document.getElementById(id), g = c.getContext('2d');
+                 const d = g.getImageData(0, 0, c.width, c.height).data; let red = 0;
+                 // Pixels of the alarm shading (red over the plot's background).
+                 for (let i = 0; i < d.length; i += 4) if (d[i] > 60 && d[i] > 1.8 * d[i + 1] && d[i] > 1.5 * d[i + 2]) red++;
+                 return red / (d.length / 4); };
+               return { top: r.top, height: r.height, width: r.width, innerWidth: window.innerWidth,
+                        fontPx: parseFloat(cs.fontSize), severity: b.dataset.severity,
+                        deficitCell: document.getElementById('v-deficit').parentElement.className,
+                        card: document.querySelector('.rig-card').className,
+                        redDeficit: plot('plot-deficit'), redPressure: plot('plot-pressure') }; })()",
+        ))
+        .expect("banner geometry");
+    let shot = artifacts().join("station-terminated.png");
+    rt.block_on(c.screenshot(&shot)).expect("screenshot");
+    println!("screenshot: {}", shot.display());
+    let num = |k: &str| v[k].as_f64().unwrap_or_else(|| panic!("{k}: {v}"));
+    // Across the top of the window, in large type.
+    assert!(num("top") < 80.0, "banner not at the top: {v}");
+    assert!(
+        num("width") >= 0.9 * num("innerWidth"),
+        "banner not full width: {v}"
+    );
+    assert!(
+        num("height") >= 40.0 && num("fontPx") >= 20.0,
+        "banner too small: {v}"
+    );
+    assert_eq!(v["severity"], "critical", "{v}");
+    assert!(v["deficitCell"].as_str().unwrap().contains("alarm"), "{v}");
+    assert!(v["card"].as_str().unwrap().contains("critical"), "{v}");
+    // The shaded spans: a visible share of each plot (the alarms held for seconds of the minute
+    // shown; the deficit's own red line alone covers under 1 %).
+    assert!(num("redDeficit") > 0.02, "deficit plot not shaded: {v}");
+    assert!(num("redPressure") > 0.02, "pressure plot not shaded: {v}");
     let errors = rt
         .block_on(c.eval("window.hydrometraStation.errors"))
         .unwrap();

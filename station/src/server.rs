@@ -123,6 +123,7 @@ impl AppState {
 
 const INDEX_HTML: &str = include_str!("assets/index.html");
 const STATION_JS: &str = include_str!("assets/station.js");
+const VIEWS_JS: &str = include_str!("assets/views.js");
 const STATION_CSS: &str = include_str!("assets/station.css");
 
 /// The router.
@@ -135,6 +136,10 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route(
             "/station.js",
             get(|| async { asset("text/javascript; charset=utf-8", STATION_JS) }),
+        )
+        .route(
+            "/views.js",
+            get(|| async { asset("text/javascript; charset=utf-8", VIEWS_JS) }),
         )
         .route(
             "/station.css",

@@ -109,7 +109,13 @@ fn unknown_paths_and_traversal_attempts_get_404_and_never_a_file() {
         assert!(!body.contains("root:"), "{path} leaked a file: {body}");
     }
     // The page's own assets are there.
-    for path in ["/", "/station.js", "/station.css", "/layout.json"] {
+    for path in [
+        "/",
+        "/station.js",
+        "/views.js",
+        "/station.css",
+        "/layout.json",
+    ] {
         let (code, _) = http(st.addr, &format!("GET {path}"), "", "");
         assert_eq!(code, 200, "{path}");
     }
