@@ -92,6 +92,12 @@ pub fn layout() -> Value {
             "history": crate::frame::kind::HISTORY,
         },
         "status_bytes": size_of::<Status>(),
+        // The scene headers' sizes (the contract appends fields to them): the page finds the
+        // payload after them instead of at a number of its own.
+        "topology_header_bytes": size_of::<hydrometra_ipc::mesh::MeshTopologyHeader>(),
+        "positions_header_bytes": size_of::<hydrometra_ipc::mesh::MeshPositionsHeader>(),
+        "particles_header_bytes": size_of::<hydrometra_ipc::particles::ParticlesHeader>(),
+        "particle_bytes": size_of::<hydrometra_ipc::particles::Particle>(),
         "status": fields,
         "alarms": bits(&alarms::ALL),
         "hydraulic_flags": bits(&hydraulic_flags::ALL),

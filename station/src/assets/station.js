@@ -114,13 +114,15 @@ function onFrame(buf) {
     const vertexCount = dv.getUint32(H + 4, true);
     const triangles = dv.getUint32(H + 8, true);
     r.topologyRevision = Number(dv.getBigUint64(H + 16, true));
-    r.topology = new Uint32Array(buf.slice(H + 24, H + 24 + 12 * triangles));
+    const T = S.layout.topology_header_bytes;
+    r.topology = new Uint32Array(buf.slice(H + T, H + T + 12 * triangles));
     r.vertexCount = vertexCount;
     r.geometryVersion++;
   } else if (kind === K.positions) {
     const n = dv.getUint32(H + 4, true);
     r.positionsRevision = Number(dv.getBigUint64(H + 24, true));
-    r.positions = new Float32Array(buf.slice(H + 40, H + 40 + 12 * n));
+    const P = S.layout.positions_header_bytes;
+    r.positions = new Float32Array(buf.slice(H + P, H + P + 12 * n));
     r.normals = null;
     r.geometryVersion++;
   } else if (kind === K.flow) {
@@ -136,7 +138,7 @@ function onFrame(buf) {
     const pos = new Float32Array(3 * n);
     const kinds = new Float32Array(n);
     for (let i = 0; i < n; i++) {
-      const o = H + 32 + 32 * i;
+      const o = H + S.layout.particles_header_bytes + S.layout.particle_bytes * i;
       pos[3 * i] = dv.getFloat32(o, true);
       pos[3 * i + 1] = dv.getFloat32(o + 4, true);
       pos[3 * i + 2] = dv.getFloat32(o + 8, true);
