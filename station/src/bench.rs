@@ -15,7 +15,7 @@ use iceoryx2::prelude::*;
 use serde_json::{json, Value};
 
 use crate::browser::{Chromium, DEFAULT_CHROMIUM};
-use crate::StationError;
+use crate::error::StationError;
 
 /// `hydrometra station bench` flags.
 #[derive(Args, Debug, Clone)]

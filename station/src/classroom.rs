@@ -15,10 +15,11 @@ use hydrometra_remote::session::{self, SessionSettings};
 use hydrometra_remote::watch::{self, Update};
 use zenoh::Wait;
 
+use crate::error::StationError;
 use crate::feed::RigFeed;
 use crate::hub::Hub;
+use crate::rates::Rates;
 use crate::server::{AppState, Backend, ControlRoute};
-use crate::{Rates, StationError};
 
 /// `--zenoh` and its settings.
 #[derive(Args, Debug, Clone)]

@@ -13,7 +13,7 @@ use hydrometra_remote::follow::Sink;
 
 use crate::frame::{self, kind};
 use crate::hub::Rig;
-use crate::Rates;
+use crate::rates::Rates;
 
 /// The feed of one rig.
 pub struct RigFeed {

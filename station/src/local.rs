@@ -13,7 +13,7 @@ use iceoryx2::prelude::*;
 
 use crate::feed::RigFeed;
 use crate::hub::Rig;
-use crate::Rates;
+use crate::rates::Rates;
 
 /// Starts the thread following the daemon on `names`; it ends when `stop` is set.
 pub fn spawn_source(

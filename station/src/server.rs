@@ -238,7 +238,7 @@ async fn stats(State(st): State<Arc<AppState>>, headers: HeaderMap) -> Response 
     Json(json!({
         "station": st.hub.counters,
         "page_latency": { "p50_s": p50, "p99_s": p99, "max_s": max, "count": count },
-        "cpu_s": crate::process_cpu_s(),
+        "cpu_s": crate::cpu::process_cpu_s(),
         "rigs": rigs,
     }))
     .into_response()
@@ -624,7 +624,7 @@ async fn serve_browser(tx: &mut Tx, rx: &mut Rx, st: &Arc<AppState>) -> Result<(
                             refuse(close_code::INVALID, "ack: origin_ns is not a decimal integer")
                         })?;
                         if origin > 0 {
-                            let latency = crate::monotonic_ns().saturating_sub(origin);
+                            let latency = hydrometra_drivers::transport::monotonic_ns().saturating_sub(origin);
                             tracing::trace!(rig, latency_ns = latency, "page shows a status");
                             st.hub.record_latency(latency);
                         }
