@@ -206,7 +206,9 @@ function particlePrims(parts, alpha) {
   return { pos: parts.pos, col };
 }
 
-const orbit = { yaw: 0.6, pitch: 0.35, zoom: 1 };
+// From the patient's left, slightly above: the sagittal view of an ultrasound, where the
+// anteroposterior distension (the cavity's thin dimension, +y) shows in the outline.
+const orbit = { yaw: 1.45, pitch: 0.2, zoom: 1 };
 let renderer3d = null, rendererEndo = null;
 
 function bounds(pos) {
