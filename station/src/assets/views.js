@@ -261,7 +261,7 @@ function render3d() {
     const p = particlePrims(r.particles, 1);
     drawPrims(R, gl.POINTS, mvp, eye, p.pos, p.col, 3.0 * dpr * 0.05);
   }
-  if (s) {
+  if (s && $('show-scope').checked) {
     const tip = s.scope_tip_position_m, dir = norm(s.scope_view_direction);
     const tail = sub(tip, scale(dir, 0.08));
     drawPrims(R, gl.LINES, mvp, eye, new Float32Array([...tail, ...tip]), new Float32Array([0.75, 0.75, 0.8, 1, 0.95, 0.95, 1, 1]));
