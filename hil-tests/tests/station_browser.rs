@@ -19,9 +19,12 @@ use serde_json::Value;
 
 const PA_PER_MMHG: f64 = hydrometra_units::PA_PER_MMHG;
 
+/// Pressure (Pa), deficit (m³) and procedure id of each status, by sequence.
+type Seen = BTreeMap<u64, (f64, f64, u64)>;
+
 /// A subscriber thread keeping every status by sequence (pressure, deficit, procedure id).
 struct Recorder {
-    seen: Arc<Mutex<BTreeMap<u64, (f64, f64, u64)>>>,
+    seen: Arc<Mutex<Seen>>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
