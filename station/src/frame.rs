@@ -28,7 +28,8 @@ pub mod kind {
     pub const POSITIONS: u8 = 3;
     /// Body: a [`super::FlowArrowsHeader`] (32 bytes) then `arrow_count` arrows of 6 f32.
     pub const FLOW: u8 = 4;
-    /// Body: `ParticlesHeader` (32 bytes) then `particle_count` particles of 32 bytes.
+    /// Body: `ParticlesHeader` (its `size_of`, `/layout.json`'s `particles_header_bytes`) then
+    /// `particle_count` particles of 32 bytes.
     pub const PARTICLES: u8 = 5;
     /// Body: `count` u32, `record_bytes` u32 (40), then `count` [`super::HistoryRecord`]s.
     pub const HISTORY: u8 = 6;
@@ -232,7 +233,7 @@ mod tests {
         };
         s.deficit_m3 = 1.5e-4;
         let f = status(3, &s);
-        assert_eq!(f.len(), HEADER_LEN + 720);
+        assert_eq!(f.len(), HEADER_LEN + size_of::<Status>());
         assert_eq!((f[0], f[1]), (kind::STATUS, VERSION));
         assert_eq!(u16::from_le_bytes([f[2], f[3]]), 3);
         let origin = u64::from_le_bytes(f[8..16].try_into().unwrap());
@@ -257,12 +258,13 @@ mod tests {
             ..Default::default()
         };
         let f = particles(0, &h, &all, 4);
-        let back: ParticlesHeader = read_exact(&f[HEADER_LEN..HEADER_LEN + 32]).unwrap();
+        let hb = size_of::<ParticlesHeader>();
+        let back: ParticlesHeader = read_exact(&f[HEADER_LEN..HEADER_LEN + hb]).unwrap();
         assert_eq!(back.particle_count, 4); // stride 3: 0, 3, 6, 9
-        let kept: Vec<Particle> = read_slice(&f[HEADER_LEN + 32..]).unwrap();
+        let kept: Vec<Particle> = read_slice(&f[HEADER_LEN + hb..]).unwrap();
         let ages: Vec<f32> = kept.iter().map(|p| p.age_s).collect();
         assert_eq!(ages, vec![0.0, 3.0, 6.0, 9.0]);
-        assert_eq!(particles(0, &h, &all, 100).len(), HEADER_LEN + 32 + 10 * 32);
+        assert_eq!(particles(0, &h, &all, 100).len(), HEADER_LEN + hb + 10 * 32);
     }
 
     #[test]

@@ -119,7 +119,7 @@ mod tests {
         assert_eq!(l["status"]["cavity_pressure_pa"]["offset"], 352);
         assert_eq!(l["status"]["deficit_m3"]["offset"], 440);
         assert_eq!(l["status"]["procedure_id"]["offset"], 464);
-        assert_eq!(l["status_bytes"], 720);
+        assert_eq!(l["status_bytes"], 752);
         assert_eq!(l["alarms"][0]["name"], "rig-link-lost");
         assert_eq!(l["link_states"][2], "connected");
     }
