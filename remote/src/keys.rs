@@ -5,7 +5,7 @@ pub const DEFAULT_ROOT: &str = "hydrometra";
 
 /// Services forwarded, by their key suffix.
 pub mod service {
-    /// `hydrometra.v1.Status`, 720 bytes.
+    /// `hydrometra.v1.Status`, 752 bytes.
     pub const STATUS: &str = "status";
     /// Mesh topology header + `u32` indices.
     pub const TOPOLOGY: &str = "cavity/topology";

@@ -61,7 +61,7 @@ mod tests {
             ..Status::default()
         };
         let b = bytes_of(&s).to_vec();
-        assert_eq!(b.len(), 720);
+        assert_eq!(b.len(), 752); // docs/ipc.md
         let back: Status = read_exact(&b).unwrap();
         assert_eq!((back.sequence, back.cavity_pressure_pa), (9, 1234.5));
         assert!(read_exact::<Status>(&b[1..]).is_none());

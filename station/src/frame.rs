@@ -20,7 +20,7 @@ pub const HEADER_LEN: usize = 16;
 
 /// Frame kinds (header byte 0).
 pub mod kind {
-    /// Body: one `hydrometra.v1.Status` (720 bytes, docs/ipc.md).
+    /// Body: one `hydrometra.v1.Status` (752 bytes, docs/ipc.md).
     pub const STATUS: u8 = 1;
     /// Body: `MeshTopologyHeader` (24 bytes) then `3 × triangle_count` u32.
     pub const TOPOLOGY: u8 = 2;
