@@ -14,7 +14,6 @@ pub mod latency;
 pub mod notify;
 pub mod publisher;
 pub mod realtime;
-pub mod remote;
 pub mod rig_connection;
 pub mod rig_source;
 pub mod scene;
@@ -512,7 +511,6 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
             None
         }
     };
-    let remote = remote::start(&config.remote, &names);
     let context = Arc::new(control::ControlContext {
         procedure,
         scene: scene_thread.as_ref().map(|_| feed.clone()),
@@ -573,7 +571,6 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         handlers.abort();
     });
     drop(supervisor);
-    drop(remote);
 
     tracing::info!("shutting down");
     systemd.stopping();
