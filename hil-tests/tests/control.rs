@@ -71,6 +71,12 @@ fn start_recording_daemon(tag: &str) -> (Daemon, StatusReader, std::path::PathBu
         ],
     );
     let reader = StatusReader::connect(&prefix, Duration::from_secs(10));
+    // Status is published before the control service is created (the daemon starts the loop
+    // first): wait for control to answer too (a loaded CI run once asked in between).
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !control(&prefix, &["record", "status"]).status.success() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(50));
+    }
     (daemon, reader, rec)
 }
 
