@@ -253,6 +253,19 @@ impl FluidGrid {
         cell: [usize; 3],
         weight_m2: f64,
     ) -> Result<(), FluidError> {
+        let idx = self.checked_weight(cell, weight_m2, "boundary flux weight")?;
+        let cells = self.labels.len();
+        set_lazily(&mut self.boundary_flux_weight_m2, cells, idx, weight_m2);
+        Ok(())
+    }
+
+    /// The index of `cell` for a weight (m^2) that is finite and `>= 0`; `what` names it.
+    fn checked_weight(
+        &self,
+        cell: [usize; 3],
+        weight_m2: f64,
+        what: &str,
+    ) -> Result<usize, FluidError> {
         if !self.in_range(cell) {
             return Err(FluidError::OutOfRange {
                 cell,
@@ -261,17 +274,12 @@ impl FluidGrid {
         }
         if !(weight_m2.is_finite() && weight_m2 >= 0.0) {
             return Err(FluidError::InvalidParameter {
-                key: format!("boundary flux weight of cell {cell:?}"),
+                key: format!("{what} of cell {cell:?}"),
                 value: weight_m2.to_string(),
                 expected: "a finite area >= 0 in m^2".into(),
             });
         }
-        if self.boundary_flux_weight_m2.is_empty() {
-            self.boundary_flux_weight_m2 = vec![0.0; self.labels.len()];
-        }
-        let idx = self.index(cell);
-        self.boundary_flux_weight_m2[idx] = weight_m2;
-        Ok(())
+        Ok(self.index(cell))
     }
 
     /// A boundary flux (m^3/s into the fluid, e.g. an opening's losses) the projection shares
@@ -312,24 +320,9 @@ impl FluidGrid {
         cell: [usize; 3],
         weight_m2: f64,
     ) -> Result<(), FluidError> {
-        if !self.in_range(cell) {
-            return Err(FluidError::OutOfRange {
-                cell,
-                dims: self.dims,
-            });
-        }
-        if !(weight_m2.is_finite() && weight_m2 >= 0.0) {
-            return Err(FluidError::InvalidParameter {
-                key: format!("shared flux weight of cell {cell:?}"),
-                value: weight_m2.to_string(),
-                expected: "a finite area >= 0 in m^2".into(),
-            });
-        }
-        if self.shared_flux_weight_m2.is_empty() {
-            self.shared_flux_weight_m2 = vec![0.0; self.labels.len()];
-        }
-        let idx = self.index(cell);
-        self.shared_flux_weight_m2[idx] = weight_m2;
+        let idx = self.checked_weight(cell, weight_m2, "shared flux weight")?;
+        let cells = self.labels.len();
+        set_lazily(&mut self.shared_flux_weight_m2, cells, idx, weight_m2);
         Ok(())
     }
 
@@ -545,6 +538,14 @@ pub(crate) fn step_along(
         periodic.then(|| index - (n - 1) * stride)
     };
     [down, up]
+}
+
+/// Sets `values[idx]`, allocating the per-cell array of `cells` zeros on the first call.
+fn set_lazily(values: &mut Vec<f64>, cells: usize, idx: usize, value: f64) {
+    if values.is_empty() {
+        *values = vec![0.0; cells];
+    }
+    values[idx] = value;
 }
 
 #[cfg(test)]
