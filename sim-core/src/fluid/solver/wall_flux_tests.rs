@@ -48,6 +48,20 @@ fn set_wall_fluxes(
     total
 }
 
+/// The net flux out of cell `c` through its six faces (spacing `h`), m^3/s.
+fn net_outflow_m3_per_s(s: &FluidSolver, c: [usize; 3], h: f64) -> f64 {
+    (0..6)
+        .map(|f| {
+            let q = s.cell_face_velocity_m_s(c, f) as f64 * h * h;
+            if f % 2 == 1 {
+                q
+            } else {
+                -q
+            }
+        })
+        .sum()
+}
+
 fn is_boundary(c: [usize; 3], dims: [usize; 3]) -> bool {
     (0..3).any(|a| c[a] == 0 || c[a] + 1 == dims[a])
 }
@@ -396,16 +410,7 @@ fn a_closed_region_with_weights_takes_its_mismatch_from_its_weighted_cells() {
         if g.label_at(n) != CellLabel::Fluid || c[0] > 5 {
             continue;
         }
-        let out: f64 = (0..6)
-            .map(|f| {
-                let u = s.cell_face_velocity_m_s(c, f) as f64;
-                if f % 2 == 1 {
-                    u * h * h
-                } else {
-                    -u * h * h
-                }
-            })
-            .sum();
+        let out = net_outflow_m3_per_s(&s, c, h);
         let w = g.boundary_flux_weights_m2()[n];
         let want = g.boundary_fluxes_m3_per_s()[n] - net_a * w / weights_a;
         worst = worst.max((out - want).abs() / q_cell);
@@ -512,16 +517,7 @@ fn a_shared_flux_goes_only_to_the_regions_that_can_carry_it() {
             if g.label_at(n) != CellLabel::Fluid || !(c[0] < 6 || pocket) {
                 continue;
             }
-            let out: f64 = (0..6)
-                .map(|f| {
-                    let u = s.cell_face_velocity_m_s(c, f) as f64;
-                    if f % 2 == 1 {
-                        u * h * h
-                    } else {
-                        -u * h * h
-                    }
-                })
-                .sum();
+            let out = net_outflow_m3_per_s(&s, c, h);
             let want = if c[0] < 6 {
                 let (q, w) = (
                     g.boundary_fluxes_m3_per_s()[n],
