@@ -1,7 +1,7 @@
 //! Helpers for end-to-end tests that run the real binaries: start `hydrometrad` on the emulated
 //! rig under a unique service prefix, read its status over iceoryx2, signal and restart it.
 
-pub mod steal;
+pub mod host;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};

@@ -6,7 +6,7 @@
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use hydrometra_hil_tests::steal::HostSteal;
+use hydrometra_hil_tests::host::HostWatch;
 use hydrometra_hil_tests::{
     daemon_on_edited_default_scene, python_with_numpy, temp_dir, unique_prefix, workspace_root,
     Daemon, StatusReader,
@@ -107,7 +107,7 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // SIGKILL in the middle.
     let misses_before = reader.drain().last().map_or(0, |s| s.deadline_misses);
     let mut statuses = Vec::new();
-    let steal = HostSteal::start();
+    let host = HostWatch::start();
     // Found (an import check, a second or more on a loaded machine) before the status reader
     // starts collecting: a pause between two collections longer than the subscriber's buffer
     // (64 statuses, 640 ms at the 100 Hz used here, so a test process held off the CPU for a
@@ -269,11 +269,11 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // window already took that long (the machine's, once in CI), the kill is checked by the misses
     // between two statuses instead (a tick held up 10 ms is 10 misses).
     let max_before = around_kill[0].tick_work_max_s;
-    // Not judged where the hypervisor took time from the loop's CPU (`hydrometra_hil_tests::steal`):
-    // a tick whose CPU stopped running takes that long whatever the daemon does.
+    // Not judged where the machine kept the loop's CPU from it (`hydrometra_hil_tests::host`): a
+    // tick whose CPU stopped running takes that long whatever the daemon does.
     for w in around_kill.windows(2) {
         let (a, b) = (w[0], w[1]);
-        if steal.stolen_between(a.publish_monotonic_ns, b.publish_monotonic_ns) {
+        if host.interfered_between(a.publish_monotonic_ns, b.publish_monotonic_ns) {
             continue;
         }
         if max_before < 0.005 {
@@ -300,12 +300,12 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         }
     }
     eprintln!(
-        "longest tick's work over the run {:.3} ms; around the kill {:.3} ms; the host took {:.2} s",
+        "longest tick's work over the run {:.3} ms; around the kill {:.3} ms; {}",
         last.tick_work_max_s * 1e3,
         around_kill
             .last()
             .map_or(f64::NAN, |s| s.tick_work_max_s * 1e3),
-        steal.stolen_s()
+        host.summary()
     );
     let misses_after = last.deadline_misses;
     let ticks = last.ticks - statuses.first().unwrap().ticks;

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use hydrometra_hil_tests::steal::HostSteal;
+use hydrometra_hil_tests::host::HostWatch;
 use hydrometra_hil_tests::{
     assert_contiguous, binary, temp_dir, unique_prefix, Daemon, StatusReader,
 };
@@ -72,19 +72,19 @@ fn wait_running(reader: &StatusReader) {
     });
 }
 
-/// Misses and ticks since the status before, where the host took no time from the loop's CPU
-/// in between (`hydrometra_hil_tests::steal`: a loop whose CPU is not running at all misses
-/// whatever the daemon does); `None` where it took some.
-fn judged(a: &Status, b: &Status, steal: &HostSteal) -> Option<(u64, u64)> {
-    (!steal.stolen_between(a.publish_monotonic_ns, b.publish_monotonic_ns))
+/// Misses and ticks since the status before, where the machine kept no `SCHED_FIFO` thread off the
+/// loop's CPU in between (`hydrometra_hil_tests::host`: a loop whose CPU is not running misses
+/// whatever the daemon does); `None` where it did.
+fn judged(a: &Status, b: &Status, host: &HostWatch) -> Option<(u64, u64)> {
+    (!host.interfered_between(a.publish_monotonic_ns, b.publish_monotonic_ns))
         .then(|| (b.deadline_misses - a.deadline_misses, b.ticks - a.ticks))
 }
 
 /// Misses and ticks over a stretch of statuses, judged as [`judged`] says.
-fn misses(statuses: &[Status], steal: &HostSteal) -> (u64, u64) {
+fn misses(statuses: &[Status], host: &HostWatch) -> (u64, u64) {
     statuses
         .windows(2)
-        .filter_map(|w| judged(&w[0], &w[1], steal))
+        .filter_map(|w| judged(&w[0], &w[1], host))
         .fold((0, 0), |acc, d| (acc.0 + d.0, acc.1 + d.1))
 }
 
@@ -98,7 +98,7 @@ fn renderers_killed_while_holding_every_scene_service_never_disturb_the_daemon()
     use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
     use std::sync::Arc;
     let prefix = unique_prefix("shm-kill");
-    let steal = HostSteal::start();
+    let host = HostWatch::start();
     let mut daemon = Daemon::start(
         &prefix,
         &["--emulated", "default", "--scene", "default", "--no-record"],
@@ -145,7 +145,7 @@ fn renderers_killed_while_holding_every_scene_service_never_disturb_the_daemon()
     let (mut kill, mut quiet) = ((0u64, 0u64), (0u64, 0u64));
     for w in all.windows(2) {
         let ((_, a), (p, b)) = (w[0], w[1]);
-        let Some(d) = judged(&a, &b, &steal) else {
+        let Some(d) = judged(&a, &b, &host) else {
             continue;
         };
         let slot = if p == 1 { &mut kill } else { &mut quiet };
@@ -154,14 +154,15 @@ fn renderers_killed_while_holding_every_scene_service_never_disturb_the_daemon()
     let share = |(m, t): (u64, u64)| m as f64 / t.max(1) as f64;
     eprintln!(
         "100 renderers killed while holding every service: misses {} in {} ticks ({:.4} %) \
-         against {} in {} quiet ({:.4} %), where the host took nothing (it took {:.2} s)",
+         against {} in {} quiet ({:.4} %), where the machine took nothing from the loop's CPU \
+         ({})",
         kill.0,
         kill.1,
         100.0 * share(kill),
         quiet.0,
         quiet.1,
         100.0 * share(quiet),
-        steal.stolen_s()
+        host.summary()
     );
     assert!(
         share(kill) <= (2.0 * share(quiet)).max(0.001),
@@ -193,7 +194,7 @@ fn renderers_killed_while_holding_every_scene_service_never_disturb_the_daemon()
 #[test]
 fn a_renderer_that_never_reads_does_not_slow_the_daemon() {
     let prefix = unique_prefix("shm-stall");
-    let steal = HostSteal::start();
+    let host = HostWatch::start();
     let mut daemon = Daemon::start(
         &prefix,
         &["--emulated", "default", "--scene", "default", "--no-record"],
@@ -208,31 +209,32 @@ fn a_renderer_that_never_reads_does_not_slow_the_daemon() {
         reader.drain();
         let statuses = reader.collect_for(window);
         assert_contiguous(&statuses);
-        let (m, t) = misses(&statuses, &steal);
+        let (m, t) = misses(&statuses, &host);
         with = (with.0 + m, with.1 + t);
         frames_with += statuses.last().map_or(0, |s| s.scene_frames) - statuses[0].scene_frames;
         let _ = stalled.kill();
         let _ = stalled.wait();
         reader.drain();
         let statuses = reader.collect_for(window);
-        let (m, t) = misses(&statuses, &steal);
+        let (m, t) = misses(&statuses, &host);
         without = (without.0 + m, without.1 + t);
     }
     let share = |(m, t): (u64, u64)| m as f64 / t.max(1) as f64;
     eprintln!(
         "a renderer that never reads: misses {} in {} ticks with it, {} in {} without (where the \
-         host took nothing; it took {:.2} s); {} scene frames in 10 s with it",
+         machine took nothing from the loop's CPU; {}); {} scene frames in 10 s with it",
         with.0,
         with.1,
         without.0,
         without.1,
-        steal.stolen_s(),
+        host.summary(),
         frames_with
     );
     assert!(
         with.1 >= 5_000,
-        "{} ticks judged of 10 s: the host took the rest",
-        with.1
+        "{} ticks judged of 10 s: the machine took the rest ({})",
+        with.1,
+        host.summary()
     );
     assert!(
         share(with) <= (2.0 * share(without)).max(0.001),

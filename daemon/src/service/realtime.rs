@@ -75,7 +75,8 @@ impl CpuSet {
             .collect()
     }
 
-    fn from_cpus(cpus: &[usize]) -> CpuSet {
+    /// The set of these CPUs (those at or above `CPU_SETSIZE` are left out).
+    pub fn from_cpus(cpus: &[usize]) -> CpuSet {
         let mut set = CpuSet::empty();
         for &cpu in cpus {
             if cpu < libc::CPU_SETSIZE as usize {
@@ -87,7 +88,7 @@ impl CpuSet {
     }
 
     /// Restricts the calling thread (and the threads it creates from now on) to this set.
-    fn apply_to_current_thread(&self) -> std::io::Result<()> {
+    pub fn apply_to_current_thread(&self) -> std::io::Result<()> {
         // SAFETY: pid 0 is the calling thread; `self.0` is a valid cpu_set_t of the size passed.
         let rc =
             unsafe { libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &self.0) };
