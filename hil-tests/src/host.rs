@@ -31,15 +31,20 @@ use hydrometra_daemon::service::realtime::{
 };
 use hydrometra_drivers::transport::monotonic_ns;
 
-/// The probe's period: any stall of the CPU longer than a period and a half contains one of its
-/// wake-ups at least [`PROBE_STALL_NS`] before the stall ends, so a deadline miss of the 1 ms loop
-/// (a tick at least 1 ms late) caused by a stall is always seen.
+/// The probe's period. A stall of the CPU of `L` holds up the probe's first wake-up inside it by
+/// more than `L - PROBE_PERIOD_NS`, so every stall longer than `PROBE_PERIOD_NS + PROBE_STALL_NS`
+/// (0.95 ms) is seen: every stall that alone makes the 1 ms loop miss a tick (a tick at least
+/// 1 ms late).
 pub const PROBE_PERIOD_NS: u64 = 500_000;
 
-/// A probe wake-up later than this is a stall of the CPU. A running `SCHED_FIFO` thread that
-/// preempts a `SCHED_IDLE` poller wakes within tens of microseconds; a quarter of the loop's
-/// period is far above that and far below what makes the loop miss.
-pub const PROBE_STALL_NS: u64 = 250_000;
+/// A probe wake-up later than this is a stall of the CPU. A `SCHED_FIFO` thread that preempts
+/// the `SCHED_IDLE` poller on a running CPU wakes within tens of microseconds (the summary prints
+/// the probe's median and 99th percentile); far below this, and this far below a miss.
+pub const PROBE_STALL_NS: u64 = 450_000;
+
+/// The probe's lateness histogram: buckets of this width up to [`PROBE_STALL_NS`]'s range.
+const LATENESS_BUCKET_NS: u64 = 10_000;
+const LATENESS_BUCKETS: usize = 100;
 
 /// How often `/proc/stat` is read for steal.
 const STEAL_SAMPLE_PERIOD: Duration = Duration::from_millis(50);
@@ -102,9 +107,11 @@ impl HostWatch {
             Ok(p) => {
                 let s = p.stats();
                 format!(
-                    "the probe on {cpu} ({} wake-ups) stalled {} times (later than {:.2} ms), \
-                     longest {:.3} ms, {:.3} s in all",
+                    "the probe on {cpu} ({} wake-ups, late by p50 {:.2} p99 {:.2} ms) stalled {} \
+                     times (later than {:.2} ms), longest {:.3} ms, {:.3} s in all",
                     s.wakes,
+                    s.p50_late_ns as f64 * 1e-6,
+                    s.p99_late_ns as f64 * 1e-6,
                     s.stalls,
                     PROBE_STALL_NS as f64 * 1e-6,
                     s.longest_ns as f64 * 1e-6,
@@ -124,12 +131,17 @@ pub struct ProbeStats {
     pub stalls: u64,
     pub longest_ns: u64,
     pub stalled_ns: u64,
+    /// Median and 99th percentile of every wake-up's lateness (10 us buckets; 1 ms and more in
+    /// the last).
+    pub p50_late_ns: u64,
+    pub p99_late_ns: u64,
 }
 
 struct Probe {
     /// (scheduled, woke) CLOCK_MONOTONIC ns of each late wake-up, in time order.
     stalls: Arc<Mutex<Vec<(u64, u64)>>>,
-    wakes: Arc<AtomicU64>,
+    /// Every wake-up's lateness, by [`LATENESS_BUCKET_NS`].
+    lateness: Arc<[AtomicU64; LATENESS_BUCKETS]>,
     stop: Arc<AtomicBool>,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -139,11 +151,11 @@ impl Probe {
     /// system refuses the CPU or the policy.
     fn start(cpu: usize, loop_priority: u8) -> Result<Probe, String> {
         let stalls = Arc::new(Mutex::new(Vec::with_capacity(STALL_CAPACITY)));
-        let wakes = Arc::new(AtomicU64::new(0));
+        let lateness = Arc::new(std::array::from_fn(|_| AtomicU64::new(0)));
         let stop = Arc::new(AtomicBool::new(false));
         let (ready_tx, ready_rx) = mpsc::channel::<Result<(), String>>();
         let thread = {
-            let (stalls, wakes, stop) = (stalls.clone(), wakes.clone(), stop.clone());
+            let (stalls, lateness, stop) = (stalls.clone(), lateness.clone(), stop.clone());
             std::thread::Builder::new()
                 .name("host-probe".into())
                 .spawn(move || {
@@ -154,7 +166,7 @@ impl Probe {
                     let ok = entered.is_ok();
                     let _ = ready_tx.send(entered);
                     if ok {
-                        probe_loop(&stalls, &wakes, &stop);
+                        probe_loop(&stalls, &lateness, &stop);
                     }
                 })
                 .map_err(|e| format!("cannot start the probe: {e}"))?
@@ -162,7 +174,7 @@ impl Probe {
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(Probe {
                 stalls,
-                wakes,
+                lateness,
                 stop,
                 thread: Some(thread),
             }),
@@ -190,11 +202,32 @@ impl Probe {
     fn stats(&self) -> ProbeStats {
         let stalls = self.stalls.lock().unwrap_or_else(|e| e.into_inner());
         let late = stalls.iter().map(|s| s.1 - s.0);
+        let counts: Vec<u64> = self
+            .lateness
+            .iter()
+            .map(|c| c.load(Ordering::Relaxed))
+            .collect();
+        let wakes: u64 = counts.iter().sum();
+        // The upper edge of the bucket holding the q-th wake-up.
+        let quantile = |q: f64| {
+            let rank = (q * wakes as f64).ceil() as u64;
+            let mut seen = 0;
+            let i = counts
+                .iter()
+                .position(|&c| {
+                    seen += c;
+                    seen >= rank.max(1)
+                })
+                .unwrap_or(LATENESS_BUCKETS - 1);
+            (i as u64 + 1) * LATENESS_BUCKET_NS
+        };
         ProbeStats {
-            wakes: self.wakes.load(Ordering::Relaxed),
+            wakes,
             stalls: stalls.len() as u64,
             longest_ns: late.clone().max().unwrap_or(0),
             stalled_ns: late.sum(),
+            p50_late_ns: quantile(0.5),
+            p99_late_ns: quantile(0.99),
         }
     }
 }
@@ -202,14 +235,20 @@ impl Probe {
 /// The probe's thread: wakes every period on an absolute deadline and keeps the late wake-ups.
 /// It never waits for the test's thread (stalls it cannot hand over at once wait for the next
 /// one) and never allocates while it runs.
-fn probe_loop(stalls: &Mutex<Vec<(u64, u64)>>, wakes: &AtomicU64, stop: &AtomicBool) {
+fn probe_loop(
+    stalls: &Mutex<Vec<(u64, u64)>>,
+    lateness: &[AtomicU64; LATENESS_BUCKETS],
+    stop: &AtomicBool,
+) {
     let mut pending: Vec<(u64, u64)> = Vec::with_capacity(STALL_CAPACITY);
     let mut next_ns = monotonic_ns() + PROBE_PERIOD_NS;
     while !stop.load(Ordering::Relaxed) {
         sleep_until_monotonic_ns(next_ns);
         let woke_ns = monotonic_ns();
-        wakes.fetch_add(1, Ordering::Relaxed);
-        if woke_ns.saturating_sub(next_ns) > PROBE_STALL_NS && pending.len() < pending.capacity() {
+        let late_ns = woke_ns.saturating_sub(next_ns);
+        let bucket = ((late_ns / LATENESS_BUCKET_NS) as usize).min(LATENESS_BUCKETS - 1);
+        lateness[bucket].fetch_add(1, Ordering::Relaxed);
+        if late_ns > PROBE_STALL_NS && pending.len() < pending.capacity() {
             pending.push((next_ns, woke_ns));
         }
         if !pending.is_empty() {
@@ -220,7 +259,7 @@ fn probe_loop(stalls: &Mutex<Vec<(u64, u64)>>, wakes: &AtomicU64, stop: &AtomicB
             }
         }
         // The next deadline after this wake-up: a long stall is one stall, not a burst of them.
-        next_ns += PROBE_PERIOD_NS * (1 + woke_ns.saturating_sub(next_ns) / PROBE_PERIOD_NS);
+        next_ns += PROBE_PERIOD_NS * (1 + late_ns / PROBE_PERIOD_NS);
     }
 }
 
@@ -327,7 +366,7 @@ mod tests {
     fn probe(stalls: Vec<(u64, u64)>) -> Probe {
         Probe {
             stalls: Arc::new(Mutex::new(stalls)),
-            wakes: Arc::new(AtomicU64::new(100)),
+            lateness: Arc::new(std::array::from_fn(|i| AtomicU64::new(u64::from(i < 2)))),
             stop: Arc::new(AtomicBool::new(true)),
             thread: None,
         }
@@ -361,7 +400,7 @@ mod tests {
     #[test]
     fn a_stretch_is_interfered_with_only_where_a_stall_overlaps_it() {
         const MS: u64 = 1_000_000;
-        let p = probe(vec![(10 * MS, 13 * MS), (20 * MS, 20 * MS + 300_000)]);
+        let p = probe(vec![(10 * MS, 13 * MS), (20 * MS, 20 * MS + 500_000)]);
         // Overlapping, inside, around.
         assert!(p.stalled_between(12 * MS, 14 * MS));
         assert!(p.stalled_between(11 * MS, 12 * MS));
@@ -371,13 +410,15 @@ mod tests {
         assert!(p.stalled_between(19 * MS, 20 * MS - PROBE_PERIOD_NS));
         // Clear of both.
         assert!(!p.stalled_between(14 * MS, 19 * MS));
-        assert!(!p.stalled_between(21 * MS, 30 * MS));
+        assert!(!p.stalled_between(22 * MS, 30 * MS));
         assert!(!p.stalled_between(0, 9 * MS));
         let s = p.stats();
         assert_eq!(
             (s.stalls, s.longest_ns, s.stalled_ns),
-            (2, 3 * MS, 3_300_000)
+            (2, 3 * MS, 3_500_000)
         );
+        // One wake-up in each of the first two buckets: the median is the first's upper edge.
+        assert_eq!((s.wakes, s.p50_late_ns, s.p99_late_ns), (2, 10_000, 20_000));
     }
 
     /// Where the probe may run (root or CAP_SYS_NICE), it wakes on its period and sees a stall
