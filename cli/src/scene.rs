@@ -21,6 +21,7 @@ use hydrometra_sim::units::{m3_to_ml, mmhg_to_pa, pa_to_mmhg};
 use hydrometra_sim::vtk;
 use hydrometra_sim::{guard_serial_joins, helper_tasks};
 
+use crate::converge::OnOff;
 use crate::fluid::ForkJoinArg;
 use crate::scenario::load_scenario;
 use crate::scene_setup::SceneArg;
@@ -69,9 +70,10 @@ pub struct RunArgs {
     /// Voxel size override, mm.
     #[arg(long)]
     voxel_mm: Option<f64>,
-    /// Cut cells on (`[fluid] cut_cells = true`) whatever the scene file says.
-    #[arg(long)]
-    cut_cells: bool,
+    /// Cut cells (`[fluid] cut_cells`) on or off whatever the scene file says (on by default;
+    /// `--cut-cells` alone means on).
+    #[arg(long, value_enum, value_name = "on|off", num_args = 0..=1, default_missing_value = "on")]
+    cut_cells: Option<OnOff>,
     /// Run every SIMD kernel on its portable (SSE2 baseline) path instead of AVX2 + FMA, to check
     /// the fallbacks against a run on the AVX2 paths (the fluid's agree to the bit).
     #[arg(long)]
@@ -119,9 +121,10 @@ pub struct BenchArgs {
     /// Table 1 and the session-7 figures).
     #[arg(long)]
     max_cfl: Option<f64>,
-    /// Cut cells on (`[fluid] cut_cells = true`) whatever the scene file says.
-    #[arg(long)]
-    cut_cells: bool,
+    /// Cut cells (`[fluid] cut_cells`) on or off whatever the scene file says (on by default;
+    /// `--cut-cells` alone means on).
+    #[arg(long, value_enum, value_name = "on|off", num_args = 0..=1, default_missing_value = "on")]
+    cut_cells: Option<OnOff>,
     /// Turn off the fork-join guard (on in the daemon: it runs the solver's joins in one thread
     /// while the helper thread does not pay, e.g. another process on its core): every join is
     /// offered to the helper, to measure the guard against.
@@ -194,7 +197,9 @@ fn run_offline(a: &RunArgs) -> Result<()> {
         desc.fluid.voxel_mm = v;
         desc.validate()?;
     }
-    desc.fluid.cut_cells |= a.cut_cells;
+    if let Some(c) = a.cut_cells {
+        desc.fluid.cut_cells = c == OnOff::On;
+    }
     let (scenario, case) = load_scenario(&a.scenario)?;
     apply_scenario_hydraulics(&mut desc, &case);
     let (assets, _) = assets(&desc, &a.scene)?;
@@ -846,7 +851,9 @@ fn bench_desc(base: &SceneDesc, a: &BenchArgs, voxel_mm: f64) -> Result<SceneDes
     if let Some(c) = a.max_cfl {
         desc.fluid.max_cfl = c;
     }
-    desc.fluid.cut_cells |= a.cut_cells;
+    if let Some(c) = a.cut_cells {
+        desc.fluid.cut_cells = c == OnOff::On;
+    }
     desc.stages.vortices = false;
     desc.validate()?;
     Ok(desc)

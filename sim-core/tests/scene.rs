@@ -18,7 +18,17 @@ use scene_common::*;
 
 #[test]
 fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
-    let (desc, assets) = coarse(1.2);
+    fluxes_equal_the_hydraulics(false);
+}
+
+#[test]
+fn with_cut_cells_fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
+    fluxes_equal_the_hydraulics(true);
+}
+
+fn fluxes_equal_the_hydraulics(cut_cells: bool) {
+    let (mut desc, assets) = coarse(1.2);
+    desc.fluid.cut_cells = cut_cells;
     let mut scene = Scene::new(desc, assets).unwrap();
     let scope = scope_in_cavity(&scene);
     let mut checked = 0;
@@ -36,9 +46,19 @@ fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
         let fl = r.flux;
         assert!(stats.projection_converged, "frame {f}: {stats:?}");
         // A relative bound from single-precision face velocities and an absolute floor of
-        // 1e-5 ml/min.
+        // 1e-5 ml/min. With cut cells the walls' flux is a sum over the wall pieces of velocities
+        // of the frame's largest flow's magnitude: relative to that flow (scene_cut_walls.rs).
+        let largest = [
+            fl.hydraulic_inflow_m3_per_s,
+            fl.hydraulic_outflow_m3_per_s,
+            fl.hydraulic_losses_m3_per_s,
+            fl.hydraulic_dvdt_m3_per_s,
+        ]
+        .iter()
+        .fold(0.0f64, |m, q| m.max(q.abs()));
         let close = |fluid: f64, hyd: f64, what: &str| {
-            let tol = 1e-5 * hyd.abs() + 1e-13;
+            let scale = if cut_cells { largest } else { hyd.abs() };
+            let tol = 1e-5 * scale + 1e-13;
             assert!(
                 (fluid - hyd).abs() <= tol,
                 "frame {f}: {what}: fluid {fluid:e} hydraulics {hyd:e}"
@@ -72,13 +92,17 @@ fn fluxes_through_ports_and_walls_equal_the_hydraulics_every_step() {
                 fl.hydraulic_losses_m3_per_s
             );
         }
-        // The tip is clear of tissue: the port's area on the grid is the channel's (the rim cell
-        // counts with a share of its faces), so the jet every inflow cell publishes is the
-        // hydraulics' port velocity Q_in / channel area, along the view direction.
-        assert_eq!(fl.inflow_open_fraction, 1.0, "frame {f}");
+        // While the cavity is distended the tip is clear of tissue: the port's area on the grid
+        // is the channel's (the rim cell counts with a share of its faces; with cut cells, of
+        // their open parts), so the jet every inflow cell publishes is the hydraulics' port
+        // velocity Q_in / channel area, along the view direction. Draining, the collapsing
+        // cavity may cover part of the tip (cut cells see it before a whole face closes).
+        if f < 270 || !cut_cells {
+            assert_eq!(fl.inflow_open_fraction, 1.0, "frame {f}");
+        }
         if fl.hydraulic_inflow_m3_per_s > 1e-9 && f % 30 == 0 {
             let area_m2 = scene.desc().scope.inflow_channel_area_mm2 * 1e-6;
-            let port = fl.hydraulic_inflow_m3_per_s / area_m2;
+            let port = fl.hydraulic_inflow_m3_per_s / (fl.inflow_open_fraction * area_m2);
             assert!((fl.inflow_jet_speed_m_per_s - port).abs() <= 1e-9 * port);
             let flow = scene.flow().unwrap();
             let mut v = vec![[0.0f32; 3]; flow.kinds().len()];
@@ -134,12 +158,26 @@ fn the_resting_slit_idles_and_unchanged_inputs_skip_every_stage() {
     );
     assert_eq!(c.get(Stage::Deformation).skips, 29);
     assert_eq!(c.get(Stage::Voxelize).runs, 1);
-    assert_eq!(c.get(Stage::Fluid).runs, 0, "nothing flows at rest");
-    assert_eq!(c.get(Stage::Fluid).skips, 30);
-    assert!(!c.get(Stage::Vortices).present && !c.get(Stage::Particles).present);
+    // The slit idles below `min_fluid_cells`. With cut cells its partial cells count and may
+    // reach it: the fluid then runs once, on the first frame (a new field, at rest), and skips
+    // after, since nothing moves.
+    let fluid = c.get(Stage::Fluid);
+    let (runs, skips) = (fluid.runs, fluid.skips);
+    eprintln!(
+        "at rest: {} fluid cells, fluid runs {runs} skips {skips}",
+        r.fluid_cells
+    );
+    assert_eq!(runs + skips, 30);
     if r.fluid_cells < min_cells {
         assert!(r.fluid_idle);
+        assert_eq!(runs, 0, "nothing flows at rest");
+    } else {
+        assert!(
+            runs <= 1 && !fluid.ran_last,
+            "nothing flows at rest: {runs} runs"
+        );
     }
+    assert!(!c.get(Stage::Vortices).present && !c.get(Stage::Particles).present);
     // Distend: every stage runs.
     for _ in 0..120 {
         scene

@@ -34,10 +34,12 @@ fn cut_cells_fill_the_distending_cavity_at_0_6_mm() {
 fn cut_cells_fill(voxel_mm: f64, distend_frames: usize, scope_frames: usize, tol: f64) {
     use hydrometra_sim::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
     let (desc, assets) = coarse(voxel_mm);
-    let mut on = desc.clone();
+    // Cut cells are the default; the whole-cell scene beside it is the comparison.
+    let (mut on, mut off) = (desc.clone(), desc);
     on.fluid.cut_cells = true;
-    let tolerance = desc.fluid.divergence_tolerance;
-    let mut whole = Scene::new(desc, assets.clone()).unwrap();
+    off.fluid.cut_cells = false;
+    let tolerance = off.fluid.divergence_tolerance;
+    let mut whole = Scene::new(off, assets.clone()).unwrap();
     let mut cut = Scene::new(on, assets).unwrap();
     let away = ScopePose::default();
     let (mut counted, mut worst_cut, mut best_whole) = (0, 0.0f64, f64::INFINITY);

@@ -123,7 +123,7 @@ impl Default for FluidSpec {
             divergence_tolerance: 1e-5,
             min_fluid_cells: 64,
             max_cfl: DEFAULT_MAX_CFL,
-            cut_cells: false,
+            cut_cells: true,
         }
     }
 }

@@ -572,13 +572,13 @@ impl Ports {
         self.candidates.clear();
         if let Some(sc) = self.scope {
             for &b in &self.tips {
-                let g = face_weight(b.faces, sc.dir);
+                let g = port_face_weight(&b, sc.dir, cells.dims, cavity.fractions);
                 let (_, r) = sc.axial_radial(cells.centre_m_of(b.cell));
                 self.candidates.push((r, b, g));
             }
         }
         // The inflow port: the tip cells whose fluid faces look forward, nearest the axis first,
-        // until their fluid-facing area reaches the channel's; the last one (the rim) counts
+        // until their fluid-facing area (with cut cells, its open part) reaches the channel's; the last one (the rim) counts
         // with the share of its area that completes the channel's, so the port's area on the
         // grid is the channel's at any voxel size and the jet leaves at the hydraulics' port
         // velocity. Fewer forward faces than the channel's area: tissue covers part of the tip.
@@ -681,11 +681,7 @@ impl Ports {
         let dpdt = flows.dpdt_pa_per_s;
         let (surface, cut) = (cavity.surface, cavity.fractions);
         let cells = self.cells;
-        // A port face's flux: with cut cells only its open part carries it.
-        let open = |b: &BoundaryCell, v: [f64; 3]| match cut {
-            Some(cut) => open_face_weight(b, v, cells.dims, cut),
-            None => face_weight(b.faces, v),
-        };
+        let open = |b: &BoundaryCell, v: [f64; 3]| port_face_weight(b, v, cells.dims, cut);
         let h2 = cells.spacing_m * cells.spacing_m;
         let coords = |b: &BoundaryCell| b.at.map(|x| x as usize);
         // Inflow: u d, u = Q_in / G_in.
@@ -867,6 +863,22 @@ fn face_weight(faces: u8, v: [f64; 3]) -> f64 {
         }
     }
     s
+}
+
+/// The area (in faces) through which port cell `b` moves fluid along `v`: [`face_weight`] of its
+/// fluid faces, with cut cells (`cut`) each weighted by its open fraction (the part tissue does
+/// not cover). The one rule for choosing the inflow port's cells and for setting the ports'
+/// velocities, so the port's area on the grid is the one its velocity is computed for.
+fn port_face_weight(
+    b: &BoundaryCell,
+    v: [f64; 3],
+    dims: [usize; 3],
+    cut: Option<&CavityFractions>,
+) -> f64 {
+    match cut {
+        Some(cut) => open_face_weight(b, v, dims, cut),
+        None => face_weight(b.faces, v),
+    }
 }
 
 /// [`face_weight`] with each face of the port cell `b` weighted by its open area fraction
