@@ -76,7 +76,7 @@ pub use error::SceneError;
 pub use flow_field::FlowField;
 pub use fluid::{FluidDrive, FluidStage, FluidStep};
 pub use hydraulics::HydraulicStage;
-pub use ports::{CavityCells, Ports, PortsStep};
+pub use ports::{CavityCells, Ports, PortsStep, MIN_INFLOW_OPEN_FRACTION};
 pub use prepare::SceneAssets;
 pub use scope::{ScopeDims, ScopeGeometry, ScopePart, SheathMesh};
 pub use surface::CavitySurface;

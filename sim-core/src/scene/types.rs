@@ -115,6 +115,8 @@ pub struct FluxBalance {
     /// the tip is clear of tissue (the port's area is the channel's, the jet leaves at
     /// `Q_in / channel area`), less when tissue covers part of the tip (the cervical canal: the
     /// jet leaves faster, at `Q_in / (fraction x channel area)`), 0 when nothing opens on fluid.
+    /// Below [`MIN_INFLOW_OPEN_FRACTION`](super::MIN_INFLOW_OPEN_FRACTION) (0.1) the inflow is
+    /// blocked.
     pub inflow_open_fraction: f64,
     /// The jet speed the inflow port imposes, m/s: `Q_in / (inflow_open_fraction x channel
     /// area)` (0 when blocked).
