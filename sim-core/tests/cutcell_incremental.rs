@@ -214,6 +214,30 @@ fn small_cells_merge_into_their_largest_open_neighbour_and_conserve_volume() {
             (exact - dust - stabilised).abs() <= 1e-12 * exact,
             "theta {theta}: {exact} - {dust} vs {stabilised}"
         );
+        // The stabilised faces: closed below `min_face_fraction`, rounding removed, else exact.
+        let mut closed = 0;
+        for axis in 0..3 {
+            let exact = c.face_fractions(axis);
+            for (f, (&e, &s)) in exact
+                .iter()
+                .zip(c.stabilised_face_fractions(axis))
+                .enumerate()
+            {
+                let want = if e < params.min_face_fraction {
+                    closed += usize::from(e > 0.0);
+                    0.0
+                } else if e > 1.0 - params.round_off_fraction {
+                    1.0
+                } else {
+                    e
+                };
+                assert_eq!(s, want, "axis {axis} face {f}: exact {e}");
+            }
+        }
+        assert!(
+            closed > 0,
+            "no face below min_face_fraction: the rule is not exercised"
+        );
         let [nx, ny, nz] = cells.dims;
         let (mut merged, mut unmerged) = (0, 0);
         for k in 0..nz {

@@ -56,8 +56,10 @@
 //! ([`CutCells::stabilised_volume_fractions`], which sum to the exact fractions; a merged cell
 //! reads 0, its target may exceed 1). A small cell without such a neighbour is left unmerged and
 //! counted. The stabilised fractions drop rounding: faces within
-//! [`SmallCellParams::round_off_fraction`] (default 1e-12) of 0 or 1 read 0 or 1, and a cell
-//! holding no more than that (dust where a surface passes a cell's corner) reads 0.
+//! [`SmallCellParams::round_off_fraction`] (default 1e-12) of 1 read 1, and a cell holding no
+//! more than that (dust where a surface passes a cell's corner) reads 0. Faces open by less than
+//! [`SmallCellParams::min_face_fraction`] (default 1e-3) read 0: closed, so no velocity is set on
+//! a face that carries next to no flux (the slivers of a collapsing slit).
 //!
 //! Errors ([`CutCellError`], [`mesh::MeshError`]): a box without cells, a surface that is not
 //! closed or consistently oriented (naming the edge and triangles), positions that are too few or
@@ -97,7 +99,6 @@ mod mesh_io;
 pub mod shapes;
 pub mod small;
 
-pub(crate) use cells::round_off;
 pub use cells::{CutCellStats, CutCells, Layer, Phase, SmallCellParams};
 pub use face_walls::{FaceWalls, NO_WALL};
 pub use fractions::{FractionStats, SurfaceFractions, MAX_CELLS_AWAY};

@@ -17,7 +17,7 @@ use super::counters::StageCounters;
 use super::error::SceneError;
 use super::scope::{ScopeGeometry, ScopePart, SheathMesh};
 use super::voxelize::{VoxelBox, Voxelizer};
-use crate::cutcell::{round_off, CutCells, Layer, Orientation, Phase, SmallCellParams};
+use crate::cutcell::{CutCells, Layer, Orientation, Phase, SmallCellParams};
 use crate::fluid::{CutFractions, FluidGrid};
 
 /// The scene's grid is not periodic.
@@ -240,8 +240,9 @@ impl CavityFractions {
     /// the sheath's (which closes the faces the ports' fluxes cross). The one rule for what the
     /// ports' velocities are set for (`Ports`) and what the solver's faces carry ([`Self::send`]).
     pub fn port_face_fraction(&self, axis: usize, idx: usize) -> f32 {
-        let eps = self.cut.params().round_off_fraction;
-        round_off(self.cut.layer(CAVITY).face_fractions(axis)[idx], eps) as f32
+        self.cut
+            .params()
+            .stabilised_face(self.cut.layer(CAVITY).face_fractions(axis)[idx]) as f32
     }
 
     /// The fractions (stabilised, the solver's layout; the ports' faces as last sent).
