@@ -83,7 +83,7 @@ fn sub(a: P3, b: P3) -> P3 {
 /// The cell holding coordinate `x` under the tie rule: `ceil(x) - 1`.
 #[inline]
 pub(crate) fn cell_of(x: f64) -> f64 {
-    x.ceil() - 1.0
+    crate::rounding::ceil(x) - 1.0
 }
 
 /// The point at which the segment from `a` towards `b` meets plane `axis = m` (the endpoints on

@@ -26,6 +26,12 @@ use crate::scene::voxelize::VoxelBox;
 /// Rows (and planes) per side of a bin of the triangle index.
 const BIN: usize = 4;
 
+// A triangle in an update, as bits of `tri_update`: a vertex moved, its reach changed, its bins
+// changed.
+const MOVED: u8 = 1;
+const REACH_CHANGED: u8 = 2;
+const REBIN: u8 = 4;
+
 /// How far from the box a vertex may lie, in cells (beyond, positions are refused: the clipping
 /// arithmetic stays far from overflow and its rounding far below the cells' size).
 pub const MAX_CELLS_AWAY: f64 = 1e6;
@@ -92,6 +98,8 @@ pub struct SurfaceFractions {
     changed_strips: [Vec<u32>; 2],
     // Scratch, reused.
     moved: Vec<bool>,
+    /// Per triangle, during an update: [`MOVED`], [`REACH_CHANGED`], [`REBIN`].
+    tri_update: Vec<u8>,
     candidates: Vec<u32>,
     acc_moment: Vec<f64>,
     acc_area: Vec<[f64; 3]>,
@@ -176,6 +184,7 @@ impl SurfaceFractions {
                 Vec::with_capacity(ny * (nz + 1)),
             ],
             moved: vec![false; vertex_count],
+            tri_update: vec![0; t],
             candidates: Vec::with_capacity(t),
             acc_moment: vec![0.0; nx],
             acc_area: vec![[0.0; 3]; nx],
@@ -451,11 +460,12 @@ impl SurfaceFractions {
         }
         let mut moved_triangles = 0;
         for t in 0..self.triangles.len() {
-            if self.triangles[t].iter().any(|&v| self.moved[v as usize]) {
+            let m = self.triangles[t].iter().any(|&v| self.moved[v as usize]);
+            self.tri_update[t] = if m { MOVED } else { 0 };
+            if m {
                 moved_triangles += 1;
                 let old = self.reach[t];
                 self.mark(old);
-                self.unbin(t);
             }
         }
         for (v, p) in positions_m.iter().enumerate() {
@@ -464,10 +474,30 @@ impl SurfaceFractions {
                 self.pos_m[v] = *p;
             }
         }
+        // A moved triangle whose reach is as it was marks nothing new, and one whose bins are as
+        // they were stays in them: most of them, the surface moving by a fraction of a cell per
+        // frame. Every triangle leaves its old bins before any enters its new ones, so a bin
+        // never holds more than before or after the move (its room was reserved).
         for t in 0..self.triangles.len() {
-            if self.triangles[t].iter().any(|&v| self.moved[v as usize]) {
-                self.reach[t] = self.reach_of(t);
+            if self.tri_update[t] & MOVED == 0 {
+                continue;
+            }
+            let new = self.reach_of(t);
+            if new != self.reach[t] {
+                self.tri_update[t] |= REACH_CHANGED;
+                if self.bin_span(&new) != self.bin_span(&self.reach[t]) {
+                    self.unbin(t);
+                    self.tri_update[t] |= REBIN;
+                }
+                self.reach[t] = new;
+            }
+        }
+        for t in 0..self.triangles.len() {
+            let u = self.tri_update[t];
+            if u & REBIN != 0 {
                 self.bin(t);
+            }
+            if u & REACH_CHANGED != 0 {
                 let new = self.reach[t];
                 self.mark(new);
             }
