@@ -51,6 +51,55 @@ impl Reach {
     };
 }
 
+/// The positions along a row or strip where values changed, inclusive (`lo > hi`: none). In a
+/// row, position `i` is cell `i` and x-face `i` (`0 ..= nx`); in a strip, face `i`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Span {
+    pub lo: u32,
+    pub hi: u32,
+}
+
+impl Span {
+    pub const EMPTY: Span = Span {
+        lo: u32::MAX,
+        hi: 0,
+    };
+
+    /// Positions `lo ..= hi`.
+    #[inline]
+    pub fn new(lo: usize, hi: usize) -> Span {
+        Span {
+            lo: lo as u32,
+            hi: hi as u32,
+        }
+    }
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.lo > self.hi
+    }
+    /// Adds position `p`.
+    #[inline]
+    pub fn add(&mut self, p: usize) {
+        self.lo = self.lo.min(p as u32);
+        self.hi = self.hi.max(p as u32);
+    }
+    /// Adds every position of `other`.
+    #[inline]
+    pub fn join(&mut self, other: Span) {
+        self.lo = self.lo.min(other.lo);
+        self.hi = self.hi.max(other.hi);
+    }
+    /// The positions `lo ..= hi` as a range, `hi` capped at `max` (empty when none).
+    #[inline]
+    pub fn range(&self, max: usize) -> std::ops::Range<usize> {
+        if self.is_empty() {
+            0..0
+        } else {
+            self.lo as usize..(self.hi as usize).min(max) + 1
+        }
+    }
+}
+
 /// What one call did.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct FractionStats {
@@ -92,10 +141,13 @@ pub struct SurfaceFractions {
     row_dirty: Vec<bool>,
     dirty_rows: Vec<u32>,
     changed_rows: Vec<u32>,
+    /// Per changed row, where it changed.
+    changed_row_spans: Vec<Span>,
     /// The same for the strips: `[y-strips, z-strips]`.
     strip_dirty: [Vec<bool>; 2],
     dirty_strips: [Vec<u32>; 2],
     changed_strips: [Vec<u32>; 2],
+    changed_strip_spans: [Vec<Span>; 2],
     // Scratch, reused.
     moved: Vec<bool>,
     /// Per triangle, during an update: [`MOVED`], [`REACH_CHANGED`], [`REBIN`].
@@ -174,12 +226,17 @@ impl SurfaceFractions {
             row_dirty: vec![false; ny * nz],
             dirty_rows: Vec::with_capacity(ny * nz),
             changed_rows: Vec::with_capacity(ny * nz),
+            changed_row_spans: Vec::with_capacity(ny * nz),
             strip_dirty: [vec![false; (ny + 1) * nz], vec![false; ny * (nz + 1)]],
             dirty_strips: [
                 Vec::with_capacity((ny + 1) * nz),
                 Vec::with_capacity(ny * (nz + 1)),
             ],
             changed_strips: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
+            changed_strip_spans: [
                 Vec::with_capacity((ny + 1) * nz),
                 Vec::with_capacity(ny * (nz + 1)),
             ],
@@ -228,6 +285,15 @@ impl SurfaceFractions {
     /// The rows `j + ny k` whose cells' volumes, interfaces or x-faces the last call changed.
     pub fn changed_rows(&self) -> &[u32] {
         &self.changed_rows
+    }
+    /// Per row of [`Self::changed_rows`], where in it the values changed.
+    pub(crate) fn changed_row_spans(&self) -> &[Span] {
+        &self.changed_row_spans
+    }
+    /// Per strip of [`Self::changed_ystrips`] (`s = 0`) or [`Self::changed_zstrips`] (`s = 1`),
+    /// where in it the faces changed.
+    pub(crate) fn changed_strip_spans(&self, s: usize) -> &[Span] {
+        &self.changed_strip_spans[s]
     }
     /// The y-strips `j + (ny + 1) k` (y-faces `(., j, k)`) the last call changed.
     pub fn changed_ystrips(&self) -> &[u32] {
@@ -454,7 +520,9 @@ impl SurfaceFractions {
             moved_vertices += m as usize;
         }
         self.changed_rows.clear();
+        self.changed_row_spans.clear();
         self.changed_strips.iter_mut().for_each(Vec::clear);
+        self.changed_strip_spans.iter_mut().for_each(Vec::clear);
         if moved_vertices == 0 {
             return Ok(FractionStats::default());
         }
@@ -511,13 +579,15 @@ impl SurfaceFractions {
     fn process(&mut self) -> FractionStats {
         let mut stats = FractionStats::default();
         self.changed_rows.clear();
+        self.changed_row_spans.clear();
         let [_, ny, _] = self.cells.dims;
         let rows = std::mem::take(&mut self.dirty_rows);
         for &u in &rows {
             self.row_dirty[u as usize] = false;
-            let (cells, faces) = self.process_row(u as usize % ny, u as usize / ny);
+            let (cells, faces, span) = self.process_row(u as usize % ny, u as usize / ny);
             if cells + faces > 0 {
                 self.changed_rows.push(u);
+                self.changed_row_spans.push(span);
             }
             stats.changed_cells += cells;
             stats.changed_faces += faces;
@@ -528,13 +598,16 @@ impl SurfaceFractions {
         // y-strips (`j + (ny + 1) k`), then z-strips (`j + ny k`).
         for s in 0..2 {
             self.changed_strips[s].clear();
+            self.changed_strip_spans[s].clear();
             let width = if s == 0 { ny + 1 } else { ny };
             let strips = std::mem::take(&mut self.dirty_strips[s]);
             for &u in &strips {
                 self.strip_dirty[s][u as usize] = false;
-                let faces = self.process_strip(s + 1, u as usize % width, u as usize / width);
+                let (faces, span) =
+                    self.process_strip(s + 1, u as usize % width, u as usize / width);
                 if faces > 0 {
                     self.changed_strips[s].push(u);
+                    self.changed_strip_spans[s].push(span);
                 }
                 stats.changed_faces += faces;
             }
@@ -556,8 +629,8 @@ impl SurfaceFractions {
         }
     }
 
-    /// Recomputes row `(j, k)`; returns how many cells and faces changed.
-    fn process_row(&mut self, j: usize, k: usize) -> (usize, usize) {
+    /// Recomputes row `(j, k)`; returns how many cells and faces changed, and where.
+    fn process_row(&mut self, j: usize, k: usize) -> (usize, usize, Span) {
         let [nx, ny, _] = self.cells.dims;
         let (ji, ki, nxi) = (j as i32, k as i32, nx as i32);
         self.gather(j, k, |r| {
@@ -613,14 +686,21 @@ impl SurfaceFractions {
         let (mut cells, mut faces) = (0, 0);
         let fx = &mut self.faces[0];
         // The face at x = 0: what the pieces left of the box leave open.
+        let mut span = Span::EMPTY;
         let mut face = -left;
-        faces += store(&mut fx[fbase], unit(sign * face));
+        if store(&mut fx[fbase], unit(sign * face)) > 0 {
+            faces += 1;
+            span.add(0);
+        }
         for i in 0..nx {
             let s = self.acc_area[i];
             let next = face - s[0];
             let volume = self.acc_moment[i] + next;
             face = next;
-            faces += store(&mut fx[fbase + i + 1], unit(sign * next));
+            if store(&mut fx[fbase + i + 1], unit(sign * next)) > 0 {
+                faces += 1;
+                span.add(i + 1);
+            }
             let mut changed = store(&mut self.volume[base + i], unit(sign * volume));
             let s = s.map(|x| sign * x);
             let slot = &mut self.interface[base + i];
@@ -628,15 +708,18 @@ impl SurfaceFractions {
                 *slot = s;
                 changed = 1;
             }
-            cells += changed;
+            if changed > 0 {
+                cells += 1;
+                span.add(i);
+            }
         }
-        (cells, faces)
+        (cells, faces, span)
     }
 
     /// Recomputes the strip `(a, b)` normal to `axis`: for axis 1 the y-strip on plane `y = a`
     /// across `z in (b, b+1]`, for axis 2 the z-strip on plane `z = b` across `y in (a, a+1]`;
-    /// returns how many faces changed.
-    fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> usize {
+    /// returns how many faces changed, and where.
+    fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> (usize, Span) {
         let [nx, ny, _] = self.cells.dims;
         let nxi = nx as i32;
         // (plane, the strip's row index across it, the axis across).
@@ -735,14 +818,18 @@ impl SurfaceFractions {
         };
         let f = &mut self.faces[axis];
         let mut faces = 0;
+        let mut span = Span::EMPTY;
         let mut edge = -left;
         for i in 0..nx {
             let next = edge - self.acc_area[i][0];
             let area = self.acc_moment[i] + next + self.acc_area[i][1];
             edge = next;
-            faces += store(&mut f[fbase + i], unit(sign * area));
+            if store(&mut f[fbase + i], unit(sign * area)) > 0 {
+                faces += 1;
+                span.add(i);
+            }
         }
-        faces
+        (faces, span)
     }
 }
 
