@@ -190,6 +190,14 @@ impl Clipper {
         p.n = 3;
     }
 
+    /// Starts on the polygon `p`.
+    #[inline]
+    pub fn start_from(&mut self, p: &Polygon) {
+        let q = &mut self.bufs[self.cur];
+        q.v[..p.n].copy_from_slice(&p.v[..p.n]);
+        q.n = p.n;
+    }
+
     /// The polygon as clipped so far.
     #[inline]
     pub fn poly(&self) -> &Polygon {

@@ -155,7 +155,14 @@ pub struct SurfaceFractions {
     candidates: Vec<u32>,
     acc_moment: Vec<f64>,
     acc_area: Vec<[f64; 3]>,
+    /// The rows' sums, per cell (the rows are summed together, triangle by triangle): the
+    /// pieces' x-moments and area vectors, and per row the x-area of the pieces left of the box.
+    row_moment: Vec<f64>,
+    row_area: Vec<[f64; 3]>,
+    row_left: Vec<f64>,
     clipper: Clipper,
+    /// A triangle clipped to a y-slab, clipped on by `clipper` to each row of the slab.
+    slab_clipper: Clipper,
 }
 
 #[inline]
@@ -245,7 +252,11 @@ impl SurfaceFractions {
             candidates: Vec::with_capacity(t),
             acc_moment: vec![0.0; nx],
             acc_area: vec![[0.0; 3]; nx],
+            row_moment: vec![0.0; n],
+            row_area: vec![[0.0; 3]; n],
+            row_left: vec![0.0; ny * nz],
             clipper: Clipper::default(),
+            slab_clipper: Clipper::default(),
             triangles,
         })
     }
@@ -582,6 +593,7 @@ impl SurfaceFractions {
         self.changed_row_spans.clear();
         let [_, ny, _] = self.cells.dims;
         let rows = std::mem::take(&mut self.dirty_rows);
+        self.sum_rows(&rows);
         for &u in &rows {
             self.row_dirty[u as usize] = false;
             let (cells, faces, span) = self.process_row(u as usize % ny, u as usize / ny);
@@ -629,57 +641,91 @@ impl SurfaceFractions {
         }
     }
 
-    /// Recomputes row `(j, k)`; returns how many cells and faces changed, and where.
+    /// Sums the pieces of every triangle in the dirty rows `rows` into their rows' sums. The
+    /// triangles go in index order, each clipped to a y-slab once and then to the slab's dirty
+    /// rows, so every row gets the pieces and sums a row alone would, in the same order.
+    fn sum_rows(&mut self, rows: &[u32]) {
+        let [nx, ny, nz] = self.cells.dims;
+        for &u in rows {
+            let u = u as usize;
+            self.row_moment[nx * u..nx * (u + 1)].fill(0.0);
+            self.row_area[nx * u..nx * (u + 1)].fill([0.0; 3]);
+            self.row_left[u] = 0.0;
+        }
+        let sign = self.sign;
+        let (nxi, nyi, nzi) = (nx as i32, ny as i32, nz as i32);
+        for t in 0..self.triangles.len() {
+            let r = self.reach[t];
+            // A row's triangles: those whose reach covers it and starts left of the box's end.
+            let (j0, j1) = (r.lo[1].max(0), r.hi[1].min(nyi - 1));
+            let (k0, k1) = (r.lo[2].max(0), r.hi[2].min(nzi - 1));
+            if r.lo[0] >= nxi || j0 > j1 || k0 > k1 {
+                continue;
+            }
+            let dirty = |j: i32| (k0..=k1).any(|k| self.row_dirty[j as usize + ny * k as usize]);
+            if !(j0..=j1).any(dirty) {
+                continue;
+            }
+            let v = self.triangles[t].map(|i| self.pos[i as usize]);
+            // A triangle in a y- or z-plane with the region above belongs to the row above.
+            let flat_y = clip::flat_below_region(&v, 1, sign);
+            let flat_z = clip::flat_below_region(&v, 2, sign);
+            let forced = clip::flat_below_region(&v, 0, sign);
+            for j in j0..=j1 {
+                let y0 = j as f64;
+                if flat_y.is_some_and(|m| m != y0) || !dirty(j) {
+                    continue;
+                }
+                let slab = &mut self.slab_clipper;
+                slab.start(v[0], v[1], v[2]);
+                if flat_y.is_none() {
+                    slab.clip_slab(1, y0, y0 + 1.0);
+                }
+                if slab.poly().n == 0 {
+                    continue;
+                }
+                for k in k0..=k1 {
+                    let z0 = k as f64;
+                    let row = j as usize + ny * k as usize;
+                    if !self.row_dirty[row] || flat_z.is_some_and(|m| m != z0) {
+                        continue;
+                    }
+                    let clipper = &mut self.clipper;
+                    clipper.start_from(self.slab_clipper.poly());
+                    if flat_z.is_none() {
+                        clipper.clip_slab(2, z0, z0 + 1.0);
+                    }
+                    if clipper.poly().n == 0 {
+                        continue;
+                    }
+                    let base = nx * row;
+                    let left = &mut self.row_left[row];
+                    let (area, moments) = (&mut self.row_area, &mut self.row_moment);
+                    clipper.split_along_x(nx, forced, |c, piece| {
+                        if piece.n < 3 {
+                            return;
+                        }
+                        if c < 0 {
+                            *left += piece.area_and_x_moment(0.0).0[0];
+                            return;
+                        }
+                        let (s, moment) = piece.area_and_x_moment(c as f64);
+                        let a = &mut area[base + c as usize];
+                        a[0] += s[0];
+                        a[1] += s[1];
+                        a[2] += s[2];
+                        moments[base + c as usize] += moment;
+                    });
+                }
+            }
+        }
+    }
+
+    /// Stores row `(j, k)` from its sums ([`Self::sum_rows`]); returns how many cells and faces
+    /// changed, and where.
     fn process_row(&mut self, j: usize, k: usize) -> (usize, usize, Span) {
         let [nx, ny, _] = self.cells.dims;
-        let (ji, ki, nxi) = (j as i32, k as i32, nx as i32);
-        self.gather(j, k, |r| {
-            r.lo[1] <= ji && ji <= r.hi[1] && r.lo[2] <= ki && ki <= r.hi[2] && r.lo[0] < nxi
-        });
-        self.acc_moment.fill(0.0);
-        self.acc_area.fill([0.0; 3]);
-        let mut left = 0.0;
-        let (y0, z0) = (j as f64, k as f64);
-        let sign = self.sign;
-        for n in 0..self.candidates.len() {
-            let t = self.candidates[n] as usize;
-            let v = self.triangles[t].map(|i| self.pos[i as usize]);
-            let clipper = &mut self.clipper;
-            clipper.start(v[0], v[1], v[2]);
-            // A triangle in a y- or z-plane with the region above belongs to the row above.
-            match clip::flat_below_region(&v, 1, sign) {
-                Some(m) if m != y0 => continue,
-                Some(_) => {}
-                None => clipper.clip_slab(1, y0, y0 + 1.0),
-            }
-            if clipper.poly().n == 0 {
-                continue;
-            }
-            match clip::flat_below_region(&v, 2, sign) {
-                Some(m) if m != z0 => continue,
-                Some(_) => {}
-                None => clipper.clip_slab(2, z0, z0 + 1.0),
-            }
-            if clipper.poly().n == 0 {
-                continue;
-            }
-            let forced = clip::flat_below_region(&v, 0, sign);
-            clipper.split_along_x(nx, forced, |c, piece| {
-                if piece.n < 3 {
-                    return;
-                }
-                if c < 0 {
-                    left += piece.area_and_x_moment(0.0).0[0];
-                    return;
-                }
-                let (s, moment) = piece.area_and_x_moment(c as f64);
-                let a = &mut self.acc_area[c as usize];
-                a[0] += s[0];
-                a[1] += s[1];
-                a[2] += s[2];
-                self.acc_moment[c as usize] += moment;
-            });
-        }
+        let left = self.row_left[j + ny * k];
         let sign = self.sign;
         let base = self.cells.index(0, j, k);
         let fbase = (nx + 1) * (j + ny * k);
@@ -693,9 +739,9 @@ impl SurfaceFractions {
             span.add(0);
         }
         for i in 0..nx {
-            let s = self.acc_area[i];
+            let s = self.row_area[base + i];
             let next = face - s[0];
-            let volume = self.acc_moment[i] + next;
+            let volume = self.row_moment[base + i] + next;
             face = next;
             if store(&mut fx[fbase + i + 1], unit(sign * next)) > 0 {
                 faces += 1;
