@@ -20,6 +20,7 @@ pub use fork_join::{guard_serial_joins, helper_tasks};
 pub mod harness;
 pub mod hydraulics;
 pub mod mesh;
+mod rounding;
 pub mod scene;
 mod simd;
 pub mod units;

@@ -2,7 +2,7 @@
 //! regions of a case file), each marking what it encloses as fluid or solid over what lies
 //! below it; with the small-cell rule applied.
 
-use super::fractions::{FractionStats, SurfaceFractions};
+use super::fractions::{FractionStats, Span, SurfaceFractions};
 use super::small::{self, NO_TARGET};
 use super::{check_box, CutCellError, Orientation};
 use crate::scene::voxelize::VoxelBox;
@@ -149,6 +149,13 @@ pub struct CutCells {
     /// Strips to combine: `[y-strips, z-strips]`.
     strip_flags: [Vec<bool>; 2],
     strips: [Vec<u32>; 2],
+    /// Where in each row or strip a stage has work: the positions whose inputs changed (a cell
+    /// whose inputs are as they were keeps its value, so the rest of the row is skipped).
+    combine_span: Vec<Span>,
+    strip_span: [Vec<Span>; 2],
+    interface_span: Vec<Span>,
+    decide_span: Vec<Span>,
+    stabilise_span: Vec<Span>,
     initialised: bool,
 }
 
@@ -220,6 +227,14 @@ impl CutCells {
                 Vec::with_capacity((ny + 1) * nz),
                 Vec::with_capacity(ny * (nz + 1)),
             ],
+            combine_span: vec![Span::EMPTY; rows],
+            strip_span: [
+                vec![Span::EMPTY; (ny + 1) * nz],
+                vec![Span::EMPTY; ny * (nz + 1)],
+            ],
+            interface_span: vec![Span::EMPTY; rows],
+            decide_span: vec![Span::EMPTY; rows],
+            stabilise_span: vec![Span::EMPTY; rows],
             initialised: false,
         })
     }
@@ -315,13 +330,16 @@ impl CutCells {
             add(&mut stats.layers, l.0.full(p)?);
         }
         self.initialised = true;
-        let [_, ny, nz] = self.cells.dims;
+        let [nx, ny, nz] = self.cells.dims;
         for r in 0..ny * nz {
             self.flag_row(r, COMBINE | INTERFACE);
+            self.combine_span[r] = Span::new(0, nx);
+            self.interface_span[r] = Span::new(0, nx - 1);
         }
         for s in 0..2 {
             for u in 0..self.strip_flags[s].len() {
                 mark(u, &mut self.strip_flags[s], &mut self.strips[s]);
+                self.strip_span[s][u] = Span::new(0, nx - 1);
             }
         }
         self.finish(&mut stats);
@@ -346,20 +364,22 @@ impl CutCells {
             let s = self.layers[l].0.update(p, threshold_m)?;
             add(&mut stats.layers, s);
             let f = &self.layers[l].0;
-            for &r in f.changed_rows() {
+            for (&r, &span) in f.changed_rows().iter().zip(f.changed_row_spans()) {
                 flag(
                     &mut self.row_flags,
                     &mut self.stage_rows,
                     r as usize,
-                    COMBINE | INTERFACE,
+                    COMBINE,
                 );
+                self.combine_span[r as usize].join(span);
             }
             for (s, changed) in [f.changed_ystrips(), f.changed_zstrips()]
                 .into_iter()
                 .enumerate()
             {
-                for &u in changed {
+                for (&u, &span) in changed.iter().zip(f.changed_strip_spans(s)) {
                     mark(u as usize, &mut self.strip_flags[s], &mut self.strips[s]);
+                    self.strip_span[s][u as usize].join(span);
                 }
             }
         }
@@ -385,27 +405,33 @@ impl CutCells {
         flag(&mut self.row_flags, &mut self.stage_rows, r, bits);
     }
 
-    /// Combines the flagged rows and strips, then applies the small-cell rule around them.
+    /// Combines the flagged rows and strips, then applies the small-cell rule where their
+    /// values changed. Each stage works only on the cells whose inputs changed: a cell's walls
+    /// follow its faces, its merge target its own and its face neighbours' volumes and its faces,
+    /// its stabilised volume its own and its neighbours' volumes and targets.
     fn finish(&mut self, stats: &mut CutCellStats) {
         let [nx, ny, nz] = self.cells.dims;
         self.changed_rows.clear();
-        // Strips: their faces, and the interfaces of the rows on both sides.
+        // Strips: their faces, and the walls and merges of the cells on both sides.
         for axis in [1, 2] {
             let strips = std::mem::take(&mut self.strips[axis - 1]);
             // y-strip `j + (ny + 1) k`, z-strip `j + ny k`: the rows `row - step` and `row`
             // lie on the two sides of the strip's plane.
             let (width, step) = if axis == 1 { (ny + 1, 1) } else { (ny, ny) };
             for &u in &strips {
-                self.strip_flags[axis - 1][u as usize] = false;
-                let (j, k) = (u as usize % width, u as usize / width);
-                if self.combine_faces(axis, nx * u as usize) {
+                let u = u as usize;
+                self.strip_flags[axis - 1][u] = false;
+                let span = std::mem::replace(&mut self.strip_span[axis - 1][u], Span::EMPTY);
+                let changed = self.combine_faces(axis, nx * u, span);
+                if !changed.is_empty() {
+                    let (j, k) = (u % width, u / width);
                     let (plane, extent) = if axis == 1 { (j, ny) } else { (k, nz) };
                     let row = j + ny * k;
                     if plane > 0 {
-                        self.flag_row(row - step, INTERFACE | CHANGED);
+                        self.faces_changed(row - step, changed);
                     }
                     if plane < extent {
-                        self.flag_row(row, INTERFACE | CHANGED);
+                        self.faces_changed(row, changed);
                     }
                 }
             }
@@ -415,42 +441,62 @@ impl CutCells {
         // Rows: volumes and x-faces.
         let rows = std::mem::take(&mut self.stage_rows[0]);
         for &r in &rows {
-            self.row_flags[r as usize] &= !COMBINE;
-            if self.combine_row(r as usize) {
-                self.row_flags[r as usize] |= CHANGED;
+            let r = r as usize;
+            self.row_flags[r] &= !COMBINE;
+            let span = std::mem::replace(&mut self.combine_span[r], Span::EMPTY);
+            let (faces, volumes, approx) = self.combine_row(r, span);
+            if !faces.is_empty() || !volumes.is_empty() || approx {
+                self.row_flags[r] |= CHANGED;
+            }
+            if !faces.is_empty() {
+                // x-face `f` lies between cells `f - 1` and `f`.
+                let cells = Span::new(
+                    faces.lo.saturating_sub(1) as usize,
+                    faces.hi.min(nx as u32 - 1) as usize,
+                );
+                self.faces_changed(r, cells);
+            }
+            if !volumes.is_empty() {
+                self.spread(r, volumes, DECIDE);
+                self.spread(r, volumes, STABILISE);
             }
         }
         stats.rows_combined = rows.len();
         self.stage_rows[0] = rows;
         self.stage_rows[0].clear();
-        // Interfaces; the rows whose cells or neighbours changed decide their merges anew.
+        // Walls.
         let rows = std::mem::take(&mut self.stage_rows[1]);
         for &r in &rows {
-            self.row_flags[r as usize] &= !INTERFACE;
-            if self.interface_row(r as usize) {
-                self.row_flags[r as usize] |= CHANGED;
-            }
-            if self.row_flags[r as usize] & CHANGED != 0 {
-                self.flag_around(r as usize, DECIDE);
+            let r = r as usize;
+            self.row_flags[r] &= !INTERFACE;
+            let span = std::mem::replace(&mut self.interface_span[r], Span::EMPTY);
+            if self.interface_row(r, span) {
+                self.row_flags[r] |= CHANGED;
             }
         }
         self.stage_rows[1] = rows;
         self.stage_rows[1].clear();
+        // Merges; a changed target changes the stabilised volumes around it.
         let rows = std::mem::take(&mut self.stage_rows[2]);
         for &r in &rows {
-            self.row_flags[r as usize] &= !DECIDE;
-            if self.decide_row(r as usize) {
-                self.row_flags[r as usize] |= CHANGED;
+            let r = r as usize;
+            self.row_flags[r] &= !DECIDE;
+            let span = std::mem::replace(&mut self.decide_span[r], Span::EMPTY);
+            let changed = self.decide_row(r, span);
+            if !changed.is_empty() {
+                self.row_flags[r] |= CHANGED;
+                self.spread(r, changed, STABILISE);
             }
-            self.flag_around(r as usize, STABILISE);
         }
         self.stage_rows[2] = rows;
         self.stage_rows[2].clear();
         let rows = std::mem::take(&mut self.stage_rows[3]);
         for &r in &rows {
-            self.row_flags[r as usize] &= !STABILISE;
-            if self.stabilise_row(r as usize) {
-                self.row_flags[r as usize] |= CHANGED;
+            let r = r as usize;
+            self.row_flags[r] &= !STABILISE;
+            let span = std::mem::replace(&mut self.stabilise_span[r], Span::EMPTY);
+            if self.stabilise_row(r, span) {
+                self.row_flags[r] |= CHANGED;
             }
         }
         stats.rows_stabilised = rows.len();
@@ -469,56 +515,92 @@ impl CutCells {
         stats.unmerged_small_cells = self.unmerged_count;
     }
 
-    /// Flags row `r` and its four neighbour rows for `stage`.
-    fn flag_around(&mut self, r: usize, stage: u8) {
-        let [_, ny, nz] = self.cells.dims;
+    /// The faces of cells `cells` of row `r` changed: their walls and merge targets are due.
+    fn faces_changed(&mut self, r: usize, cells: Span) {
+        self.flag_row(r, INTERFACE | DECIDE | CHANGED);
+        self.interface_span[r].join(cells);
+        self.decide_span[r].join(cells);
+    }
+
+    /// Flags for `stage` the cells of row `r`'s `cells` and their face neighbours: `cells`
+    /// widened by one in the row, the same cells in the four neighbour rows.
+    fn spread(&mut self, r: usize, cells: Span, stage: u8) {
+        let [nx, ny, nz] = self.cells.dims;
         let (j, k) = (r % ny, r / ny);
-        self.flag_row(r, stage);
+        let wide = Span::new(
+            cells.lo.saturating_sub(1) as usize,
+            (cells.hi as usize + 1).min(nx - 1),
+        );
+        self.stage_span(r, wide, stage);
         if j > 0 {
-            self.flag_row(r - 1, stage);
+            self.stage_span(r - 1, cells, stage);
         }
         if j + 1 < ny {
-            self.flag_row(r + 1, stage);
+            self.stage_span(r + 1, cells, stage);
         }
         if k > 0 {
-            self.flag_row(r - ny, stage);
+            self.stage_span(r - ny, cells, stage);
         }
         if k + 1 < nz {
-            self.flag_row(r + ny, stage);
+            self.stage_span(r + ny, cells, stage);
         }
     }
 
-    /// Combines the `nx` faces normal to `axis` from `base`; whether any changed.
-    fn combine_faces(&mut self, axis: usize, base: usize) -> bool {
+    fn stage_span(&mut self, r: usize, cells: Span, stage: u8) {
+        self.flag_row(r, stage);
+        let spans = if stage == DECIDE {
+            &mut self.decide_span
+        } else {
+            &mut self.stabilise_span
+        };
+        spans[r].join(cells);
+    }
+
+    /// Combines the faces normal to `axis` at positions `span` of the `nx` from `base`; where
+    /// any changed.
+    fn combine_faces(&mut self, axis: usize, base: usize, span: Span) -> Span {
         let nx = self.cells.dims[0];
         let params = self.params;
-        let mut changed = false;
-        for f in base..base + nx {
+        let mut changed = Span::EMPTY;
+        for i in span.range(nx - 1) {
+            let f = base + i;
             let (v, _) = self.combined(|l| l.face_fractions(axis)[f]);
-            changed |= store(&mut self.faces[axis][f], v);
-            changed |= store(
+            let a = store(&mut self.faces[axis][f], v);
+            let b = store(
                 &mut self.stabilised_faces[axis][f],
                 params.stabilised_face(v),
             );
+            if a | b {
+                changed.add(i);
+            }
         }
         changed
     }
 
-    /// Combines row `r`'s volumes and its `nx + 1` x-faces; whether any changed.
-    fn combine_row(&mut self, r: usize) -> bool {
+    /// Combines row `r`'s volumes and `nx + 1` x-faces at positions `span` (cell `i` and face
+    /// `i`); where faces and volumes changed, and whether a cell's approximation did.
+    fn combine_row(&mut self, r: usize, span: Span) -> (Span, Span, bool) {
         let nx = self.cells.dims[0];
-        let mut changed = self.combine_faces(0, (nx + 1) * r);
-        // The x-faces of a row are `nx + 1`: the last one too.
-        let last = (nx + 1) * r + nx;
-        let (v, _) = self.combined(|l| l.face_fractions(0)[last]);
-        changed |= store(&mut self.faces[0][last], v);
-        changed |= store(
-            &mut self.stabilised_faces[0][last],
-            self.params.stabilised_face(v),
-        );
-        for n in nx * r..nx * (r + 1) {
+        let params = self.params;
+        let mut faces = Span::EMPTY;
+        let base = (nx + 1) * r;
+        for i in span.range(nx) {
+            let f = base + i;
+            let (v, _) = self.combined(|l| l.face_fractions(0)[f]);
+            let a = store(&mut self.faces[0][f], v);
+            let b = store(&mut self.stabilised_faces[0][f], params.stabilised_face(v));
+            if a | b {
+                faces.add(i);
+            }
+        }
+        let mut volumes = Span::EMPTY;
+        let mut approx_changed = false;
+        for i in span.range(nx - 1) {
+            let n = nx * r + i;
             let (v, approx) = self.combined(|l| l.volume_fractions()[n]);
-            changed |= store(&mut self.volume[n], v);
+            if store(&mut self.volume[n], v) {
+                volumes.add(i);
+            }
             if approx != self.approximate[n] {
                 self.approximate[n] = approx;
                 if approx {
@@ -526,10 +608,10 @@ impl CutCells {
                 } else {
                     self.approximate_count -= 1;
                 }
-                changed = true;
+                approx_changed = true;
             }
         }
-        changed
+        (faces, volumes, approx_changed)
     }
 
     /// The combination of the layers' values `value(layer)` over the background, and whether it
@@ -549,13 +631,13 @@ impl CutCells {
         (phi, approx)
     }
 
-    /// The walls of row `r`'s cells from their faces; whether any changed.
-    fn interface_row(&mut self, r: usize) -> bool {
+    /// The walls of row `r`'s cells `span` from their faces; whether any changed.
+    fn interface_row(&mut self, r: usize, span: Span) -> bool {
         let [nx, ny, _] = self.cells.dims;
         let (j, k) = (r % ny, r / ny);
         let (fx, fy, fz) = (&self.faces[0], &self.faces[1], &self.faces[2]);
         let mut changed = false;
-        for i in 0..nx {
+        for i in span.range(nx - 1) {
             let x = i + (nx + 1) * r;
             let y = i + nx * (j + (ny + 1) * k);
             let z = i + nx * r;
@@ -573,14 +655,14 @@ impl CutCells {
         changed
     }
 
-    /// The merge targets of row `r`'s cells, and the counts; whether any changed.
-    fn decide_row(&mut self, r: usize) -> bool {
+    /// The merge targets of row `r`'s cells `span`, and the counts; where any changed.
+    fn decide_row(&mut self, r: usize, span: Span) -> Span {
         let [nx, ny, _] = self.cells.dims;
         let (j, k) = (r % ny, r / ny);
         let theta = self.params.min_volume_fraction;
         let dust = self.params.round_off_fraction;
-        let mut changed = false;
-        for i in 0..nx {
+        let mut changed = Span::EMPTY;
+        for i in span.range(nx - 1) {
             let n = nx * r + i;
             let t = small::target(
                 &self.cells,
@@ -590,8 +672,10 @@ impl CutCells {
                 dust,
                 (i, j, k),
             );
-            changed |= t != self.targets[n];
-            self.targets[n] = t;
+            if t != self.targets[n] {
+                changed.add(i);
+                self.targets[n] = t;
+            }
             let v = self.volume[n];
             let state = if !(v > dust && v < theta) {
                 NOT_SMALL
@@ -618,11 +702,12 @@ impl CutCells {
         changed
     }
 
-    fn stabilise_row(&mut self, r: usize) -> bool {
+    /// The stabilised volumes of row `r`'s cells `span`; whether any changed.
+    fn stabilise_row(&mut self, r: usize, span: Span) -> bool {
         let [nx, ny, _] = self.cells.dims;
         let (j, k) = (r % ny, r / ny);
         let mut changed = false;
-        for i in 0..nx {
+        for i in span.range(nx - 1) {
             let v = small::stabilised(
                 &self.cells,
                 &self.volume,

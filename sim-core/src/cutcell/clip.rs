@@ -83,7 +83,7 @@ fn sub(a: P3, b: P3) -> P3 {
 /// The cell holding coordinate `x` under the tie rule: `ceil(x) - 1`.
 #[inline]
 pub(crate) fn cell_of(x: f64) -> f64 {
-    x.ceil() - 1.0
+    crate::rounding::ceil(x) - 1.0
 }
 
 /// The point at which the segment from `a` towards `b` meets plane `axis = m` (the endpoints on
@@ -188,6 +188,14 @@ impl Clipper {
         p.v[1] = b;
         p.v[2] = c;
         p.n = 3;
+    }
+
+    /// Starts on the polygon `p`.
+    #[inline]
+    pub fn start_from(&mut self, p: &Polygon) {
+        let q = &mut self.bufs[self.cur];
+        q.v[..p.n].copy_from_slice(&p.v[..p.n]);
+        q.n = p.n;
     }
 
     /// The polygon as clipped so far.

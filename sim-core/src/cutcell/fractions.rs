@@ -26,6 +26,12 @@ use crate::scene::voxelize::VoxelBox;
 /// Rows (and planes) per side of a bin of the triangle index.
 const BIN: usize = 4;
 
+// A triangle in an update, as bits of `tri_update`: a vertex moved, its reach changed, its bins
+// changed.
+const MOVED: u8 = 1;
+const REACH_CHANGED: u8 = 2;
+const REBIN: u8 = 4;
+
 /// How far from the box a vertex may lie, in cells (beyond, positions are refused: the clipping
 /// arithmetic stays far from overflow and its rounding far below the cells' size).
 pub const MAX_CELLS_AWAY: f64 = 1e6;
@@ -43,6 +49,55 @@ impl Reach {
         lo: [0; 3],
         hi: [-1; 3],
     };
+}
+
+/// The positions along a row or strip where values changed, inclusive (`lo > hi`: none). In a
+/// row, position `i` is cell `i` and x-face `i` (`0 ..= nx`); in a strip, face `i`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Span {
+    pub lo: u32,
+    pub hi: u32,
+}
+
+impl Span {
+    pub const EMPTY: Span = Span {
+        lo: u32::MAX,
+        hi: 0,
+    };
+
+    /// Positions `lo ..= hi`.
+    #[inline]
+    pub fn new(lo: usize, hi: usize) -> Span {
+        Span {
+            lo: lo as u32,
+            hi: hi as u32,
+        }
+    }
+    #[inline]
+    pub fn is_empty(&self) -> bool {
+        self.lo > self.hi
+    }
+    /// Adds position `p`.
+    #[inline]
+    pub fn add(&mut self, p: usize) {
+        self.lo = self.lo.min(p as u32);
+        self.hi = self.hi.max(p as u32);
+    }
+    /// Adds every position of `other`.
+    #[inline]
+    pub fn join(&mut self, other: Span) {
+        self.lo = self.lo.min(other.lo);
+        self.hi = self.hi.max(other.hi);
+    }
+    /// The positions `lo ..= hi` as a range, `hi` capped at `max` (empty when none).
+    #[inline]
+    pub fn range(&self, max: usize) -> std::ops::Range<usize> {
+        if self.is_empty() {
+            0..0
+        } else {
+            self.lo as usize..(self.hi as usize).min(max) + 1
+        }
+    }
 }
 
 /// What one call did.
@@ -86,16 +141,28 @@ pub struct SurfaceFractions {
     row_dirty: Vec<bool>,
     dirty_rows: Vec<u32>,
     changed_rows: Vec<u32>,
+    /// Per changed row, where it changed.
+    changed_row_spans: Vec<Span>,
     /// The same for the strips: `[y-strips, z-strips]`.
     strip_dirty: [Vec<bool>; 2],
     dirty_strips: [Vec<u32>; 2],
     changed_strips: [Vec<u32>; 2],
+    changed_strip_spans: [Vec<Span>; 2],
     // Scratch, reused.
     moved: Vec<bool>,
+    /// Per triangle, during an update: [`MOVED`], [`REACH_CHANGED`], [`REBIN`].
+    tri_update: Vec<u8>,
     candidates: Vec<u32>,
     acc_moment: Vec<f64>,
     acc_area: Vec<[f64; 3]>,
+    /// The rows' sums, per cell (the rows are summed together, triangle by triangle): the
+    /// pieces' x-moments and area vectors, and per row the x-area of the pieces left of the box.
+    row_moment: Vec<f64>,
+    row_area: Vec<[f64; 3]>,
+    row_left: Vec<f64>,
     clipper: Clipper,
+    /// A triangle clipped to a y-slab, clipped on by `clipper` to each row of the slab.
+    slab_clipper: Clipper,
 }
 
 #[inline]
@@ -166,6 +233,7 @@ impl SurfaceFractions {
             row_dirty: vec![false; ny * nz],
             dirty_rows: Vec::with_capacity(ny * nz),
             changed_rows: Vec::with_capacity(ny * nz),
+            changed_row_spans: Vec::with_capacity(ny * nz),
             strip_dirty: [vec![false; (ny + 1) * nz], vec![false; ny * (nz + 1)]],
             dirty_strips: [
                 Vec::with_capacity((ny + 1) * nz),
@@ -175,11 +243,20 @@ impl SurfaceFractions {
                 Vec::with_capacity((ny + 1) * nz),
                 Vec::with_capacity(ny * (nz + 1)),
             ],
+            changed_strip_spans: [
+                Vec::with_capacity((ny + 1) * nz),
+                Vec::with_capacity(ny * (nz + 1)),
+            ],
             moved: vec![false; vertex_count],
+            tri_update: vec![0; t],
             candidates: Vec::with_capacity(t),
             acc_moment: vec![0.0; nx],
             acc_area: vec![[0.0; 3]; nx],
+            row_moment: vec![0.0; n],
+            row_area: vec![[0.0; 3]; n],
+            row_left: vec![0.0; ny * nz],
             clipper: Clipper::default(),
+            slab_clipper: Clipper::default(),
             triangles,
         })
     }
@@ -219,6 +296,15 @@ impl SurfaceFractions {
     /// The rows `j + ny k` whose cells' volumes, interfaces or x-faces the last call changed.
     pub fn changed_rows(&self) -> &[u32] {
         &self.changed_rows
+    }
+    /// Per row of [`Self::changed_rows`], where in it the values changed.
+    pub(crate) fn changed_row_spans(&self) -> &[Span] {
+        &self.changed_row_spans
+    }
+    /// Per strip of [`Self::changed_ystrips`] (`s = 0`) or [`Self::changed_zstrips`] (`s = 1`),
+    /// where in it the faces changed.
+    pub(crate) fn changed_strip_spans(&self, s: usize) -> &[Span] {
+        &self.changed_strip_spans[s]
     }
     /// The y-strips `j + (ny + 1) k` (y-faces `(., j, k)`) the last call changed.
     pub fn changed_ystrips(&self) -> &[u32] {
@@ -445,17 +531,20 @@ impl SurfaceFractions {
             moved_vertices += m as usize;
         }
         self.changed_rows.clear();
+        self.changed_row_spans.clear();
         self.changed_strips.iter_mut().for_each(Vec::clear);
+        self.changed_strip_spans.iter_mut().for_each(Vec::clear);
         if moved_vertices == 0 {
             return Ok(FractionStats::default());
         }
         let mut moved_triangles = 0;
         for t in 0..self.triangles.len() {
-            if self.triangles[t].iter().any(|&v| self.moved[v as usize]) {
+            let m = self.triangles[t].iter().any(|&v| self.moved[v as usize]);
+            self.tri_update[t] = if m { MOVED } else { 0 };
+            if m {
                 moved_triangles += 1;
                 let old = self.reach[t];
                 self.mark(old);
-                self.unbin(t);
             }
         }
         for (v, p) in positions_m.iter().enumerate() {
@@ -464,10 +553,30 @@ impl SurfaceFractions {
                 self.pos_m[v] = *p;
             }
         }
+        // A moved triangle whose reach is as it was marks nothing new, and one whose bins are as
+        // they were stays in them: most of them, the surface moving by a fraction of a cell per
+        // frame. Every triangle leaves its old bins before any enters its new ones, so a bin
+        // never holds more than before or after the move (its room was reserved).
         for t in 0..self.triangles.len() {
-            if self.triangles[t].iter().any(|&v| self.moved[v as usize]) {
-                self.reach[t] = self.reach_of(t);
+            if self.tri_update[t] & MOVED == 0 {
+                continue;
+            }
+            let new = self.reach_of(t);
+            if new != self.reach[t] {
+                self.tri_update[t] |= REACH_CHANGED;
+                if self.bin_span(&new) != self.bin_span(&self.reach[t]) {
+                    self.unbin(t);
+                    self.tri_update[t] |= REBIN;
+                }
+                self.reach[t] = new;
+            }
+        }
+        for t in 0..self.triangles.len() {
+            let u = self.tri_update[t];
+            if u & REBIN != 0 {
                 self.bin(t);
+            }
+            if u & REACH_CHANGED != 0 {
                 let new = self.reach[t];
                 self.mark(new);
             }
@@ -481,13 +590,16 @@ impl SurfaceFractions {
     fn process(&mut self) -> FractionStats {
         let mut stats = FractionStats::default();
         self.changed_rows.clear();
+        self.changed_row_spans.clear();
         let [_, ny, _] = self.cells.dims;
         let rows = std::mem::take(&mut self.dirty_rows);
+        self.sum_rows(&rows);
         for &u in &rows {
             self.row_dirty[u as usize] = false;
-            let (cells, faces) = self.process_row(u as usize % ny, u as usize / ny);
+            let (cells, faces, span) = self.process_row(u as usize % ny, u as usize / ny);
             if cells + faces > 0 {
                 self.changed_rows.push(u);
+                self.changed_row_spans.push(span);
             }
             stats.changed_cells += cells;
             stats.changed_faces += faces;
@@ -498,13 +610,16 @@ impl SurfaceFractions {
         // y-strips (`j + (ny + 1) k`), then z-strips (`j + ny k`).
         for s in 0..2 {
             self.changed_strips[s].clear();
+            self.changed_strip_spans[s].clear();
             let width = if s == 0 { ny + 1 } else { ny };
             let strips = std::mem::take(&mut self.dirty_strips[s]);
             for &u in &strips {
                 self.strip_dirty[s][u as usize] = false;
-                let faces = self.process_strip(s + 1, u as usize % width, u as usize / width);
+                let (faces, span) =
+                    self.process_strip(s + 1, u as usize % width, u as usize / width);
                 if faces > 0 {
                     self.changed_strips[s].push(u);
+                    self.changed_strip_spans[s].push(span);
                 }
                 stats.changed_faces += faces;
             }
@@ -526,71 +641,112 @@ impl SurfaceFractions {
         }
     }
 
-    /// Recomputes row `(j, k)`; returns how many cells and faces changed.
-    fn process_row(&mut self, j: usize, k: usize) -> (usize, usize) {
-        let [nx, ny, _] = self.cells.dims;
-        let (ji, ki, nxi) = (j as i32, k as i32, nx as i32);
-        self.gather(j, k, |r| {
-            r.lo[1] <= ji && ji <= r.hi[1] && r.lo[2] <= ki && ki <= r.hi[2] && r.lo[0] < nxi
-        });
-        self.acc_moment.fill(0.0);
-        self.acc_area.fill([0.0; 3]);
-        let mut left = 0.0;
-        let (y0, z0) = (j as f64, k as f64);
-        let sign = self.sign;
-        for n in 0..self.candidates.len() {
-            let t = self.candidates[n] as usize;
-            let v = self.triangles[t].map(|i| self.pos[i as usize]);
-            let clipper = &mut self.clipper;
-            clipper.start(v[0], v[1], v[2]);
-            // A triangle in a y- or z-plane with the region above belongs to the row above.
-            match clip::flat_below_region(&v, 1, sign) {
-                Some(m) if m != y0 => continue,
-                Some(_) => {}
-                None => clipper.clip_slab(1, y0, y0 + 1.0),
-            }
-            if clipper.poly().n == 0 {
-                continue;
-            }
-            match clip::flat_below_region(&v, 2, sign) {
-                Some(m) if m != z0 => continue,
-                Some(_) => {}
-                None => clipper.clip_slab(2, z0, z0 + 1.0),
-            }
-            if clipper.poly().n == 0 {
-                continue;
-            }
-            let forced = clip::flat_below_region(&v, 0, sign);
-            clipper.split_along_x(nx, forced, |c, piece| {
-                if piece.n < 3 {
-                    return;
-                }
-                if c < 0 {
-                    left += piece.area_and_x_moment(0.0).0[0];
-                    return;
-                }
-                let (s, moment) = piece.area_and_x_moment(c as f64);
-                let a = &mut self.acc_area[c as usize];
-                a[0] += s[0];
-                a[1] += s[1];
-                a[2] += s[2];
-                self.acc_moment[c as usize] += moment;
-            });
+    /// Sums the pieces of every triangle in the dirty rows `rows` into their rows' sums. The
+    /// triangles go in index order, each clipped to a y-slab once and then to the slab's dirty
+    /// rows, so every row gets the pieces and sums a row alone would, in the same order.
+    fn sum_rows(&mut self, rows: &[u32]) {
+        let [nx, ny, nz] = self.cells.dims;
+        for &u in rows {
+            let u = u as usize;
+            self.row_moment[nx * u..nx * (u + 1)].fill(0.0);
+            self.row_area[nx * u..nx * (u + 1)].fill([0.0; 3]);
+            self.row_left[u] = 0.0;
         }
+        let sign = self.sign;
+        let (nxi, nyi, nzi) = (nx as i32, ny as i32, nz as i32);
+        for t in 0..self.triangles.len() {
+            let r = self.reach[t];
+            // A row's triangles: those whose reach covers it and starts left of the box's end.
+            let (j0, j1) = (r.lo[1].max(0), r.hi[1].min(nyi - 1));
+            let (k0, k1) = (r.lo[2].max(0), r.hi[2].min(nzi - 1));
+            if r.lo[0] >= nxi || j0 > j1 || k0 > k1 {
+                continue;
+            }
+            let dirty = |j: i32| (k0..=k1).any(|k| self.row_dirty[j as usize + ny * k as usize]);
+            if !(j0..=j1).any(dirty) {
+                continue;
+            }
+            let v = self.triangles[t].map(|i| self.pos[i as usize]);
+            // A triangle in a y- or z-plane with the region above belongs to the row above.
+            let flat_y = clip::flat_below_region(&v, 1, sign);
+            let flat_z = clip::flat_below_region(&v, 2, sign);
+            let forced = clip::flat_below_region(&v, 0, sign);
+            for j in j0..=j1 {
+                let y0 = j as f64;
+                if flat_y.is_some_and(|m| m != y0) || !dirty(j) {
+                    continue;
+                }
+                let slab = &mut self.slab_clipper;
+                slab.start(v[0], v[1], v[2]);
+                if flat_y.is_none() {
+                    slab.clip_slab(1, y0, y0 + 1.0);
+                }
+                if slab.poly().n == 0 {
+                    continue;
+                }
+                for k in k0..=k1 {
+                    let z0 = k as f64;
+                    let row = j as usize + ny * k as usize;
+                    if !self.row_dirty[row] || flat_z.is_some_and(|m| m != z0) {
+                        continue;
+                    }
+                    let clipper = &mut self.clipper;
+                    clipper.start_from(self.slab_clipper.poly());
+                    if flat_z.is_none() {
+                        clipper.clip_slab(2, z0, z0 + 1.0);
+                    }
+                    if clipper.poly().n == 0 {
+                        continue;
+                    }
+                    let base = nx * row;
+                    let left = &mut self.row_left[row];
+                    let (area, moments) = (&mut self.row_area, &mut self.row_moment);
+                    clipper.split_along_x(nx, forced, |c, piece| {
+                        if piece.n < 3 {
+                            return;
+                        }
+                        if c < 0 {
+                            *left += piece.area_and_x_moment(0.0).0[0];
+                            return;
+                        }
+                        let (s, moment) = piece.area_and_x_moment(c as f64);
+                        let a = &mut area[base + c as usize];
+                        a[0] += s[0];
+                        a[1] += s[1];
+                        a[2] += s[2];
+                        moments[base + c as usize] += moment;
+                    });
+                }
+            }
+        }
+    }
+
+    /// Stores row `(j, k)` from its sums ([`Self::sum_rows`]); returns how many cells and faces
+    /// changed, and where.
+    fn process_row(&mut self, j: usize, k: usize) -> (usize, usize, Span) {
+        let [nx, ny, _] = self.cells.dims;
+        let left = self.row_left[j + ny * k];
         let sign = self.sign;
         let base = self.cells.index(0, j, k);
         let fbase = (nx + 1) * (j + ny * k);
         let (mut cells, mut faces) = (0, 0);
         let fx = &mut self.faces[0];
         // The face at x = 0: what the pieces left of the box leave open.
+        let mut span = Span::EMPTY;
         let mut face = -left;
-        faces += store(&mut fx[fbase], unit(sign * face));
+        if store(&mut fx[fbase], unit(sign * face)) > 0 {
+            faces += 1;
+            span.add(0);
+        }
         for i in 0..nx {
-            let s = self.acc_area[i];
+            let s = self.row_area[base + i];
             let next = face - s[0];
-            let volume = self.acc_moment[i] + next;
+            let volume = self.row_moment[base + i] + next;
             face = next;
-            faces += store(&mut fx[fbase + i + 1], unit(sign * next));
+            if store(&mut fx[fbase + i + 1], unit(sign * next)) > 0 {
+                faces += 1;
+                span.add(i + 1);
+            }
             let mut changed = store(&mut self.volume[base + i], unit(sign * volume));
             let s = s.map(|x| sign * x);
             let slot = &mut self.interface[base + i];
@@ -598,15 +754,18 @@ impl SurfaceFractions {
                 *slot = s;
                 changed = 1;
             }
-            cells += changed;
+            if changed > 0 {
+                cells += 1;
+                span.add(i);
+            }
         }
-        (cells, faces)
+        (cells, faces, span)
     }
 
     /// Recomputes the strip `(a, b)` normal to `axis`: for axis 1 the y-strip on plane `y = a`
     /// across `z in (b, b+1]`, for axis 2 the z-strip on plane `z = b` across `y in (a, a+1]`;
-    /// returns how many faces changed.
-    fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> usize {
+    /// returns how many faces changed, and where.
+    fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> (usize, Span) {
         let [nx, ny, _] = self.cells.dims;
         let nxi = nx as i32;
         // (plane, the strip's row index across it, the axis across).
@@ -705,14 +864,18 @@ impl SurfaceFractions {
         };
         let f = &mut self.faces[axis];
         let mut faces = 0;
+        let mut span = Span::EMPTY;
         let mut edge = -left;
         for i in 0..nx {
             let next = edge - self.acc_area[i][0];
             let area = self.acc_moment[i] + next + self.acc_area[i][1];
             edge = next;
-            faces += store(&mut f[fbase + i], unit(sign * area));
+            if store(&mut f[fbase + i], unit(sign * area)) > 0 {
+                faces += 1;
+                span.add(i);
+            }
         }
-        faces
+        (faces, span)
     }
 }
 

@@ -44,7 +44,8 @@
 //!
 //! Incremental: [`CutCells::update`] takes the new position of every vertex that moved (beyond a
 //! threshold) and recomputes only the rows and strips of faces the moved triangles' old and new
-//! boxes reach, then combines and re-applies the small-cell rule two rows around what changed.
+//! boxes reach, then combines and re-applies the small-cell rule to the cells whose inputs changed
+//! (and, for the rule, their face neighbours).
 //! Every unit is a function of the held positions alone, visited in triangle order, so the result
 //! equals [`CutCells::full`] at the held positions bit for bit after any sequence of moves; the
 //! counts are in [`CutCellStats`], the rows changed in [`CutCells::changed_rows`]. After the build

@@ -26,6 +26,7 @@
 use std::time::Instant;
 
 use super::counters::StageCounters;
+use crate::rounding::floor;
 
 /// Widening of the band test, in cells.
 pub const EPS: f64 = 1e-6;
@@ -101,6 +102,7 @@ pub struct Voxelizer {
     // Scratch, reused.
     moved: Vec<bool>,
     tri_moved: Vec<bool>,
+    tri_rebin: Vec<bool>,
     row_dirty: Vec<bool>,
     dirty_rows: Vec<u32>,
     /// The rows in which the last call changed a cell's state or owner.
@@ -131,6 +133,7 @@ impl Voxelizer {
             extent: vec![[0, 0]; cells.dims[1] * cells.dims[2]],
             moved: vec![false; vertex_count],
             tri_moved: vec![false; t],
+            tri_rebin: vec![false; t],
             row_dirty: vec![false; cells.dims[1] * cells.dims[2]],
             dirty_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
             changed_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
@@ -192,8 +195,8 @@ impl Voxelizer {
                 return CellRange::EMPTY;
             }
             let n = self.cells.dims[ax] as f64;
-            r.lo[ax] = lo.floor().clamp(-1.0, n) as i32;
-            r.hi[ax] = hi.floor().clamp(-1.0, n) as i32;
+            r.lo[ax] = floor(lo).clamp(-1.0, n) as i32;
+            r.hi[ax] = floor(hi).clamp(-1.0, n) as i32;
             if ax > 0 {
                 r.lo[ax] = r.lo[ax].max(0);
                 r.hi[ax] = r.hi[ax].min(self.cells.dims[ax] as i32 - 1);
@@ -311,7 +314,6 @@ impl Voxelizer {
                 moved_triangles += 1;
                 let old = self.range[t];
                 self.mark_rows(old);
-                self.unbin(t);
             }
         }
         for (v, p) in positions_m.iter().enumerate() {
@@ -320,10 +322,31 @@ impl Voxelizer {
                 self.pos_m[v] = *p;
             }
         }
+        // A moved triangle whose range is as it was marks no new row, and one whose bins are as
+        // they were stays in them (most of them: the surface moves by a fraction of a cell per
+        // frame; a bin's order does not matter). Every triangle leaves its old bins before any
+        // enters its new ones.
         for t in 0..self.triangles.len() {
-            if self.tri_moved[t] {
-                self.range[t] = self.triangle_range(t);
+            if !self.tri_moved[t] {
+                continue;
+            }
+            let new = self.triangle_range(t);
+            if new == self.range[t] {
+                self.tri_moved[t] = false;
+                continue;
+            }
+            if self.bin_range(&new) != self.bin_range(&self.range[t]) {
+                self.unbin(t);
+                self.tri_rebin[t] = true;
+            }
+            self.range[t] = new;
+        }
+        for t in 0..self.triangles.len() {
+            if self.tri_rebin[t] {
+                self.tri_rebin[t] = false;
                 self.bin(t);
+            }
+            if self.tri_moved[t] {
                 let new = self.range[t];
                 self.mark_rows(new);
             }
@@ -410,8 +433,8 @@ impl Voxelizer {
                 k as f64 - EPS,
                 k as f64 + 1.0 + EPS,
             ) {
-                let lo = (x0 - EPS).floor().max(0.0);
-                let hi = (x1 + EPS).floor().min(nx as f64 - 1.0);
+                let lo = floor(x0 - EPS).max(0.0);
+                let hi = floor(x1 + EPS).min(nx as f64 - 1.0);
                 if lo <= hi {
                     for i in lo as usize..=hi as usize {
                         self.row_state[i] = state::BAND;
