@@ -48,14 +48,7 @@ fn fluxes_equal_the_hydraulics(cut_cells: bool) {
         // A relative bound from single-precision face velocities and an absolute floor of
         // 1e-5 ml/min. With cut cells the walls' flux is a sum over the wall pieces of velocities
         // of the frame's largest flow's magnitude: relative to that flow (scene_cut_walls.rs).
-        let largest = [
-            fl.hydraulic_inflow_m3_per_s,
-            fl.hydraulic_outflow_m3_per_s,
-            fl.hydraulic_losses_m3_per_s,
-            fl.hydraulic_dvdt_m3_per_s,
-        ]
-        .iter()
-        .fold(0.0f64, |m, q| m.max(q.abs()));
+        let largest = largest_flow_m3_per_s(&fl);
         let close = |fluid: f64, hyd: f64, what: &str| {
             let scale = if cut_cells { largest } else { hyd.abs() };
             let tol = 1e-5 * scale + 1e-13;

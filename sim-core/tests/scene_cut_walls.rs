@@ -7,7 +7,9 @@
 //! fluid in while they flow out), and the walls `dV/dt`.
 
 mod scene_common;
-use scene_common::{coarse, inputs, own, scope_in_cavity, DT};
+use scene_common::{
+    coarse, flux_balance_m3_per_s, inputs, largest_flow_m3_per_s, own, scope_in_cavity, DT,
+};
 
 use hydrometra_sim::scene::Scene;
 
@@ -41,18 +43,8 @@ fn with_cut_cells_the_walls_and_the_os_carry_the_hydraulics_flows_every_fluid_st
         assert_eq!(regions, closed, "frame {f}: an open region");
         split += usize::from(regions > 1);
         // The balance of the fluxes measured on the projected field.
-        let balance = fl.fluid_inflow_m3_per_s
-            - fl.fluid_outflow_m3_per_s
-            - fl.fluid_wall_m3_per_s
-            - fl.fluid_open_m3_per_s;
-        let scale = [
-            fl.hydraulic_inflow_m3_per_s,
-            fl.hydraulic_outflow_m3_per_s,
-            fl.hydraulic_losses_m3_per_s,
-            fl.hydraulic_dvdt_m3_per_s,
-        ]
-        .iter()
-        .fold(1e-12f64, |m, q| m.max(q.abs()));
+        let balance = flux_balance_m3_per_s(&fl);
+        let scale = largest_flow_m3_per_s(&fl).max(1e-12);
         let rel = balance.abs() / scale;
         worst = worst.max(rel);
         // Each region with wall pieces balances by itself (its walls take up its mismatch) and a

@@ -133,18 +133,8 @@ fn soak(seed: u64) {
             unconverged += usize::from(!stats.projection_converged);
             // in - out - walls - os is what the projection removed from closed regions (reported)
             // plus single-precision rounding (scene_cut_walls.rs).
-            let balance = fl.fluid_inflow_m3_per_s
-                - fl.fluid_outflow_m3_per_s
-                - fl.fluid_wall_m3_per_s
-                - fl.fluid_open_m3_per_s;
-            let scale = [
-                fl.hydraulic_inflow_m3_per_s,
-                fl.hydraulic_outflow_m3_per_s,
-                fl.hydraulic_losses_m3_per_s,
-                fl.hydraulic_dvdt_m3_per_s,
-            ]
-            .iter()
-            .fold(1e-12f64, |m, q| m.max(q.abs()));
+            let balance = flux_balance_m3_per_s(&fl);
+            let scale = largest_flow_m3_per_s(&fl).max(1e-12);
             let rel = (balance.abs() - fl.closed_region_mismatch_m3_per_s).max(0.0) / scale;
             assert!(
                 rel <= 1e-4,
@@ -181,14 +171,7 @@ fn soak(seed: u64) {
             fl.inflow_jet_speed_m_per_s,
             fl.inflow_open_fraction
         );
-        let largest_flow = [
-            fl.hydraulic_inflow_m3_per_s,
-            fl.hydraulic_outflow_m3_per_s,
-            fl.hydraulic_losses_m3_per_s,
-            fl.hydraulic_dvdt_m3_per_s,
-        ]
-        .iter()
-        .fold(0.0f64, |m, q| m.max(q.abs()));
+        let largest_flow = largest_flow_m3_per_s(&fl);
         peak_speed = peak_speed.max(port).max(largest_flow / channel_m2);
         let ratio = resolved.max(sliver) / peak_speed;
         assert!(

@@ -7,7 +7,8 @@
 
 use hydrometra_sim::hydraulics::HydraulicInputs;
 use hydrometra_sim::scene::{
-    prepare, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs, ScopePose,
+    prepare, FluxBalance, HydraulicsInput, RigInputs, Scene, SceneAssets, SceneDesc, SceneInputs,
+    ScopePose,
 };
 use hydrometra_sim::units::mmhg_to_pa;
 
@@ -100,4 +101,26 @@ pub fn slide_and_sway(home: ScopePose, f: usize) -> ScopePose {
         s.tip_position_m[a] += slide * d[a] / m + sway * c[a] / n;
     }
     s
+}
+
+/// The largest of a frame's hydraulic flows (inflow, outflow, losses, dV/dt), m^3/s: the scale the
+/// fluxes' bounds are relative to.
+pub fn largest_flow_m3_per_s(fl: &FluxBalance) -> f64 {
+    [
+        fl.hydraulic_inflow_m3_per_s,
+        fl.hydraulic_outflow_m3_per_s,
+        fl.hydraulic_losses_m3_per_s,
+        fl.hydraulic_dvdt_m3_per_s,
+    ]
+    .iter()
+    .fold(0.0f64, |m, q| m.max(q.abs()))
+}
+
+/// `in - out - walls - os` of the fluxes measured on the projected field, m^3/s: what the
+/// projection removed from closed regions plus rounding.
+pub fn flux_balance_m3_per_s(fl: &FluxBalance) -> f64 {
+    fl.fluid_inflow_m3_per_s
+        - fl.fluid_outflow_m3_per_s
+        - fl.fluid_wall_m3_per_s
+        - fl.fluid_open_m3_per_s
 }
