@@ -12,6 +12,7 @@ use hydrometra_hil_tests::{
     Daemon, StatusReader,
 };
 use hydrometra_ipc::status::{scene_stage, scene_state};
+use hydrometra_ipc::Status;
 use serde_json::Value;
 
 /// Runs the checker for `seconds` and returns its JSON lines. Its output is read while `during`
@@ -44,6 +45,38 @@ fn check(prefix: &str, seconds: f64, during: impl FnOnce()) -> Vec<Value> {
 
 fn of<'a>(lines: &'a [Value], kind: &str) -> Vec<&'a Value> {
     lines.iter().filter(|l| l["kind"] == kind).collect()
+}
+
+/// The status cavity volume at `pressure_pa`, linear between the two consecutive statuses within
+/// 20 of sequence `seq` whose pressures bracket it (the nearest such pair); `None` without one.
+fn status_volume_at(statuses: &[Status], seq: u64, pressure_pa: f64) -> Option<f64> {
+    let near: Vec<&Status> = statuses
+        .iter()
+        .filter(|s| s.sequence.abs_diff(seq) <= 20)
+        .collect();
+    near.windows(2)
+        .filter(|w| w[1].sequence == w[0].sequence + 1)
+        .filter_map(|w| {
+            let (a, b) = (w[0], w[1]);
+            let (lo, hi) = if a.cavity_pressure_pa <= b.cavity_pressure_pa {
+                (a, b)
+            } else {
+                (b, a)
+            };
+            if !(lo.cavity_pressure_pa..=hi.cavity_pressure_pa).contains(&pressure_pa) {
+                return None;
+            }
+            let span = hi.cavity_pressure_pa - lo.cavity_pressure_pa;
+            let t = if span > 0.0 {
+                (pressure_pa - lo.cavity_pressure_pa) / span
+            } else {
+                0.0
+            };
+            let volume = lo.cavity_volume_m3 + t * (hi.cavity_volume_m3 - lo.cavity_volume_m3);
+            Some((a.sequence.abs_diff(seq), volume))
+        })
+        .min_by_key(|(d, _)| *d)
+        .map(|(_, v)| v)
 }
 
 fn f(v: &Value) -> f64 {
@@ -150,24 +183,45 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
         .map(|p| f(&p["t"]))
         .filter(|t| *t > ready + 1.0)
         .collect();
-    // The enclosed volume of the published mesh = status cavity volume within 1 %.
-    let mut compared = 0;
+    // The enclosed volume of the published mesh = the hydraulics' cavity volume at the frame's
+    // pressure within 0.2 % (measured 0.023-0.038 %: the replay's Hermite interpolation against
+    // the compliance curve's, between the atlas's levels). The status a frame names is the newest
+    // published when the frame took its inputs: up to a status period (10 ms here) older, more
+    // when the machine held the loop off its CPU, while the cavity fills (CI once paired a frame
+    // with a status 1.04 % of volume behind; against the named status the worst was 0.29-0.32 %
+    // in three quiet runs). The hydraulics' volume is a function of the pressure (the atlas's
+    // compliance curve), so it is read at the frame's pressure from the statuses around the
+    // named one.
+    let (mut compared, mut worst_volume) = (0, (0.0f64, 0.0f64));
     for p in &pos {
         let (Some(volume), Some(st)) = (p["volume_m3"].as_f64(), p["status"].as_object()) else {
             continue;
         };
-        let status_volume = f(&st["cavity_volume_m3"]);
+        let Some(status_volume) =
+            status_volume_at(&statuses, f(&st["sequence"]) as u64, f(&p["pressure_pa"]))
+        else {
+            continue;
+        };
         let err = (volume - status_volume).abs() / status_volume;
         assert!(
-            err <= 0.01,
+            err <= 0.002,
             "published cavity {:.4} ml vs status {:.4} ml ({:.2} %) at {:.0} Pa",
             volume * 1e6,
             status_volume * 1e6,
             err * 100.0,
             f(&p["pressure_pa"])
         );
+        if err > worst_volume.0 {
+            worst_volume = (err, f(&p["pressure_pa"]));
+        }
         compared += 1;
     }
+    println!(
+        "{compared} frames: the published cavity's volume against status within {:.3} % (worst \
+         at {:.0} Pa)",
+        100.0 * worst_volume.0,
+        worst_volume.1
+    );
     assert!(
         compared >= pos.len() / 2,
         "only {compared} of {} frames paired with their status",
