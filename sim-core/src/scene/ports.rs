@@ -587,12 +587,12 @@ impl Ports {
             }
         }
         // The inflow port: the tip cells whose fluid faces look forward, nearest the axis first,
-        // until their fluid-facing area (with cut cells, its open part) reaches the channel's; the last one (the rim) counts
-        // with the share of its area that completes the channel's, so the port's area on the
-        // grid is the channel's at any voxel size and the jet leaves at the hydraulics' port
-        // velocity. Fewer forward faces than the channel's area: tissue covers part of the tip.
-        // Unstable (no scratch buffer on the heap), with the cells' order (that of `tips`) among
-        // equal distances: the order of a stable sort.
+        // until their fluid-facing area (with cut cells, its open part) reaches the channel's; the
+        // last one (the rim) counts with the share of its area that completes the channel's, so the
+        // port's area on the grid is the channel's at any voxel size and the jet leaves at the
+        // hydraulics' port velocity. Fewer forward faces than the channel's area: tissue covers
+        // part of the tip. Unstable (no scratch buffer on the heap), with the cells' order (that of
+        // `tips`) among equal distances: the order of a stable sort.
         self.candidates
             .sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cell.cmp(&b.1.cell)));
         let area = self.inflow_channel_area_m2;
