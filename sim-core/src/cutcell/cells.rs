@@ -156,6 +156,13 @@ pub struct CutCells {
     interface_span: Vec<Span>,
     decide_span: Vec<Span>,
     stabilise_span: Vec<Span>,
+    /// What a stage's rows and strips changed, per row or strip: written by the two halves of
+    /// the stage, then read in the order they were listed.
+    strip_changed: [Vec<Span>; 2],
+    row_combined: Vec<(Span, Span, bool)>,
+    row_changed: Vec<Span>,
+    /// Per layer `k`, the work of a stage's rows or strips (for the split in two halves).
+    layer_work: Vec<u64>,
     initialised: bool,
 }
 
@@ -235,6 +242,13 @@ impl CutCells {
             interface_span: vec![Span::EMPTY; rows],
             decide_span: vec![Span::EMPTY; rows],
             stabilise_span: vec![Span::EMPTY; rows],
+            strip_changed: [
+                vec![Span::EMPTY; (ny + 1) * nz],
+                vec![Span::EMPTY; ny * (nz + 1)],
+            ],
+            row_combined: vec![(Span::EMPTY, Span::EMPTY, false); rows],
+            row_changed: vec![Span::EMPTY; rows],
+            layer_work: vec![0; nz + 1],
             initialised: false,
         })
     }
@@ -408,7 +422,10 @@ impl CutCells {
     /// Combines the flagged rows and strips, then applies the small-cell rule where their
     /// values changed. Each stage works only on the cells whose inputs changed: a cell's walls
     /// follow its faces, its merge target its own and its face neighbours' volumes and its faces,
-    /// its stabilised volume its own and its neighbours' volumes and targets.
+    /// its stabilised volume its own and its neighbours' volumes and targets. Each stage computes
+    /// its rows (strips) in two halves on the two cores (a row writes only its own cells and faces,
+    /// and reads only what earlier stages wrote), then flags what they changed in one pass, in the
+    /// order the rows were listed: the same values and lists as one pass doing both.
     fn finish(&mut self, stats: &mut CutCellStats) {
         let [nx, ny, nz] = self.cells.dims;
         self.changed_rows.clear();
@@ -418,11 +435,12 @@ impl CutCells {
             // y-strip `j + (ny + 1) k`, z-strip `j + ny k`: the rows `row - step` and `row`
             // lie on the two sides of the strip's plane.
             let (width, step) = if axis == 1 { (ny + 1, 1) } else { (ny, ny) };
+            self.combine_strips(axis, &strips, width);
             for &u in &strips {
                 let u = u as usize;
                 self.strip_flags[axis - 1][u] = false;
-                let span = std::mem::replace(&mut self.strip_span[axis - 1][u], Span::EMPTY);
-                let changed = self.combine_faces(axis, nx * u, span);
+                self.strip_span[axis - 1][u] = Span::EMPTY;
+                let changed = self.strip_changed[axis - 1][u];
                 if !changed.is_empty() {
                     let (j, k) = (u % width, u / width);
                     let (plane, extent) = if axis == 1 { (j, ny) } else { (k, nz) };
@@ -440,11 +458,12 @@ impl CutCells {
         }
         // Rows: volumes and x-faces.
         let rows = std::mem::take(&mut self.stage_rows[0]);
+        self.combine_rows(&rows);
         for &r in &rows {
             let r = r as usize;
             self.row_flags[r] &= !COMBINE;
-            let span = std::mem::replace(&mut self.combine_span[r], Span::EMPTY);
-            let (faces, volumes, approx) = self.combine_row(r, span);
+            self.combine_span[r] = Span::EMPTY;
+            let (faces, volumes, approx) = self.row_combined[r];
             if !faces.is_empty() || !volumes.is_empty() || approx {
                 self.row_flags[r] |= CHANGED;
             }
@@ -466,11 +485,12 @@ impl CutCells {
         self.stage_rows[0].clear();
         // Walls.
         let rows = std::mem::take(&mut self.stage_rows[1]);
+        self.interface_rows(&rows);
         for &r in &rows {
             let r = r as usize;
             self.row_flags[r] &= !INTERFACE;
-            let span = std::mem::replace(&mut self.interface_span[r], Span::EMPTY);
-            if self.interface_row(r, span) {
+            self.interface_span[r] = Span::EMPTY;
+            if !self.row_changed[r].is_empty() {
                 self.row_flags[r] |= CHANGED;
             }
         }
@@ -478,11 +498,12 @@ impl CutCells {
         self.stage_rows[1].clear();
         // Merges; a changed target changes the stabilised volumes around it.
         let rows = std::mem::take(&mut self.stage_rows[2]);
+        self.decide_rows(&rows);
         for &r in &rows {
             let r = r as usize;
             self.row_flags[r] &= !DECIDE;
-            let span = std::mem::replace(&mut self.decide_span[r], Span::EMPTY);
-            let changed = self.decide_row(r, span);
+            self.decide_span[r] = Span::EMPTY;
+            let changed = self.row_changed[r];
             if !changed.is_empty() {
                 self.row_flags[r] |= CHANGED;
                 self.spread(r, changed, STABILISE);
@@ -491,11 +512,12 @@ impl CutCells {
         self.stage_rows[2] = rows;
         self.stage_rows[2].clear();
         let rows = std::mem::take(&mut self.stage_rows[3]);
+        self.stabilise_rows(&rows);
         for &r in &rows {
             let r = r as usize;
             self.row_flags[r] &= !STABILISE;
-            let span = std::mem::replace(&mut self.stabilise_span[r], Span::EMPTY);
-            if self.stabilise_row(r, span) {
+            self.stabilise_span[r] = Span::EMPTY;
+            if !self.row_changed[r].is_empty() {
                 self.row_flags[r] |= CHANGED;
             }
         }
@@ -556,71 +578,270 @@ impl CutCells {
         spans[r].join(cells);
     }
 
-    /// Combines the faces normal to `axis` at positions `span` of the `nx` from `base`; where
-    /// any changed.
-    fn combine_faces(&mut self, axis: usize, base: usize, span: Span) -> Span {
+    /// Combines the faces of `strips` (normal to `axis`, `width` strips a layer) at the positions
+    /// of their spans, in two halves of layers; per strip, where its faces changed
+    /// (`strip_changed`).
+    fn combine_strips(&mut self, axis: usize, strips: &[u32], width: usize) {
         let nx = self.cells.dims[0];
-        let params = self.params;
-        let mut changed = Span::EMPTY;
-        for i in span.range(nx - 1) {
-            let f = base + i;
-            let (v, _) = self.combined(|l| l.face_fractions(axis)[f]);
-            let a = store(&mut self.faces[axis][f], v);
-            let b = store(
-                &mut self.stabilised_faces[axis][f],
-                params.stabilised_face(v),
-            );
-            if a | b {
-                changed.add(i);
-            }
-        }
-        changed
-    }
-
-    /// Combines row `r`'s volumes and `nx + 1` x-faces at positions `span` (cell `i` and face
-    /// `i`); where faces and volumes changed, and whether a cell's approximation did.
-    fn combine_row(&mut self, r: usize, span: Span) -> (Span, Span, bool) {
-        let nx = self.cells.dims[0];
-        let params = self.params;
-        let mut faces = Span::EMPTY;
-        let base = (nx + 1) * r;
-        for i in span.range(nx) {
-            let f = base + i;
-            let (v, _) = self.combined(|l| l.face_fractions(0)[f]);
-            let a = store(&mut self.faces[0][f], v);
-            let b = store(&mut self.stabilised_faces[0][f], params.stabilised_face(v));
-            if a | b {
-                faces.add(i);
-            }
-        }
-        let mut volumes = Span::EMPTY;
-        let mut approx_changed = false;
-        for i in span.range(nx - 1) {
-            let n = nx * r + i;
-            let (v, approx) = self.combined(|l| l.volume_fractions()[n]);
-            if store(&mut self.volume[n], v) {
-                volumes.add(i);
-            }
-            if approx != self.approximate[n] {
-                self.approximate[n] = approx;
-                if approx {
-                    self.approximate_count += 1;
-                } else {
-                    self.approximate_count -= 1;
+        let spans = &self.strip_span[axis - 1];
+        let at = width * split_layer(strips, width, spans, &mut self.layer_work);
+        let combine = Combine {
+            background: self.background,
+            params: self.params,
+            layers: &self.layers,
+        };
+        let (faces, faces_b) = self.faces[axis].split_at_mut(nx * at);
+        let (stable, stable_b) = self.stabilised_faces[axis].split_at_mut(nx * at);
+        let (changed, changed_b) = self.strip_changed[axis - 1].split_at_mut(at);
+        let run = |lo: usize, faces: &mut [f64], stable: &mut [f64], changed: &mut [Span]| {
+            for &u in strips {
+                let u = u as usize;
+                if u < lo || u - lo >= changed.len() {
+                    continue;
                 }
-                approx_changed = true;
+                let base = nx * u;
+                let mut c = Span::EMPTY;
+                for i in spans[u].range(nx - 1) {
+                    let f = base + i;
+                    let (v, _) = combine.value(|l| l.face_fractions(axis)[f]);
+                    let a = store(&mut faces[f - nx * lo], v);
+                    let b = store(&mut stable[f - nx * lo], combine.params.stabilised_face(v));
+                    if a | b {
+                        c.add(i);
+                    }
+                }
+                changed[u - lo] = c;
             }
-        }
-        (faces, volumes, approx_changed)
+        };
+        crate::fork_join::join(
+            || run(0, faces, stable, changed),
+            || run(at, faces_b, stable_b, changed_b),
+        );
     }
 
+    /// Combines the volumes and `nx + 1` x-faces of `rows` at the positions of their spans
+    /// (cell `i` and face `i`), in two halves of layers; per row, where faces and volumes changed
+    /// and whether a cell's approximation did (`row_combined`).
+    fn combine_rows(&mut self, rows: &[u32]) {
+        let [nx, ny, _] = self.cells.dims;
+        let spans = &self.combine_span;
+        let at = ny * split_layer(rows, ny, spans, &mut self.layer_work);
+        let combine = Combine {
+            background: self.background,
+            params: self.params,
+            layers: &self.layers,
+        };
+        let (fx, fx_b) = self.faces[0].split_at_mut((nx + 1) * at);
+        let (sx, sx_b) = self.stabilised_faces[0].split_at_mut((nx + 1) * at);
+        let (volume, volume_b) = self.volume.split_at_mut(nx * at);
+        let (approx, approx_b) = self.approximate.split_at_mut(nx * at);
+        let (combined, combined_b) = self.row_combined.split_at_mut(at);
+        // Returns the change in the count of approximate cells.
+        let run = |lo: usize,
+                   fx: &mut [f64],
+                   sx: &mut [f64],
+                   volume: &mut [f64],
+                   approximate: &mut [bool],
+                   combined: &mut [(Span, Span, bool)]|
+         -> isize {
+            let mut count = 0;
+            for &r in rows {
+                let r = r as usize;
+                if r < lo || r - lo >= combined.len() {
+                    continue;
+                }
+                let span = spans[r];
+                let mut faces = Span::EMPTY;
+                let base = (nx + 1) * r;
+                for i in span.range(nx) {
+                    let f = base + i;
+                    let (v, _) = combine.value(|l| l.face_fractions(0)[f]);
+                    let idx = f - (nx + 1) * lo;
+                    let a = store(&mut fx[idx], v);
+                    let b = store(&mut sx[idx], combine.params.stabilised_face(v));
+                    if a | b {
+                        faces.add(i);
+                    }
+                }
+                let mut volumes = Span::EMPTY;
+                let mut approx_changed = false;
+                for i in span.range(nx - 1) {
+                    let n = nx * r + i;
+                    let (v, approx) = combine.value(|l| l.volume_fractions()[n]);
+                    let idx = n - nx * lo;
+                    if store(&mut volume[idx], v) {
+                        volumes.add(i);
+                    }
+                    if approx != approximate[idx] {
+                        approximate[idx] = approx;
+                        count += if approx { 1 } else { -1 };
+                        approx_changed = true;
+                    }
+                }
+                combined[r - lo] = (faces, volumes, approx_changed);
+            }
+            count
+        };
+        let (a, b) = crate::fork_join::join(
+            || run(0, fx, sx, volume, approx, combined),
+            || run(at, fx_b, sx_b, volume_b, approx_b, combined_b),
+        );
+        self.approximate_count = self.approximate_count.saturating_add_signed(a + b);
+    }
+
+    /// The walls of `rows`' cells in their spans from their faces, in two halves of layers; per
+    /// row, where any changed (`row_changed`).
+    fn interface_rows(&mut self, rows: &[u32]) {
+        let [nx, ny, _] = self.cells.dims;
+        let spans = &self.interface_span;
+        let at = ny * split_layer(rows, ny, spans, &mut self.layer_work);
+        let (fx, fy, fz) = (&self.faces[0], &self.faces[1], &self.faces[2]);
+        let (interface, interface_b) = self.interface.split_at_mut(nx * at);
+        let (changed, changed_b) = self.row_changed.split_at_mut(at);
+        let run = |lo: usize, interface: &mut [[f64; 3]], changed: &mut [Span]| {
+            for &r in rows {
+                let r = r as usize;
+                if r < lo || r - lo >= changed.len() {
+                    continue;
+                }
+                let (j, k) = (r % ny, r / ny);
+                let mut c = Span::EMPTY;
+                for i in spans[r].range(nx - 1) {
+                    let x = i + (nx + 1) * r;
+                    let y = i + nx * (j + (ny + 1) * k);
+                    let z = i + nx * r;
+                    let s = [
+                        -(fx[x + 1] - fx[x]),
+                        -(fy[y + nx] - fy[y]),
+                        -(fz[z + nx * ny] - fz[z]),
+                    ];
+                    let slot = &mut interface[nx * (r - lo) + i];
+                    if slot.map(f64::to_bits) != s.map(f64::to_bits) {
+                        *slot = s;
+                        c.add(i);
+                    }
+                }
+                changed[r - lo] = c;
+            }
+        };
+        crate::fork_join::join(
+            || run(0, interface, changed),
+            || run(at, interface_b, changed_b),
+        );
+    }
+
+    /// The merge targets of `rows`' cells in their spans, and the counts, in two halves of
+    /// layers; per row, where any target changed (`row_changed`).
+    fn decide_rows(&mut self, rows: &[u32]) {
+        let [nx, ny, _] = self.cells.dims;
+        let spans = &self.decide_span;
+        let at = ny * split_layer(rows, ny, spans, &mut self.layer_work);
+        let theta = self.params.min_volume_fraction;
+        let dust = self.params.round_off_fraction;
+        let (cells, volume, faces) = (&self.cells, &self.volume, &self.faces);
+        let (targets, targets_b) = self.targets.split_at_mut(nx * at);
+        let (small_state, small_state_b) = self.small_state.split_at_mut(nx * at);
+        let (changed, changed_b) = self.row_changed.split_at_mut(at);
+        // Returns the changes in the counts of merged and unmerged cells.
+        let run = |lo: usize,
+                   targets: &mut [u32],
+                   small_state: &mut [u8],
+                   changed: &mut [Span]|
+         -> [isize; 2] {
+            let mut counts = [0isize; 2];
+            for &r in rows {
+                let r = r as usize;
+                if r < lo || r - lo >= changed.len() {
+                    continue;
+                }
+                let (j, k) = (r % ny, r / ny);
+                let mut c = Span::EMPTY;
+                for i in spans[r].range(nx - 1) {
+                    let n = nx * r + i;
+                    let idx = n - nx * lo;
+                    let t = small::target(cells, volume, faces, theta, dust, (i, j, k));
+                    if t != targets[idx] {
+                        c.add(i);
+                        targets[idx] = t;
+                    }
+                    let v = volume[n];
+                    let state = if !(v > dust && v < theta) {
+                        NOT_SMALL
+                    } else if t == NO_TARGET {
+                        UNMERGED
+                    } else {
+                        MERGED
+                    };
+                    let old = small_state[idx];
+                    if state != old {
+                        for (s, d) in [(old, -1), (state, 1)] {
+                            match s {
+                                MERGED => counts[0] += d,
+                                UNMERGED => counts[1] += d,
+                                _ => {}
+                            }
+                        }
+                        small_state[idx] = state;
+                    }
+                }
+                changed[r - lo] = c;
+            }
+            counts
+        };
+        let (a, b) = crate::fork_join::join(
+            || run(0, targets, small_state, changed),
+            || run(at, targets_b, small_state_b, changed_b),
+        );
+        self.merged_count = self.merged_count.saturating_add_signed(a[0] + b[0]);
+        self.unmerged_count = self.unmerged_count.saturating_add_signed(a[1] + b[1]);
+    }
+
+    /// The stabilised volumes of `rows`' cells in their spans, in two halves of layers; per
+    /// row, where any changed (`row_changed`).
+    fn stabilise_rows(&mut self, rows: &[u32]) {
+        let [nx, ny, _] = self.cells.dims;
+        let spans = &self.stabilise_span;
+        let at = ny * split_layer(rows, ny, spans, &mut self.layer_work);
+        let dust = self.params.round_off_fraction;
+        let (cells, volume, targets) = (&self.cells, &self.volume, &self.targets);
+        let (stable, stable_b) = self.stabilised_volume.split_at_mut(nx * at);
+        let (changed, changed_b) = self.row_changed.split_at_mut(at);
+        let run = |lo: usize, stable: &mut [f64], changed: &mut [Span]| {
+            for &r in rows {
+                let r = r as usize;
+                if r < lo || r - lo >= changed.len() {
+                    continue;
+                }
+                let (j, k) = (r % ny, r / ny);
+                let mut c = Span::EMPTY;
+                for i in spans[r].range(nx - 1) {
+                    let v = small::stabilised(cells, volume, targets, dust, (i, j, k));
+                    if store(&mut stable[nx * (r - lo) + i], v) {
+                        c.add(i);
+                    }
+                }
+                changed[r - lo] = c;
+            }
+        };
+        crate::fork_join::join(|| run(0, stable, changed), || run(at, stable_b, changed_b));
+    }
+}
+
+/// What the combination of the layers reads.
+struct Combine<'a> {
+    background: Phase,
+    params: SmallCellParams,
+    layers: &'a [(SurfaceFractions, Phase)],
+}
+
+impl Combine<'_> {
     /// The combination of the layers' values `value(layer)` over the background, and whether it
     /// is approximate (a fractional layer over a fractional value).
     #[inline]
-    fn combined(&self, value: impl Fn(&SurfaceFractions) -> f64) -> (f64, bool) {
+    fn value(&self, value: impl Fn(&SurfaceFractions) -> f64) -> (f64, bool) {
         let mut phi = self.background.fraction();
         let mut approx = false;
-        for (l, phase) in &self.layers {
+        for (l, phase) in self.layers {
             let f = value(l);
             approx |= (phi > 0.0 && phi < 1.0) && (f > 0.0 && f < 1.0);
             phi = match phase {
@@ -630,95 +851,27 @@ impl CutCells {
         }
         (phi, approx)
     }
+}
 
-    /// The walls of row `r`'s cells `span` from their faces; whether any changed.
-    fn interface_row(&mut self, r: usize, span: Span) -> bool {
-        let [nx, ny, _] = self.cells.dims;
-        let (j, k) = (r % ny, r / ny);
-        let (fx, fy, fz) = (&self.faces[0], &self.faces[1], &self.faces[2]);
-        let mut changed = false;
-        for i in span.range(nx - 1) {
-            let x = i + (nx + 1) * r;
-            let y = i + nx * (j + (ny + 1) * k);
-            let z = i + nx * r;
-            let s = [
-                -(fx[x + 1] - fx[x]),
-                -(fy[y + nx] - fy[y]),
-                -(fz[z + nx * ny] - fz[z]),
-            ];
-            let slot = &mut self.interface[nx * r + i];
-            if slot.map(f64::to_bits) != s.map(f64::to_bits) {
-                *slot = s;
-                changed = true;
-            }
-        }
-        changed
+/// The layer `k` that splits `units` (`width` a layer; rows or strips) into two halves of about
+/// equal work, a unit's work taken as its span's length; `work` holds a layer's sum (scratch, at
+/// least one entry a layer).
+fn split_layer(units: &[u32], width: usize, spans: &[Span], work: &mut [u64]) -> usize {
+    work.fill(0);
+    for &u in units {
+        let s = spans[u as usize];
+        let len = if s.is_empty() { 0 } else { s.hi - s.lo + 1 };
+        work[u as usize / width] += u64::from(len) + 1;
     }
-
-    /// The merge targets of row `r`'s cells `span`, and the counts; where any changed.
-    fn decide_row(&mut self, r: usize, span: Span) -> Span {
-        let [nx, ny, _] = self.cells.dims;
-        let (j, k) = (r % ny, r / ny);
-        let theta = self.params.min_volume_fraction;
-        let dust = self.params.round_off_fraction;
-        let mut changed = Span::EMPTY;
-        for i in span.range(nx - 1) {
-            let n = nx * r + i;
-            let t = small::target(
-                &self.cells,
-                &self.volume,
-                &self.faces,
-                theta,
-                dust,
-                (i, j, k),
-            );
-            if t != self.targets[n] {
-                changed.add(i);
-                self.targets[n] = t;
-            }
-            let v = self.volume[n];
-            let state = if !(v > dust && v < theta) {
-                NOT_SMALL
-            } else if t == NO_TARGET {
-                UNMERGED
-            } else {
-                MERGED
-            };
-            let old = self.small_state[n];
-            if state != old {
-                match old {
-                    MERGED => self.merged_count -= 1,
-                    UNMERGED => self.unmerged_count -= 1,
-                    _ => {}
-                }
-                match state {
-                    MERGED => self.merged_count += 1,
-                    UNMERGED => self.unmerged_count += 1,
-                    _ => {}
-                }
-                self.small_state[n] = state;
-            }
+    let total: u64 = work.iter().sum();
+    let mut below = 0;
+    for (k, &w) in work.iter().enumerate() {
+        if 2 * below >= total {
+            return k;
         }
-        changed
+        below += w;
     }
-
-    /// The stabilised volumes of row `r`'s cells `span`; whether any changed.
-    fn stabilise_row(&mut self, r: usize, span: Span) -> bool {
-        let [nx, ny, _] = self.cells.dims;
-        let (j, k) = (r % ny, r / ny);
-        let mut changed = false;
-        for i in span.range(nx - 1) {
-            let v = small::stabilised(
-                &self.cells,
-                &self.volume,
-                &self.targets,
-                self.params.round_off_fraction,
-                (i, j, k),
-            );
-            changed |= store(&mut self.stabilised_volume[nx * r + i], v);
-        }
-        changed
-    }
+    work.len()
 }
 
 /// `v` with rounding removed: below `eps` 0, above `1 - eps` 1 (the stabilised faces' rule).

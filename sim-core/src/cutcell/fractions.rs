@@ -18,6 +18,10 @@
 //! n_x dl` plus `h` times the inside length of the face's right edge, that length being minus the
 //! cross-section's `integral of n_x dl` left of it. Everything is exact for the polygonal surface
 //! up to rounding; the tie rule of [`super::clip`] decides what lies exactly on a grid plane.
+//!
+//! The units of an update are computed in two halves, the layers `k` below a split and the rest,
+//! on the two cores: a unit writes only its own cells and faces, so which thread computes it
+//! changes nothing.
 
 use super::clip::{self, cell_of, Clipper, Segment, P3};
 use super::{CutCellError, Orientation};
@@ -152,17 +156,18 @@ pub struct SurfaceFractions {
     moved: Vec<bool>,
     /// Per triangle, during an update: [`MOVED`], [`REACH_CHANGED`], [`REBIN`].
     tri_update: Vec<u8>,
-    candidates: Vec<u32>,
-    acc_moment: Vec<f64>,
-    acc_area: Vec<[f64; 3]>,
     /// The rows' sums, per cell (the rows are summed together, triangle by triangle): the
     /// pieces' x-moments and area vectors, and per row the x-area of the pieces left of the box.
     row_moment: Vec<f64>,
     row_area: Vec<[f64; 3]>,
     row_left: Vec<f64>,
-    clipper: Clipper,
-    /// A triangle clipped to a y-slab, clipped on by `clipper` to each row of the slab.
-    slab_clipper: Clipper,
+    /// Per row, y-strip and z-strip, what its last recomputation changed (read in the order the
+    /// units were marked).
+    results: [Vec<Changed>; 3],
+    /// Per layer `k`, the work of its dirty units (for the split of the units in two halves).
+    layer_work: Vec<u64>,
+    /// The two halves' scratch.
+    scratch: [Scratch; 2],
 }
 
 #[inline]
@@ -249,14 +254,16 @@ impl SurfaceFractions {
             ],
             moved: vec![false; vertex_count],
             tri_update: vec![0; t],
-            candidates: Vec::with_capacity(t),
-            acc_moment: vec![0.0; nx],
-            acc_area: vec![[0.0; 3]; nx],
             row_moment: vec![0.0; n],
             row_area: vec![[0.0; 3]; n],
             row_left: vec![0.0; ny * nz],
-            clipper: Clipper::default(),
-            slab_clipper: Clipper::default(),
+            results: [
+                vec![Changed::NONE; ny * nz],
+                vec![Changed::NONE; (ny + 1) * nz],
+                vec![Changed::NONE; ny * (nz + 1)],
+            ],
+            layer_work: vec![0; nz + 1],
+            scratch: [Scratch::new(nx, t), Scratch::new(nx, t)],
             triangles,
         })
     }
@@ -587,295 +594,528 @@ impl SurfaceFractions {
         Ok(stats)
     }
 
+    /// Recomputes the dirty units in two halves of the box on the two cores (the solver's
+    /// fork-join: with a rayon pool of one thread, one after the other), then lists what changed.
     fn process(&mut self) -> FractionStats {
+        let ks = self.split_layer();
+        {
+            let shared = Shared {
+                cells: &self.cells,
+                triangles: &self.triangles,
+                sign: self.sign,
+                pos: &self.pos,
+                reach: &self.reach,
+                bins: &self.bins,
+                bins_dims: self.bins_dims,
+                row_dirty: &self.row_dirty,
+                dirty_rows: &self.dirty_rows,
+                dirty_strips: [&self.dirty_strips[0], &self.dirty_strips[1]],
+            };
+            let [results_rows, results_y, results_z] = &mut self.results;
+            let [faces_x, faces_y, faces_z] = &mut self.faces;
+            let outputs = Outputs {
+                k0: 0,
+                row_moment: &mut self.row_moment,
+                row_area: &mut self.row_area,
+                row_left: &mut self.row_left,
+                volume: &mut self.volume,
+                interface: &mut self.interface,
+                faces: [faces_x, faces_y, faces_z],
+                results: [results_rows, results_y, results_z],
+            };
+            let (lower, upper) = outputs.split(ks, self.cells.dims);
+            let [a, b] = &mut self.scratch;
+            // Every unit reads only the shared state and writes only its own outputs, so the
+            // two halves give what one pass over the units would, bit for bit.
+            crate::fork_join::join(
+                || run_half(&shared, lower, a),
+                || run_half(&shared, upper, b),
+            );
+        }
+        // The units' results in the order they were marked, as one pass would list them.
         let mut stats = FractionStats::default();
         self.changed_rows.clear();
         self.changed_row_spans.clear();
-        let [_, ny, _] = self.cells.dims;
-        let rows = std::mem::take(&mut self.dirty_rows);
-        self.sum_rows(&rows);
-        for &u in &rows {
+        for &u in &self.dirty_rows {
             self.row_dirty[u as usize] = false;
-            let (cells, faces, span) = self.process_row(u as usize % ny, u as usize / ny);
-            if cells + faces > 0 {
+            let c = self.results[0][u as usize];
+            if c.cells + c.faces > 0 {
                 self.changed_rows.push(u);
-                self.changed_row_spans.push(span);
+                self.changed_row_spans.push(c.span);
             }
-            stats.changed_cells += cells;
-            stats.changed_faces += faces;
+            stats.changed_cells += c.cells as usize;
+            stats.changed_faces += c.faces as usize;
         }
-        stats.rows = rows.len();
-        self.dirty_rows = rows;
+        stats.rows = self.dirty_rows.len();
         self.dirty_rows.clear();
         // y-strips (`j + (ny + 1) k`), then z-strips (`j + ny k`).
         for s in 0..2 {
             self.changed_strips[s].clear();
             self.changed_strip_spans[s].clear();
-            let width = if s == 0 { ny + 1 } else { ny };
-            let strips = std::mem::take(&mut self.dirty_strips[s]);
-            for &u in &strips {
+            for &u in &self.dirty_strips[s] {
                 self.strip_dirty[s][u as usize] = false;
-                let (faces, span) =
-                    self.process_strip(s + 1, u as usize % width, u as usize / width);
-                if faces > 0 {
+                let c = self.results[s + 1][u as usize];
+                if c.faces > 0 {
                     self.changed_strips[s].push(u);
-                    self.changed_strip_spans[s].push(span);
+                    self.changed_strip_spans[s].push(c.span);
                 }
-                stats.changed_faces += faces;
+                stats.changed_faces += c.faces as usize;
             }
-            stats.strips += strips.len();
-            self.dirty_strips[s] = strips;
+            stats.strips += self.dirty_strips[s].len();
             self.dirty_strips[s].clear();
         }
         stats
     }
 
-    /// The triangles of the bin of `(j, k)` whose reach passes `keep`, in index order.
-    fn gather(&mut self, j: usize, k: usize, keep: impl Fn(&Reach) -> bool) {
-        self.candidates.clear();
+    /// The layer `k` that splits the dirty units into two halves of about equal work: the layers
+    /// below it (their rows and y-strips, the z-strips on their planes) and the rest. A unit's work
+    /// is taken as the triangles of its bin, those it tests: a count of rows alone would not
+    /// weigh a row crossed by many triangles above one crossed by few.
+    fn split_layer(&mut self) -> usize {
+        let [_, ny, nz] = self.cells.dims;
+        let (bins, bins_dims) = (&self.bins, self.bins_dims);
+        let bin_len = |j: usize, k: usize| bins[j / BIN + bins_dims[0] * (k / BIN)].len() as u64;
+        let work = &mut self.layer_work;
+        work.fill(0);
+        for (units, width) in [
+            (&self.dirty_rows, ny),
+            (&self.dirty_strips[0], ny + 1),
+            (&self.dirty_strips[1], ny),
+        ] {
+            for &u in units {
+                let (j, k) = (u as usize % width, u as usize / width);
+                work[k] += bin_len(j, k);
+            }
+        }
+        let total: u64 = work.iter().sum();
+        let mut below = 0;
+        for (k, &w) in work.iter().enumerate() {
+            if 2 * below >= total {
+                return k.min(nz);
+            }
+            below += w;
+        }
+        nz
+    }
+}
+
+/// The surface's state every unit reads, shared by the two halves of
+/// [`SurfaceFractions::process`].
+struct Shared<'a> {
+    cells: &'a VoxelBox,
+    triangles: &'a [[u32; 3]],
+    sign: f64,
+    pos: &'a [P3],
+    reach: &'a [Reach],
+    bins: &'a [Vec<u32>],
+    bins_dims: [usize; 2],
+    row_dirty: &'a [bool],
+    dirty_rows: &'a [u32],
+    dirty_strips: [&'a [u32]; 2],
+}
+
+impl Shared<'_> {
+    /// The triangles of the bin of `(j, k)` whose reach passes `keep`, in index order, into
+    /// `candidates`.
+    fn gather(&self, j: usize, k: usize, candidates: &mut Vec<u32>, keep: impl Fn(&Reach) -> bool) {
+        candidates.clear();
         let bin = &self.bins[j / BIN + self.bins_dims[0] * (k / BIN)];
         for &t in bin {
             if keep(&self.reach[t as usize]) {
-                self.candidates.push(t);
+                candidates.push(t);
             }
         }
     }
+}
 
-    /// Sums the pieces of every triangle in the dirty rows `rows` into their rows' sums. The
-    /// triangles go in index order, each clipped to a y-slab once and then to the slab's dirty
-    /// rows, so every row gets the pieces and sums a row alone would, in the same order.
-    fn sum_rows(&mut self, rows: &[u32]) {
-        let [nx, ny, nz] = self.cells.dims;
-        for &u in rows {
+/// What recomputing one unit changed: cells and faces, and where.
+#[derive(Debug, Clone, Copy)]
+struct Changed {
+    cells: u32,
+    faces: u32,
+    span: Span,
+}
+
+impl Changed {
+    const NONE: Changed = Changed {
+        cells: 0,
+        faces: 0,
+        span: Span::EMPTY,
+    };
+}
+
+/// One half's scratch (preallocated, reused every update).
+#[derive(Debug, Clone)]
+struct Scratch {
+    candidates: Vec<u32>,
+    acc_moment: Vec<f64>,
+    acc_area: Vec<[f64; 3]>,
+    clipper: Clipper,
+    /// A triangle clipped to a y-slab, clipped on by `clipper` to each row of the slab.
+    slab_clipper: Clipper,
+}
+
+impl Scratch {
+    fn new(nx: usize, triangles: usize) -> Self {
+        Self {
+            candidates: Vec::with_capacity(triangles),
+            acc_moment: vec![0.0; nx],
+            acc_area: vec![[0.0; 3]; nx],
+            clipper: Clipper::default(),
+            slab_clipper: Clipper::default(),
+        }
+    }
+}
+
+/// The outputs of the units of the layers from `k0` on (rows and y-strips `(., k)`, z-strips on
+/// planes `k`): each array from the first entry of layer `k0` on.
+struct Outputs<'a> {
+    k0: usize,
+    row_moment: &'a mut [f64],
+    row_area: &'a mut [[f64; 3]],
+    row_left: &'a mut [f64],
+    volume: &'a mut [f64],
+    interface: &'a mut [[f64; 3]],
+    faces: [&'a mut [f64]; 3],
+    /// Per row, y-strip and z-strip, what its recomputation changed.
+    results: [&'a mut [Changed]; 3],
+}
+
+impl<'a> Outputs<'a> {
+    /// The outputs of layers `k0 .. k` and of `k ..` (`k0 <= k <= nz`).
+    fn split(self, k: usize, [nx, ny, _]: [usize; 3]) -> (Outputs<'a>, Outputs<'a>) {
+        let layers = k - self.k0;
+        // Units below `k`: rows and z-strips `j + ny k`, y-strips `j + (ny + 1) k`.
+        let (rows, ystrips) = (ny * layers, (ny + 1) * layers);
+        let (row_moment, row_moment_b) = self.row_moment.split_at_mut(nx * rows);
+        let (row_area, row_area_b) = self.row_area.split_at_mut(nx * rows);
+        let (row_left, row_left_b) = self.row_left.split_at_mut(rows);
+        let (volume, volume_b) = self.volume.split_at_mut(nx * rows);
+        let (interface, interface_b) = self.interface.split_at_mut(nx * rows);
+        let [fx, fy, fz] = self.faces;
+        let (fx, fx_b) = fx.split_at_mut((nx + 1) * rows);
+        let (fy, fy_b) = fy.split_at_mut(nx * ystrips);
+        let (fz, fz_b) = fz.split_at_mut(nx * rows);
+        let [rr, ry, rz] = self.results;
+        let (rr, rr_b) = rr.split_at_mut(rows);
+        let (ry, ry_b) = ry.split_at_mut(ystrips);
+        let (rz, rz_b) = rz.split_at_mut(rows);
+        (
+            Outputs {
+                k0: self.k0,
+                row_moment,
+                row_area,
+                row_left,
+                volume,
+                interface,
+                faces: [fx, fy, fz],
+                results: [rr, ry, rz],
+            },
+            Outputs {
+                k0: k,
+                row_moment: row_moment_b,
+                row_area: row_area_b,
+                row_left: row_left_b,
+                volume: volume_b,
+                interface: interface_b,
+                faces: [fx_b, fy_b, fz_b],
+                results: [rr_b, ry_b, rz_b],
+            },
+        )
+    }
+}
+
+/// Recomputes the dirty units whose outputs `out` holds: the rows' sums, the rows, the strips.
+fn run_half(sh: &Shared, mut out: Outputs, scratch: &mut Scratch) {
+    let [_, ny, _] = sh.cells.dims;
+    sum_rows(sh, &mut out, scratch);
+    let r0 = ny * out.k0;
+    for &u in sh.dirty_rows {
+        let u = u as usize;
+        if u < r0 || u - r0 >= out.results[0].len() {
+            continue;
+        }
+        out.results[0][u - r0] = process_row(sh, &mut out, u % ny, u / ny);
+    }
+    for s in 0..2 {
+        let width = if s == 0 { ny + 1 } else { ny };
+        let u0 = width * out.k0;
+        for &u in sh.dirty_strips[s] {
             let u = u as usize;
-            self.row_moment[nx * u..nx * (u + 1)].fill(0.0);
-            self.row_area[nx * u..nx * (u + 1)].fill([0.0; 3]);
-            self.row_left[u] = 0.0;
-        }
-        let sign = self.sign;
-        let (nxi, nyi, nzi) = (nx as i32, ny as i32, nz as i32);
-        for t in 0..self.triangles.len() {
-            let r = self.reach[t];
-            // A row's triangles: those whose reach covers it and starts left of the box's end.
-            let (j0, j1) = (r.lo[1].max(0), r.hi[1].min(nyi - 1));
-            let (k0, k1) = (r.lo[2].max(0), r.hi[2].min(nzi - 1));
-            if r.lo[0] >= nxi || j0 > j1 || k0 > k1 {
+            if u < u0 || u - u0 >= out.results[s + 1].len() {
                 continue;
             }
-            let dirty = |j: i32| (k0..=k1).any(|k| self.row_dirty[j as usize + ny * k as usize]);
-            if !(j0..=j1).any(dirty) {
+            out.results[s + 1][u - u0] =
+                process_strip(sh, &mut out, scratch, s + 1, u % width, u / width);
+        }
+    }
+}
+
+/// Sums the pieces of every triangle in the dirty rows of `out` into their rows' sums. The
+/// triangles go in index order, each clipped to a y-slab once and then to the slab's dirty rows,
+/// so every row gets the pieces and sums a row alone would, in the same order.
+fn sum_rows(sh: &Shared, out: &mut Outputs, scratch: &mut Scratch) {
+    let [nx, ny, nz] = sh.cells.dims;
+    let r0 = ny * out.k0;
+    let rows = out.row_left.len();
+    for &u in sh.dirty_rows {
+        let u = u as usize;
+        if u < r0 || u - r0 >= rows {
+            continue;
+        }
+        let l = u - r0;
+        out.row_moment[nx * l..nx * (l + 1)].fill(0.0);
+        out.row_area[nx * l..nx * (l + 1)].fill([0.0; 3]);
+        out.row_left[l] = 0.0;
+    }
+    if rows == 0 {
+        return;
+    }
+    // This half's layers.
+    let (klo, khi) = (out.k0 as i32, (out.k0 + rows / ny) as i32 - 1);
+    let sign = sh.sign;
+    let (nxi, nyi, nzi) = (nx as i32, ny as i32, nz as i32);
+    for t in 0..sh.triangles.len() {
+        let r = sh.reach[t];
+        // A row's triangles: those whose reach covers it and starts left of the box's end.
+        let (j0, j1) = (r.lo[1].max(0), r.hi[1].min(nyi - 1));
+        let (k0, k1) = (r.lo[2].max(0).max(klo), r.hi[2].min(nzi - 1).min(khi));
+        if r.lo[0] >= nxi || j0 > j1 || k0 > k1 {
+            continue;
+        }
+        let dirty = |j: i32| (k0..=k1).any(|k| sh.row_dirty[j as usize + ny * k as usize]);
+        if !(j0..=j1).any(dirty) {
+            continue;
+        }
+        let v = sh.triangles[t].map(|i| sh.pos[i as usize]);
+        // A triangle in a y- or z-plane with the region above belongs to the row above.
+        let flat_y = clip::flat_below_region(&v, 1, sign);
+        let flat_z = clip::flat_below_region(&v, 2, sign);
+        let forced = clip::flat_below_region(&v, 0, sign);
+        for j in j0..=j1 {
+            let y0 = j as f64;
+            if flat_y.is_some_and(|m| m != y0) || !dirty(j) {
                 continue;
             }
-            let v = self.triangles[t].map(|i| self.pos[i as usize]);
-            // A triangle in a y- or z-plane with the region above belongs to the row above.
-            let flat_y = clip::flat_below_region(&v, 1, sign);
-            let flat_z = clip::flat_below_region(&v, 2, sign);
-            let forced = clip::flat_below_region(&v, 0, sign);
-            for j in j0..=j1 {
-                let y0 = j as f64;
-                if flat_y.is_some_and(|m| m != y0) || !dirty(j) {
+            let slab = &mut scratch.slab_clipper;
+            slab.start(v[0], v[1], v[2]);
+            if flat_y.is_none() {
+                slab.clip_slab(1, y0, y0 + 1.0);
+            }
+            if slab.poly().n == 0 {
+                continue;
+            }
+            for k in k0..=k1 {
+                let z0 = k as f64;
+                let row = j as usize + ny * k as usize;
+                if !sh.row_dirty[row] || flat_z.is_some_and(|m| m != z0) {
                     continue;
                 }
-                let slab = &mut self.slab_clipper;
-                slab.start(v[0], v[1], v[2]);
-                if flat_y.is_none() {
-                    slab.clip_slab(1, y0, y0 + 1.0);
+                let clipper = &mut scratch.clipper;
+                clipper.start_from(scratch.slab_clipper.poly());
+                if flat_z.is_none() {
+                    clipper.clip_slab(2, z0, z0 + 1.0);
                 }
-                if slab.poly().n == 0 {
+                if clipper.poly().n == 0 {
                     continue;
                 }
-                for k in k0..=k1 {
-                    let z0 = k as f64;
-                    let row = j as usize + ny * k as usize;
-                    if !self.row_dirty[row] || flat_z.is_some_and(|m| m != z0) {
-                        continue;
+                let l = row - r0;
+                let base = nx * l;
+                let left = &mut out.row_left[l];
+                let (area, moments) = (&mut *out.row_area, &mut *out.row_moment);
+                clipper.split_along_x(nx, forced, |c, piece| {
+                    if piece.n < 3 {
+                        return;
                     }
-                    let clipper = &mut self.clipper;
-                    clipper.start_from(self.slab_clipper.poly());
-                    if flat_z.is_none() {
-                        clipper.clip_slab(2, z0, z0 + 1.0);
+                    if c < 0 {
+                        *left += piece.area_and_x_moment(0.0).0[0];
+                        return;
                     }
-                    if clipper.poly().n == 0 {
-                        continue;
-                    }
-                    let base = nx * row;
-                    let left = &mut self.row_left[row];
-                    let (area, moments) = (&mut self.row_area, &mut self.row_moment);
-                    clipper.split_along_x(nx, forced, |c, piece| {
-                        if piece.n < 3 {
-                            return;
-                        }
-                        if c < 0 {
-                            *left += piece.area_and_x_moment(0.0).0[0];
-                            return;
-                        }
-                        let (s, moment) = piece.area_and_x_moment(c as f64);
-                        let a = &mut area[base + c as usize];
-                        a[0] += s[0];
-                        a[1] += s[1];
-                        a[2] += s[2];
-                        moments[base + c as usize] += moment;
-                    });
-                }
-            }
-        }
-    }
-
-    /// Stores row `(j, k)` from its sums ([`Self::sum_rows`]); returns how many cells and faces
-    /// changed, and where.
-    fn process_row(&mut self, j: usize, k: usize) -> (usize, usize, Span) {
-        let [nx, ny, _] = self.cells.dims;
-        let left = self.row_left[j + ny * k];
-        let sign = self.sign;
-        let base = self.cells.index(0, j, k);
-        let fbase = (nx + 1) * (j + ny * k);
-        let (mut cells, mut faces) = (0, 0);
-        let fx = &mut self.faces[0];
-        // The face at x = 0: what the pieces left of the box leave open.
-        let mut span = Span::EMPTY;
-        let mut face = -left;
-        if store(&mut fx[fbase], unit(sign * face)) > 0 {
-            faces += 1;
-            span.add(0);
-        }
-        for i in 0..nx {
-            let s = self.row_area[base + i];
-            let next = face - s[0];
-            let volume = self.row_moment[base + i] + next;
-            face = next;
-            if store(&mut fx[fbase + i + 1], unit(sign * next)) > 0 {
-                faces += 1;
-                span.add(i + 1);
-            }
-            let mut changed = store(&mut self.volume[base + i], unit(sign * volume));
-            let s = s.map(|x| sign * x);
-            let slot = &mut self.interface[base + i];
-            if slot.map(f64::to_bits) != s.map(f64::to_bits) {
-                *slot = s;
-                changed = 1;
-            }
-            if changed > 0 {
-                cells += 1;
-                span.add(i);
-            }
-        }
-        (cells, faces, span)
-    }
-
-    /// Recomputes the strip `(a, b)` normal to `axis`: for axis 1 the y-strip on plane `y = a`
-    /// across `z in (b, b+1]`, for axis 2 the z-strip on plane `z = b` across `y in (a, a+1]`;
-    /// returns how many faces changed, and where.
-    fn process_strip(&mut self, axis: usize, a: usize, b: usize) -> (usize, Span) {
-        let [nx, ny, _] = self.cells.dims;
-        let nxi = nx as i32;
-        // (plane, the strip's row index across it, the axis across).
-        let (plane, across, across_axis) = if axis == 1 { (a, b, 2) } else { (b, a, 1) };
-        let (pi, ci) = (plane as i32, across as i32);
-        // The bin of the unit's (j, k).
-        self.gather(a, b, |r| {
-            r.lo[axis] < pi
-                && pi <= r.hi[axis]
-                && r.lo[across_axis] <= ci
-                && ci <= r.hi[across_axis]
-                && r.lo[0] < nxi
-        });
-        self.acc_moment.fill(0.0);
-        // Per face: `acc_area[i][0]`, the x-component of the outward normal times length of the
-        // cross-section; `acc_area[i][1]`, the (raw, negative outward) area of the triangles in
-        // the plane with the region above, which close the face (the tie rule's exception).
-        for s in &mut self.acc_area {
-            s[0] = 0.0;
-            s[1] = 0.0;
-        }
-        let mut left = 0.0;
-        let m = plane as f64;
-        let lo = across as f64;
-        let nxf = nx as f64;
-        // In the plane's coordinates (axis + 1, axis + 2) the region lies left of a section
-        // `p -> q`: its outward normal times length is (d_(axis+2), -d_(axis+1)). The x-component:
-        // plane z (x, y): d_y; plane y (z, x): -d_z.
-        let nx_dl = |s: &Segment| -> f64 {
-            if axis == 2 {
-                s.q[1] - s.p[1]
-            } else {
-                -(s.q[2] - s.p[2])
-            }
-        };
-        for n in 0..self.candidates.len() {
-            let t = self.candidates[n] as usize;
-            let ids = self.triangles[t];
-            let v = ids.map(|i| self.pos[i as usize]);
-            if clip::flat_below_region(&v, axis, self.sign) == Some(m) {
-                let clipper = &mut self.clipper;
-                clipper.start(v[0], v[1], v[2]);
-                clipper.clip_slab(across_axis, lo, lo + 1.0);
-                if clipper.poly().n < 3 {
-                    continue;
-                }
-                clipper.split_along_x(nx, None, |c, piece| {
-                    if c >= 0 && piece.n >= 3 {
-                        self.acc_area[c as usize][1] += piece.area_and_x_moment(0.0).0[axis];
-                    }
+                    let (s, moment) = piece.area_and_x_moment(c as f64);
+                    let a = &mut area[base + c as usize];
+                    a[0] += s[0];
+                    a[1] += s[1];
+                    a[2] += s[2];
+                    moments[base + c as usize] += moment;
                 });
-                continue;
-            }
-            let Some(seg) = clip::plane_section(&ids, &v, axis, m) else {
-                continue;
-            };
-            let Some(seg) = clip::clip_segment(&seg, across_axis, lo, lo + 1.0) else {
-                continue;
-            };
-            let (xa, xb) = (seg.p[0].min(seg.q[0]), seg.p[0].max(seg.q[0]));
-            let c0 = cell_of(xa);
-            let c1 = cell_of(xb);
-            if c0 >= nxf {
-                continue;
-            }
-            if c1 < 0.0 {
-                left += nx_dl(&seg);
-                continue;
-            }
-            if c0 == c1 {
-                let l = nx_dl(&seg);
-                self.acc_area[c0 as usize][0] += l;
-                self.acc_moment[c0 as usize] += l * (0.5 * (seg.p[0] + seg.q[0]) - c0);
-                continue;
-            }
-            if c0 < 0.0 {
-                if let Some(piece) = clip::clip_segment(&seg, 0, f64::NEG_INFINITY, 0.0) {
-                    left += nx_dl(&piece);
-                }
-            }
-            let mut c = c0.max(0.0);
-            while c <= c1 && c < nxf {
-                if let Some(piece) = clip::clip_segment(&seg, 0, c, c + 1.0) {
-                    let l = nx_dl(&piece);
-                    self.acc_area[c as usize][0] += l;
-                    self.acc_moment[c as usize] += l * (0.5 * (piece.p[0] + piece.q[0]) - c);
-                }
-                c += 1.0;
             }
         }
-        let sign = self.sign;
-        let fbase = if axis == 1 {
-            nx * (plane + (ny + 1) * across)
+    }
+}
+
+/// Stores row `(j, k)` of `out` from its sums ([`sum_rows`]); how many cells and faces changed,
+/// and where.
+fn process_row(sh: &Shared, out: &mut Outputs, j: usize, k: usize) -> Changed {
+    let [nx, ny, _] = sh.cells.dims;
+    let l = j + ny * k - ny * out.k0;
+    let left = out.row_left[l];
+    let sign = sh.sign;
+    let base = nx * l;
+    let fbase = (nx + 1) * l;
+    let (mut cells, mut faces) = (0, 0);
+    let fx = &mut *out.faces[0];
+    // The face at x = 0: what the pieces left of the box leave open.
+    let mut span = Span::EMPTY;
+    let mut face = -left;
+    if store(&mut fx[fbase], unit(sign * face)) > 0 {
+        faces += 1;
+        span.add(0);
+    }
+    for i in 0..nx {
+        let s = out.row_area[base + i];
+        let next = face - s[0];
+        let volume = out.row_moment[base + i] + next;
+        face = next;
+        if store(&mut fx[fbase + i + 1], unit(sign * next)) > 0 {
+            faces += 1;
+            span.add(i + 1);
+        }
+        let mut changed = store(&mut out.volume[base + i], unit(sign * volume));
+        let s = s.map(|x| sign * x);
+        let slot = &mut out.interface[base + i];
+        if slot.map(f64::to_bits) != s.map(f64::to_bits) {
+            *slot = s;
+            changed = 1;
+        }
+        if changed > 0 {
+            cells += 1;
+            span.add(i);
+        }
+    }
+    Changed { cells, faces, span }
+}
+
+/// Recomputes the strip `(a, b)` normal to `axis` into `out`: for axis 1 the y-strip on plane
+/// `y = a` across `z in (b, b+1]`, for axis 2 the z-strip on plane `z = b` across `y in (a, a+1]`;
+/// how many faces changed, and where.
+fn process_strip(
+    sh: &Shared,
+    out: &mut Outputs,
+    scratch: &mut Scratch,
+    axis: usize,
+    a: usize,
+    b: usize,
+) -> Changed {
+    let [nx, ny, _] = sh.cells.dims;
+    let nxi = nx as i32;
+    // (plane, the strip's row index across it, the axis across).
+    let (plane, across, across_axis) = if axis == 1 { (a, b, 2) } else { (b, a, 1) };
+    let (pi, ci) = (plane as i32, across as i32);
+    let Scratch {
+        candidates,
+        acc_moment,
+        acc_area,
+        clipper,
+        ..
+    } = scratch;
+    // The bin of the unit's (j, k).
+    sh.gather(a, b, candidates, |r| {
+        r.lo[axis] < pi
+            && pi <= r.hi[axis]
+            && r.lo[across_axis] <= ci
+            && ci <= r.hi[across_axis]
+            && r.lo[0] < nxi
+    });
+    acc_moment.fill(0.0);
+    // Per face: `acc_area[i][0]`, the x-component of the outward normal times length of the
+    // cross-section; `acc_area[i][1]`, the (raw, negative outward) area of the triangles in
+    // the plane with the region above, which close the face (the tie rule's exception).
+    for s in acc_area.iter_mut() {
+        s[0] = 0.0;
+        s[1] = 0.0;
+    }
+    let mut left = 0.0;
+    let m = plane as f64;
+    let lo = across as f64;
+    let nxf = nx as f64;
+    // In the plane's coordinates (axis + 1, axis + 2) the region lies left of a section
+    // `p -> q`: its outward normal times length is (d_(axis+2), -d_(axis+1)). The x-component:
+    // plane z (x, y): d_y; plane y (z, x): -d_z.
+    let nx_dl = |s: &Segment| -> f64 {
+        if axis == 2 {
+            s.q[1] - s.p[1]
         } else {
-            nx * (across + ny * plane)
+            -(s.q[2] - s.p[2])
+        }
+    };
+    for &t in candidates.iter() {
+        let ids = sh.triangles[t as usize];
+        let v = ids.map(|i| sh.pos[i as usize]);
+        if clip::flat_below_region(&v, axis, sh.sign) == Some(m) {
+            clipper.start(v[0], v[1], v[2]);
+            clipper.clip_slab(across_axis, lo, lo + 1.0);
+            if clipper.poly().n < 3 {
+                continue;
+            }
+            clipper.split_along_x(nx, None, |c, piece| {
+                if c >= 0 && piece.n >= 3 {
+                    acc_area[c as usize][1] += piece.area_and_x_moment(0.0).0[axis];
+                }
+            });
+            continue;
+        }
+        let Some(seg) = clip::plane_section(&ids, &v, axis, m) else {
+            continue;
         };
-        let f = &mut self.faces[axis];
-        let mut faces = 0;
-        let mut span = Span::EMPTY;
-        let mut edge = -left;
-        for i in 0..nx {
-            let next = edge - self.acc_area[i][0];
-            let area = self.acc_moment[i] + next + self.acc_area[i][1];
-            edge = next;
-            if store(&mut f[fbase + i], unit(sign * area)) > 0 {
-                faces += 1;
-                span.add(i);
+        let Some(seg) = clip::clip_segment(&seg, across_axis, lo, lo + 1.0) else {
+            continue;
+        };
+        let (xa, xb) = (seg.p[0].min(seg.q[0]), seg.p[0].max(seg.q[0]));
+        let c0 = cell_of(xa);
+        let c1 = cell_of(xb);
+        if c0 >= nxf {
+            continue;
+        }
+        if c1 < 0.0 {
+            left += nx_dl(&seg);
+            continue;
+        }
+        if c0 == c1 {
+            let l = nx_dl(&seg);
+            acc_area[c0 as usize][0] += l;
+            acc_moment[c0 as usize] += l * (0.5 * (seg.p[0] + seg.q[0]) - c0);
+            continue;
+        }
+        if c0 < 0.0 {
+            if let Some(piece) = clip::clip_segment(&seg, 0, f64::NEG_INFINITY, 0.0) {
+                left += nx_dl(&piece);
             }
         }
-        (faces, span)
+        let mut c = c0.max(0.0);
+        while c <= c1 && c < nxf {
+            if let Some(piece) = clip::clip_segment(&seg, 0, c, c + 1.0) {
+                let l = nx_dl(&piece);
+                acc_area[c as usize][0] += l;
+                acc_moment[c as usize] += l * (0.5 * (piece.p[0] + piece.q[0]) - c);
+            }
+            c += 1.0;
+        }
+    }
+    let sign = sh.sign;
+    // The strip's index (`j + (ny + 1) k` or `j + ny k`) less the first of this half's.
+    let (u, width) = if axis == 1 {
+        (plane + (ny + 1) * across, ny + 1)
+    } else {
+        (across + ny * plane, ny)
+    };
+    let fbase = nx * (u - width * out.k0);
+    let f = &mut *out.faces[axis];
+    let mut faces = 0;
+    let mut span = Span::EMPTY;
+    let mut edge = -left;
+    for i in 0..nx {
+        let next = edge - acc_area[i][0];
+        let area = acc_moment[i] + next + acc_area[i][1];
+        edge = next;
+        if store(&mut f[fbase + i], unit(sign * area)) > 0 {
+            faces += 1;
+            span.add(i);
+        }
+    }
+    Changed {
+        cells: 0,
+        faces,
+        span,
     }
 }
 

@@ -21,7 +21,8 @@
 //! voxel position only when the vertex moved more than a threshold since, and re-tests only the rows
 //! of cells that the moved triangles' old and new boxes cover. Because every row is computed by the
 //! same function of the voxel positions, the result equals [`Voxelizer::full`] of those positions
-//! after any sequence of moves (tested).
+//! after any sequence of moves (tested). The rows of a call are re-tested in two halves of the box
+//! on the two cores, each row by that same function, so the split changes nothing.
 
 use std::time::Instant;
 
@@ -107,11 +108,79 @@ pub struct Voxelizer {
     dirty_rows: Vec<u32>,
     /// The rows in which the last call changed a cell's state or owner.
     changed_rows: Vec<u32>,
-    crossings: Vec<(f64, i32)>,
     /// What the last call did.
     last: VoxelizeStats,
-    row_state: Vec<u8>,
-    row_owner: Vec<u32>,
+    /// Per row, how many of its cells its last re-test changed.
+    row_changed: Vec<u32>,
+    /// Per layer `k`, the work of its dirty rows (for the split of the rows in two halves).
+    layer_work: Vec<u64>,
+    /// The two halves' scratch.
+    scratch: [RowScratch; 2],
+}
+
+/// One half's scratch for re-testing rows (preallocated, reused every update).
+#[derive(Debug, Clone)]
+struct RowScratch {
+    state: Vec<u8>,
+    owner: Vec<u32>,
+    crossings: Vec<(f64, i32)>,
+}
+
+impl RowScratch {
+    fn new(nx: usize) -> Self {
+        Self {
+            state: vec![state::OUTSIDE; nx],
+            owner: vec![NO_TRIANGLE; nx],
+            crossings: Vec::with_capacity(64),
+        }
+    }
+}
+
+/// What every row's re-test reads, shared by the two halves of [`Voxelizer::process_rows`].
+struct Shared<'a> {
+    cells: &'a VoxelBox,
+    triangles: &'a [[u32; 3]],
+    pos: &'a [[f64; 3]],
+    range: &'a [CellRange],
+    bins: &'a [Vec<u32>],
+    bins_dims: [usize; 2],
+    dirty_rows: &'a [u32],
+}
+
+/// The outputs of the rows from `row0` on: every array from the first entry of row `row0` on.
+struct RowOutputs<'a> {
+    row0: usize,
+    state: &'a mut [u8],
+    owner: &'a mut [u32],
+    extent: &'a mut [[u32; 2]],
+    changed: &'a mut [u32],
+}
+
+impl<'a> RowOutputs<'a> {
+    /// The outputs of rows `row0 .. row` and of `row ..` (rows `nx` cells long).
+    fn split(self, row: usize, nx: usize) -> (RowOutputs<'a>, RowOutputs<'a>) {
+        let rows = row - self.row0;
+        let (state, state_b) = self.state.split_at_mut(nx * rows);
+        let (owner, owner_b) = self.owner.split_at_mut(nx * rows);
+        let (extent, extent_b) = self.extent.split_at_mut(rows);
+        let (changed, changed_b) = self.changed.split_at_mut(rows);
+        (
+            RowOutputs {
+                row0: self.row0,
+                state,
+                owner,
+                extent,
+                changed,
+            },
+            RowOutputs {
+                row0: row,
+                state: state_b,
+                owner: owner_b,
+                extent: extent_b,
+                changed: changed_b,
+            },
+        )
+    }
 }
 
 impl Voxelizer {
@@ -137,10 +206,13 @@ impl Voxelizer {
             row_dirty: vec![false; cells.dims[1] * cells.dims[2]],
             dirty_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
             changed_rows: Vec::with_capacity(cells.dims[1] * cells.dims[2]),
-            crossings: Vec::with_capacity(64),
             last: VoxelizeStats::default(),
-            row_state: vec![0; cells.dims[0]],
-            row_owner: vec![NO_TRIANGLE; cells.dims[0]],
+            row_changed: vec![0; cells.dims[1] * cells.dims[2]],
+            layer_work: vec![0; cells.dims[2]],
+            scratch: [
+                RowScratch::new(cells.dims[0]),
+                RowScratch::new(cells.dims[0]),
+            ],
             triangles,
         }
     }
@@ -386,104 +458,169 @@ impl Voxelizer {
     }
 
     fn process_rows(&mut self) -> VoxelizeStats {
-        let mut stats = VoxelizeStats::default();
-        let rows = std::mem::take(&mut self.dirty_rows);
-        let ny = self.cells.dims[1];
-        self.changed_rows.clear();
-        for &row in &rows {
-            self.row_dirty[row as usize] = false;
+        let [nx, ny, nz] = self.cells.dims;
+        // Two halves of the box, the layers below `ks` and the rest, of about equal work (a row's
+        // work taken as the triangles of its bin, those it tests), on the two cores.
+        let work = &mut self.layer_work;
+        work.fill(0);
+        for &row in &self.dirty_rows {
             let (j, k) = (row as usize % ny, row as usize / ny);
-            let changed = self.process_row(j, k);
+            work[k] += self.bins[j / BIN + self.bins_dims[0] * (k / BIN)].len() as u64;
+        }
+        let total: u64 = work.iter().sum();
+        let mut below = 0;
+        let ks = work
+            .iter()
+            .position(|&w| {
+                let half = 2 * below >= total;
+                below += w;
+                half
+            })
+            .unwrap_or(nz);
+        {
+            let shared = Shared {
+                cells: &self.cells,
+                triangles: &self.triangles,
+                pos: &self.pos,
+                range: &self.range,
+                bins: &self.bins,
+                bins_dims: self.bins_dims,
+                dirty_rows: &self.dirty_rows,
+            };
+            let outputs = RowOutputs {
+                row0: 0,
+                state: &mut self.state,
+                owner: &mut self.owner,
+                extent: &mut self.extent,
+                changed: &mut self.row_changed,
+            };
+            let (lower, upper) = outputs.split(ny * ks, nx);
+            let [a, b] = &mut self.scratch;
+            // Each row reads only the shared state and writes only its own cells, so the halves
+            // give what one pass over the rows would, bit for bit.
+            crate::fork_join::join(
+                || process_half(&shared, lower, a),
+                || process_half(&shared, upper, b),
+            );
+        }
+        let mut stats = VoxelizeStats::default();
+        self.changed_rows.clear();
+        for &row in &self.dirty_rows {
+            self.row_dirty[row as usize] = false;
+            let changed = self.row_changed[row as usize] as usize;
             if changed > 0 {
                 self.changed_rows.push(row);
             }
             stats.changed_cells += changed;
         }
-        stats.rows = rows.len();
-        self.dirty_rows = rows;
+        stats.rows = self.dirty_rows.len();
         self.dirty_rows.clear();
         stats
     }
+}
 
-    /// Recomputes one row of cells; returns how many changed.
-    fn process_row(&mut self, j: usize, k: usize) -> usize {
-        let nx = self.cells.dims[0];
-        self.row_state.fill(state::OUTSIDE);
-        self.row_owner.fill(NO_TRIANGLE);
-        self.crossings.clear();
-        let bin = (j / BIN) + self.bins_dims[0] * (k / BIN);
-        let (py, pz) = (j as f64 + 0.5, k as f64 + 0.5);
-        for n in 0..self.bins[bin].len() {
-            let t = self.bins[bin][n] as usize;
-            let r = self.range[t];
-            if (j as i32) < r.lo[1]
-                || (j as i32) > r.hi[1]
-                || (k as i32) < r.lo[2]
-                || (k as i32) > r.hi[2]
-            {
-                continue;
-            }
-            let tri = self.triangles[t];
-            let v = tri.map(|i| self.pos[i as usize]);
-            // Band: the triangle clipped to the row's slab, its x-extent.
-            if let Some((x0, x1)) = clip_x_extent(
-                &v,
-                j as f64 - EPS,
-                j as f64 + 1.0 + EPS,
-                k as f64 - EPS,
-                k as f64 + 1.0 + EPS,
-            ) {
-                let lo = floor(x0 - EPS).max(0.0);
-                let hi = floor(x1 + EPS).min(nx as f64 - 1.0);
-                if lo <= hi {
-                    for i in lo as usize..=hi as usize {
-                        self.row_state[i] = state::BAND;
-                        if (t as u32) < self.row_owner[i] {
-                            self.row_owner[i] = t as u32;
-                        }
+/// Re-tests the dirty rows whose outputs `out` holds.
+fn process_half(sh: &Shared, mut out: RowOutputs, scratch: &mut RowScratch) {
+    let ny = sh.cells.dims[1];
+    for &row in sh.dirty_rows {
+        let row = row as usize;
+        if row < out.row0 || row - out.row0 >= out.changed.len() {
+            continue;
+        }
+        out.changed[row - out.row0] = process_row(sh, &mut out, scratch, row % ny, row / ny);
+    }
+}
+
+/// Re-tests row `(j, k)` of `out`; returns how many of its cells changed.
+fn process_row(
+    sh: &Shared,
+    out: &mut RowOutputs,
+    scratch: &mut RowScratch,
+    j: usize,
+    k: usize,
+) -> u32 {
+    let nx = sh.cells.dims[0];
+    let RowScratch {
+        state: row_state,
+        owner: row_owner,
+        crossings,
+    } = scratch;
+    row_state.fill(state::OUTSIDE);
+    row_owner.fill(NO_TRIANGLE);
+    crossings.clear();
+    let bin = &sh.bins[(j / BIN) + sh.bins_dims[0] * (k / BIN)];
+    let (py, pz) = (j as f64 + 0.5, k as f64 + 0.5);
+    for &t in bin {
+        let t = t as usize;
+        let r = sh.range[t];
+        if (j as i32) < r.lo[1]
+            || (j as i32) > r.hi[1]
+            || (k as i32) < r.lo[2]
+            || (k as i32) > r.hi[2]
+        {
+            continue;
+        }
+        let tri = sh.triangles[t];
+        let v = tri.map(|i| sh.pos[i as usize]);
+        // Band: the triangle clipped to the row's slab, its x-extent.
+        if let Some((x0, x1)) = clip_x_extent(
+            &v,
+            j as f64 - EPS,
+            j as f64 + 1.0 + EPS,
+            k as f64 - EPS,
+            k as f64 + 1.0 + EPS,
+        ) {
+            let lo = floor(x0 - EPS).max(0.0);
+            let hi = floor(x1 + EPS).min(nx as f64 - 1.0);
+            if lo <= hi {
+                for i in lo as usize..=hi as usize {
+                    row_state[i] = state::BAND;
+                    if (t as u32) < row_owner[i] {
+                        row_owner[i] = t as u32;
                     }
                 }
             }
-            // Crossing of the x-ray through the cell centres.
-            if let Some(c) = crossing(&tri, &v, py, pz) {
-                self.crossings.push(c);
-            }
         }
-        if !self.crossings.is_empty() {
-            self.crossings.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-            let mut winding = 0i32;
-            let mut next = 0;
-            for i in 0..nx {
-                let x = i as f64 + 0.5;
-                while next < self.crossings.len() && self.crossings[next].0 < x {
-                    winding += self.crossings[next].1;
-                    next += 1;
-                }
-                if winding != 0 && self.row_state[i] == state::OUTSIDE {
-                    self.row_state[i] = state::INSIDE;
-                }
-            }
+        // Crossing of the x-ray through the cell centres.
+        if let Some(c) = crossing(&tri, &v, py, pz) {
+            crossings.push(c);
         }
-        let base = self.cells.index(0, j, k);
-        let first = self.row_state.iter().position(|&s| s != state::OUTSIDE);
-        self.extent[j + self.cells.dims[1] * k] = match first {
-            Some(a) => {
-                let b = self.row_state.iter().rposition(|&s| s != state::OUTSIDE);
-                [a as u32, b.unwrap_or(a) as u32 + 1]
-            }
-            None => [0, 0],
-        };
-        let mut changed = 0;
-        for i in 0..nx {
-            let (s, o) = (self.row_state[i], self.row_owner[i]);
-            if self.state[base + i] != s || self.owner[base + i] != o {
-                changed += 1;
-                self.state[base + i] = s;
-                self.owner[base + i] = o;
-            }
-        }
-        changed
     }
+    if !crossings.is_empty() {
+        crossings.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        let mut winding = 0i32;
+        let mut next = 0;
+        for (i, s) in row_state.iter_mut().enumerate() {
+            let x = i as f64 + 0.5;
+            while next < crossings.len() && crossings[next].0 < x {
+                winding += crossings[next].1;
+                next += 1;
+            }
+            if winding != 0 && *s == state::OUTSIDE {
+                *s = state::INSIDE;
+            }
+        }
+    }
+    let l = j + sh.cells.dims[1] * k - out.row0;
+    let base = nx * l;
+    let first = row_state.iter().position(|&s| s != state::OUTSIDE);
+    out.extent[l] = match first {
+        Some(a) => {
+            let b = row_state.iter().rposition(|&s| s != state::OUTSIDE);
+            [a as u32, b.unwrap_or(a) as u32 + 1]
+        }
+        None => [0, 0],
+    };
+    let mut changed = 0;
+    for i in 0..nx {
+        let (s, o) = (row_state[i], row_owner[i]);
+        if out.state[base + i] != s || out.owner[base + i] != o {
+            changed += 1;
+            out.state[base + i] = s;
+            out.owner[base + i] = o;
+        }
+    }
+    changed
 }
 
 /// The x-extent of triangle `v` clipped to `y0 <= y <= y1`, `z0 <= z <= z1`, if not empty.
