@@ -1,14 +1,13 @@
 //! `hydrometra control ...`: requests to a running hydrometrad over its control service
 //! (`<prefix>/control`, docs/ipc.md "Control").
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use clap::{Args, Subcommand};
-use hydrometra_ipc::control::{self, command, result, ControlResponse, ControlServiceError};
+use hydrometra_ipc::control::{self, command, result, ControlResponse};
 use hydrometra_ipc::{ServiceNames, DEFAULT_SERVICE_PREFIX};
 use iceoryx2::prelude::*;
-use iceoryx2::service::builder::request_response::RequestResponseOpenError;
 
 /// Control commands.
 #[derive(Subcommand, Debug)]
@@ -114,51 +113,11 @@ pub fn request(
     argument: &str,
     timeout: Duration,
 ) -> Result<ControlResponse> {
-    let full = names.full(hydrometra_ipc::names::suffix::CONTROL);
-    let no_daemon = || {
-        format!(
-            "no hydrometrad answers on {full}: is it running, with --service-prefix {}?",
-            names.prefix()
-        )
-    };
     let node = NodeBuilder::new()
         .signal_handling_mode(SignalHandlingMode::Disabled)
         .create::<ipc::Service>()
         .map_err(|e| anyhow::anyhow!("cannot create an iceoryx2 node: {e:?}"))?;
-    let service = match control::open(&node, names) {
-        Ok(s) => s,
-        Err(ControlServiceError::Open(RequestResponseOpenError::DoesNotExist)) => {
-            bail!("{} (the service does not exist)", no_daemon())
-        }
-        Err(e) => return Err(e).with_context(|| format!("opening {full}")),
-    };
-    let client = service
-        .client_builder()
-        .create()
-        .map_err(|e| anyhow::anyhow!("cannot create a client of {full}: {e:?}"))?;
-    let request = control::ControlRequest::new(code, argument)?;
-    let pending = client
-        .send_copy(request)
-        .map_err(|e| anyhow::anyhow!("cannot send the request to {full}: {e:?}"))?;
-    if pending.number_of_server_connections() == 0 {
-        bail!("{} (the service has no server)", no_daemon());
-    }
-    let deadline = Instant::now() + timeout;
-    loop {
-        match pending.receive() {
-            Ok(Some(response)) => return Ok(*response),
-            Ok(None) => {}
-            Err(e) => bail!("cannot receive the response from {full}: {e:?}"),
-        }
-        if Instant::now() >= deadline {
-            bail!(
-                "{}: no response within {:.1} s",
-                no_daemon(),
-                timeout.as_secs_f64()
-            );
-        }
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    Ok(control::request(&node, names, code, argument, timeout)?)
 }
 
 fn to_json(r: &ControlResponse) -> serde_json::Value {

@@ -33,6 +33,8 @@ enum Command {
     /// Control a running hydrometrad: new procedure, load a scene, the recorder.
     #[command(subcommand)]
     Control(control::ControlCommand),
+    /// Serve the instructor's live web page of one or several rigs (docs/station.md).
+    Station(hydrometra_station::StationArgs),
     /// Show hydrometrad's live status (link, inputs, alarms, timing) in the terminal.
     Monitor(monitor::MonitorArgs),
     /// Hydraulic model tools (offline simulation of a scenario).
@@ -80,6 +82,7 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Control(cmd) => control::run(cmd),
+        Command::Station(args) => Ok(hydrometra_station::run(args)?),
         Command::Monitor(args) => monitor::run(&args),
         Command::Hydraulics(command) => hydraulics::run(command),
         Command::Procedure(command) => procedure::run(command),

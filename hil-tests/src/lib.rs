@@ -2,6 +2,7 @@
 //! rig under a unique service prefix, read its status over iceoryx2, signal and restart it.
 
 pub mod host;
+pub mod station;
 
 use std::io::Read;
 use std::path::{Path, PathBuf};

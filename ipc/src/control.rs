@@ -317,6 +317,88 @@ pub fn open<S: Service>(
         .map_err(ControlServiceError::Open)
 }
 
+/// Why a request got no response ([`request`]).
+#[derive(Debug)]
+pub enum RequestError {
+    /// No daemon serves the prefix: the service does not exist, or it has no server.
+    NoDaemon(String),
+    /// The argument does not fit the request.
+    Argument(ArgumentTooLong),
+    /// iceoryx2 failed to open the service, create the client, send or receive.
+    Ipc(String),
+    /// No response within the timeout.
+    Timeout(String),
+}
+
+impl core::fmt::Display for RequestError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoDaemon(m) | Self::Ipc(m) | Self::Timeout(m) => f.write_str(m),
+            Self::Argument(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for RequestError {}
+
+/// Sends one request on `node` and waits (polling every 5 ms, blocking the calling thread) up to
+/// `timeout` for its response.
+pub fn request<S: Service>(
+    node: &Node<S>,
+    names: &ServiceNames,
+    code: u32,
+    argument: &str,
+    timeout: Duration,
+) -> Result<ControlResponse, RequestError> {
+    use iceoryx2::service::builder::request_response::RequestResponseOpenError as OpenError;
+    let full = names.full(suffix::CONTROL);
+    let no_daemon = |why: &str| {
+        RequestError::NoDaemon(format!(
+            "no hydrometrad answers on {full}: is it running, with --service-prefix {}? ({why})",
+            names.prefix()
+        ))
+    };
+    let service = match open(node, names) {
+        Ok(s) => s,
+        Err(ControlServiceError::Open(OpenError::DoesNotExist)) => {
+            return Err(no_daemon("the service does not exist"))
+        }
+        Err(e) => return Err(RequestError::Ipc(format!("opening {full}: {e}"))),
+    };
+    let client = service
+        .client_builder()
+        .create()
+        .map_err(|e| RequestError::Ipc(format!("cannot create a client of {full}: {e:?}")))?;
+    let request = ControlRequest::new(code, argument).map_err(RequestError::Argument)?;
+    let pending = client
+        .send_copy(request)
+        .map_err(|e| RequestError::Ipc(format!("cannot send the request to {full}: {e:?}")))?;
+    if pending.number_of_server_connections() == 0 {
+        return Err(no_daemon("the service has no server"));
+    }
+    let deadline = std::time::Instant::now() + timeout;
+    loop {
+        match pending.receive() {
+            Ok(Some(response)) => return Ok(*response),
+            Ok(None) => {}
+            Err(e) => {
+                return Err(RequestError::Ipc(format!(
+                    "cannot receive the response from {full}: {e:?}"
+                )))
+            }
+        }
+        if std::time::Instant::now() >= deadline {
+            return Err(RequestError::Timeout(format!(
+                "no hydrometrad answers on {full}: is it running, with --service-prefix {}?: \
+                 no response within {:.1} s",
+                names.prefix(),
+                timeout.as_secs_f64()
+            )));
+        }
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -371,6 +371,8 @@ pub struct Config {
     pub record: RecordConfig,
     /// `[scene]`.
     pub scene: SceneConfig,
+    /// `[remote]`: the services forwarded to zenoh (docs/station.md); off by default.
+    pub remote: hydrometra_remote::RemoteConfig,
 }
 
 /// Command-line overrides, applied after the file.
@@ -492,6 +494,9 @@ impl Config {
 
     /// Checks ranges and consistency.
     pub fn validate(&self, origin: &str) -> Result<(), ConfigError> {
+        self.remote
+            .validate()
+            .map_err(|(key, value, expected)| invalid(origin, &key, &value, &expected))?;
         let l = &self.sim_loop;
         check_range(
             origin,

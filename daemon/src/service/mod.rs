@@ -14,6 +14,7 @@ pub mod latency;
 pub mod notify;
 pub mod publisher;
 pub mod realtime;
+pub mod remote;
 pub mod rig_connection;
 pub mod rig_source;
 pub mod scene;
@@ -511,6 +512,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
             None
         }
     };
+    let remote = remote::start(&config.remote, &names);
     let context = Arc::new(control::ControlContext {
         procedure,
         scene: scene_thread.as_ref().map(|_| feed.clone()),
@@ -571,6 +573,7 @@ pub fn run(config: &Config, duration: Option<Duration>) -> anyhow::Result<RunSum
         handlers.abort();
     });
     drop(supervisor);
+    drop(remote);
 
     tracing::info!("shutting down");
     systemd.stopping();
