@@ -387,8 +387,8 @@ fn the_page_shows_the_rig_live_in_a_real_browser_and_starts_a_new_procedure() {
     // Luminance 0-255 averaged over a 48 x 36 grid of the whole view (most of it background):
     // the wall's change must stand out of the view's own change at one pressure (3 x) and reach
     // a quarter of a grey level over the whole view, several where the outline moved (measured
-    // between settled walls, 75.6 -> 14.3 mmHg, 1.40 mm RMS: 0.66; earlier 0.99 against 0.05 at
-    // one pressure).
+    // between settled walls, 84.5-84.7 -> 13.9 mmHg, 1.54-1.55 mm RMS: 0.81 in three runs,
+    // against 0.001-0.002 at one pressure).
     let context = format!(
         "{p0} -> {p1} mmHg, wall vertices moved {moved} mm RMS; view change {d3}, \
          at one pressure {floor}"
