@@ -92,6 +92,11 @@ pub(crate) struct Level {
     /// +axis neighbour); empty on level 0 and on periodic levels, whose couplings are 1 between
     /// unknowns (and to open cells, in the diagonal).
     pub wt: [Vec<f32>; 3],
+    /// Level 0 with cut cells: the box (`dims`) and the row ranges (`row_ext`) the couplings in
+    /// `wt` were last written within (empty: unknown, `wt` is cleared whole). Outside them `wt`
+    /// is zero, so the next build clears only these ranges rather than the box (at 0.6 mm the
+    /// three padded boxes are about 5 MB a rebuild).
+    pub wt_ext: ([usize; 3], Vec<[u32; 2]>),
     /// Scratch of [`Level::build_dense`]: one row's neighbour counts.
     pub row_counts: Vec<u8>,
     /// Dense unknowns, right-hand side and residual.

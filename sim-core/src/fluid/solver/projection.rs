@@ -61,13 +61,42 @@ fn set_cut_couplings(grid: &FluidGrid, l0: &mut Level) {
         for w in &mut l0.wt {
             w.clear();
         }
+        l0.wt_ext.1.clear();
         return;
     };
     let len = l0.mask.len();
-    for w in &mut l0.wt {
-        w.clear();
-        w.resize(len, 0.0);
+    // Every coupling is written at a fluid or open cell, within the rows' ranges of the labels it
+    // was built from (a periodic halo writes outside them: such boxes are cleared whole). With the
+    // same box, clearing those ranges leaves `wt` as zero as clearing it whole.
+    let periodic_box = l0.periodic.iter().any(|&p| p);
+    // Taken out and put back below (moved, not allocated).
+    let (wt_dims, mut wt_rows) = std::mem::take(&mut l0.wt_ext);
+    let ranged = !periodic_box
+        && wt_dims == l0.dims
+        && wt_rows.len() == l0.row_ext.len()
+        && l0.wt.iter().all(|w| w.len() == len);
+    if ranged {
+        let [_, ny, _] = l0.dims;
+        for (r, &[a, b]) in wt_rows.iter().enumerate() {
+            if a < b {
+                let p = l0.pad(a as usize, r % ny, r / ny);
+                for w in &mut l0.wt {
+                    w[p..p + (b - a) as usize].fill(0.0);
+                }
+            }
+        }
+    } else {
+        for w in &mut l0.wt {
+            w.clear();
+            w.resize(len, 0.0);
+        }
     }
+    // The ranges this build writes within, for the next one (sized once per box).
+    wt_rows.clear();
+    if !periodic_box {
+        wt_rows.extend_from_slice(&l0.row_ext);
+    }
+    l0.wt_ext = (l0.dims, wt_rows);
     let dims = grid.dims();
     let periodic = grid.periodic();
     let fdims: [[usize; 3]; 3] = std::array::from_fn(|a| {
