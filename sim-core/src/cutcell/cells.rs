@@ -594,11 +594,7 @@ impl CutCells {
         let (stable, stable_b) = self.stabilised_faces[axis].split_at_mut(nx * at);
         let (changed, changed_b) = self.strip_changed[axis - 1].split_at_mut(at);
         let run = |lo: usize, faces: &mut [f64], stable: &mut [f64], changed: &mut [Span]| {
-            for &u in strips {
-                let u = u as usize;
-                if u < lo || u - lo >= changed.len() {
-                    continue;
-                }
+            for u in in_half(strips, lo, changed.len()) {
                 let base = nx * u;
                 let mut c = Span::EMPTY;
                 for i in spans[u].range(nx - 1) {
@@ -645,11 +641,7 @@ impl CutCells {
                    combined: &mut [(Span, Span, bool)]|
          -> isize {
             let mut count = 0;
-            for &r in rows {
-                let r = r as usize;
-                if r < lo || r - lo >= combined.len() {
-                    continue;
-                }
+            for r in in_half(rows, lo, combined.len()) {
                 let span = spans[r];
                 let mut faces = Span::EMPTY;
                 let base = (nx + 1) * r;
@@ -699,11 +691,7 @@ impl CutCells {
         let (interface, interface_b) = self.interface.split_at_mut(nx * at);
         let (changed, changed_b) = self.row_changed.split_at_mut(at);
         let run = |lo: usize, interface: &mut [[f64; 3]], changed: &mut [Span]| {
-            for &r in rows {
-                let r = r as usize;
-                if r < lo || r - lo >= changed.len() {
-                    continue;
-                }
+            for r in in_half(rows, lo, changed.len()) {
                 let (j, k) = (r % ny, r / ny);
                 let mut c = Span::EMPTY;
                 for i in spans[r].range(nx - 1) {
@@ -749,11 +737,7 @@ impl CutCells {
                    changed: &mut [Span]|
          -> [isize; 2] {
             let mut counts = [0isize; 2];
-            for &r in rows {
-                let r = r as usize;
-                if r < lo || r - lo >= changed.len() {
-                    continue;
-                }
+            for r in in_half(rows, lo, changed.len()) {
                 let (j, k) = (r % ny, r / ny);
                 let mut c = Span::EMPTY;
                 for i in spans[r].range(nx - 1) {
@@ -807,11 +791,7 @@ impl CutCells {
         let (stable, stable_b) = self.stabilised_volume.split_at_mut(nx * at);
         let (changed, changed_b) = self.row_changed.split_at_mut(at);
         let run = |lo: usize, stable: &mut [f64], changed: &mut [Span]| {
-            for &r in rows {
-                let r = r as usize;
-                if r < lo || r - lo >= changed.len() {
-                    continue;
-                }
+            for r in in_half(rows, lo, changed.len()) {
                 let (j, k) = (r % ny, r / ny);
                 let mut c = Span::EMPTY;
                 for i in spans[r].range(nx - 1) {
@@ -825,6 +805,15 @@ impl CutCells {
         };
         crate::fork_join::join(|| run(0, stable, changed), || run(at, stable_b, changed_b));
     }
+}
+
+/// The entries of `units` (rows or strips, in their order) that fall in the half of the box
+/// starting at unit `lo` with `len` units: each half of a split loop visits only its own.
+fn in_half(units: &[u32], lo: usize, len: usize) -> impl Iterator<Item = usize> + '_ {
+    units
+        .iter()
+        .map(|&u| u as usize)
+        .filter(move |&u| u >= lo && u - lo < len)
 }
 
 /// What the combination of the layers reads.
