@@ -3,6 +3,7 @@
 //! exact ones a renderer draws.
 
 use hydrometra_sim::cutcell::small::NO_TARGET;
+use hydrometra_sim::scene::surface::enclosed_volume_m3;
 use hydrometra_sim::scene::{Scene, ScopePose, VoxelKind};
 
 mod scene_common;
@@ -43,6 +44,7 @@ fn cut_cells_fill(voxel_mm: f64, distend_frames: usize, scope_frames: usize, tol
     let mut cut = Scene::new(on, assets).unwrap();
     let away = ScopePose::default();
     let (mut counted, mut worst_cut, mut best_whole) = (0, 0.0f64, f64::INFINITY);
+    let mut worst_lag = 0.0f64;
     let (mut max_div, mut unconverged, mut steps) = ([0.0f64; 2], [0; 2], [0; 2]);
     for f in 0..distend_frames {
         let rig = inputs(1.0, 0.0, 100.0, away);
@@ -58,13 +60,25 @@ fn cut_cells_fill(voxel_mm: f64, distend_frames: usize, scope_frames: usize, tol
         }
         let (w, c) = (whole.report(), cut.report());
         assert_eq!(w.surface_volume_m3, c.surface_volume_m3, "frame {f}");
-        // The sheath is away: the reference is the surface's volume.
-        let reference = c.cavity_less_sheath_volume_m3.unwrap();
+        // The sheath is away: the fractions' volume is the volume of the surface at the held
+        // positions, within the lag's bound of the deformed surface's; the reference of the
+        // error is the deformed surface's volume.
+        let held = cut_fraction_lag(&cut);
+        let fractions_m3 = c.cavity_less_sheath_volume_m3.unwrap();
         assert!(
-            (reference - c.surface_volume_m3).abs() <= 1e-9 * c.surface_volume_m3,
-            "frame {f}: reference {reference:e}, surface {:e}",
-            c.surface_volume_m3
+            (fractions_m3 - held.held_m3).abs() <= 1e-9 * held.held_m3,
+            "frame {f}: fractions {fractions_m3:e}, held surface {:e}",
+            held.held_m3
         );
+        assert!(
+            (held.held_m3 - c.surface_volume_m3).abs() <= held.bound_m3,
+            "frame {f}: held surface {:e}, surface {:e}, lag bound {:e}",
+            held.held_m3,
+            c.surface_volume_m3,
+            held.bound_m3
+        );
+        worst_lag = worst_lag.max((held.held_m3 - c.surface_volume_m3).abs() / held.bound_m3);
+        let reference = c.surface_volume_m3;
         if c.fluid_cells >= cut.desc().fluid.min_fluid_cells {
             counted += 1;
             let err = (c.grid_fluid_volume_m3 - reference) / reference;
@@ -87,10 +101,11 @@ fn cut_cells_fill(voxel_mm: f64, distend_frames: usize, scope_frames: usize, tol
     }
     println!(
         "{voxel_mm} mm, {counted} frames: worst cut-cell error {:.2} %, best whole-cell error \
-         {:.1} %; max div whole {:.2e}, cut {:.2e}; unconverged fluid steps whole {} of {}, cut {} \
-         of {}",
+         {:.1} %; the held surface's volume at most {:.2} of the lag's bound off; max div whole \
+         {:.2e}, cut {:.2e}; unconverged fluid steps whole {} of {}, cut {} of {}",
         100.0 * worst_cut,
         100.0 * best_whole,
+        worst_lag,
         max_div[0],
         max_div[1],
         unconverged[0],
@@ -117,10 +132,18 @@ fn cut_cells_fill(voxel_mm: f64, distend_frames: usize, scope_frames: usize, tol
         let r = cut
             .step(&own(inputs(1.0, 0.5, 100.0, slide_and_sway(home, f))), DT)
             .unwrap();
-        let reference = r.cavity_less_sheath_volume_m3.unwrap();
-        sheath_m3 = sheath_m3.min(r.surface_volume_m3 - reference);
-        if r.fluid_cells >= min_fluid_cells {
-            let err = (r.grid_fluid_volume_m3 - reference) / reference;
+        let fractions_m3 = r.cavity_less_sheath_volume_m3.unwrap();
+        let (surface_m3, fluid_cells, grid_m3) =
+            (r.surface_volume_m3, r.fluid_cells, r.grid_fluid_volume_m3);
+        // The deformed surface's volume less the sheath's part: the fractions' reference moved
+        // by what the deformed surface holds beyond the held one (the sheath's part in the
+        // difference is second order).
+        let held = cut_fraction_lag(&cut);
+        assert!((held.held_m3 - surface_m3).abs() <= held.bound_m3);
+        let reference = fractions_m3 + surface_m3 - held.held_m3;
+        sheath_m3 = sheath_m3.min(held.held_m3 - fractions_m3);
+        if fluid_cells >= min_fluid_cells {
+            let err = (grid_m3 - reference) / reference;
             assert!(err.abs() < tol, "scope frame {f}: volume error {err:e}");
             worst_in = worst_in.max(err.abs());
         }
@@ -242,7 +265,8 @@ fn published_fractions_are_the_exact_ones_less_the_scope(scene: &Scene) {
             );
         }
     }
-    let surface_m3 = scene.report().surface_volume_m3;
+    // The surface the fractions are of: the held positions.
+    let surface_m3 = cut_fraction_lag(scene).held_m3;
     let expected_m3 = exact.iter().sum::<f64>() * h * h * h - in_scope_m3;
     println!(
         "published: {:.4} ml = exact {:.4} ml less the scope's {:.4} ml; surface {:.4} ml; {merged} \
@@ -297,4 +321,43 @@ fn published_fractions_of_whole_cells_are_the_fluid_and_open_cells(scene: &Scene
     let h = scene.cells().spacing_m;
     assert!(ones >= scene.desc().fluid.min_fluid_cells);
     assert_eq!(flow.fluid_volume_m3(), ones as f64 * h * h * h);
+}
+
+/// The surface the cut cells are computed from (the voxelizer's held positions) against the
+/// deformed one.
+struct FractionLag {
+    /// The held surface's enclosed volume, m^3.
+    held_m3: f64,
+    /// `skip.cut_move_fraction h A` (A: the held surface's area) plus rounding: how far the held
+    /// volume may be from the deformed surface's when every vertex is within the move fraction.
+    bound_m3: f64,
+}
+
+fn cut_fraction_lag(scene: &Scene) -> FractionLag {
+    let surface = scene.cavity_surface();
+    let held = scene.voxelizer().voxel_positions_m();
+    let triangles = surface.triangles();
+    let held_m3 = enclosed_volume_m3(held, triangles);
+    let area_m2: f64 = triangles
+        .iter()
+        .map(|t| {
+            let p = t.map(|v| held[v as usize].map(f64::from));
+            let (a, b) = (sub(p[1], p[0]), sub(p[2], p[0]));
+            let n = [
+                a[1] * b[2] - a[2] * b[1],
+                a[2] * b[0] - a[0] * b[2],
+                a[0] * b[1] - a[1] * b[0],
+            ];
+            0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+        })
+        .sum();
+    let lag_m = scene.desc().skip.cut_move_fraction * scene.cells().spacing_m;
+    FractionLag {
+        held_m3,
+        bound_m3: lag_m * area_m2 + 1e-9 * held_m3,
+    }
+}
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }

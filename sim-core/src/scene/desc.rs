@@ -156,8 +156,14 @@ impl Default for StagesSpec {
 pub struct SkipSpec {
     /// The deformation is replayed only when the cavity pressure moved more than this, Pa.
     pub pressure_tolerance_pa: f64,
-    /// The cavity is re-voxelized only where a vertex moved more than this fraction of a voxel.
+    /// The cavity is re-voxelized only where a vertex moved more than this fraction of a voxel
+    /// (whole cells).
     pub voxel_move_fraction: f64,
+    /// With cut cells, the fractions (and the cell states) follow a surface vertex only once it
+    /// moved more than this fraction of a voxel since they last did (0: every move). Every vertex
+    /// of the surface they are computed from is then within this many voxels of the deformed
+    /// surface's, so their volume is within `cut_move_fraction h A` of its (A: its area).
+    pub cut_move_fraction: f64,
     /// The scope is re-rasterized only when its tip (or the far end of its part in the grid)
     /// moved more than this fraction of a voxel: its cells follow the centre rule, so a smaller
     /// move changes at most a boundary cell, and every change costs a topology rebuild.
@@ -172,6 +178,7 @@ impl Default for SkipSpec {
         Self {
             pressure_tolerance_pa: 1.0,
             voxel_move_fraction: 0.1,
+            cut_move_fraction: 0.01,
             scope_move_fraction: 0.5,
             rest_speed_m_s: 1e-4,
         }
@@ -524,6 +531,7 @@ impl SceneDesc {
         non_negative("skip.pressure_tolerance_pa", k.pressure_tolerance_pa)?;
         non_negative("skip.rest_speed_m_s", k.rest_speed_m_s)?;
         non_negative("skip.voxel_move_fraction", k.voxel_move_fraction)?;
+        non_negative("skip.cut_move_fraction", k.cut_move_fraction)?;
         non_negative("skip.scope_move_fraction", k.scope_move_fraction)?;
         if k.scope_move_fraction > 2.0 {
             return Err(invalid(
@@ -532,15 +540,17 @@ impl SceneDesc {
                 format!("{}: expected at most 2 voxels", k.scope_move_fraction),
             ));
         }
-        if k.voxel_move_fraction > 0.5 {
-            return Err(invalid(
-                o,
-                "skip.voxel_move_fraction",
-                format!(
-                    "{}: expected at most 0.5 (a larger move could skip a cell)",
-                    k.voxel_move_fraction
-                ),
-            ));
+        for (key, v) in [
+            ("skip.voxel_move_fraction", k.voxel_move_fraction),
+            ("skip.cut_move_fraction", k.cut_move_fraction),
+        ] {
+            if v > 0.5 {
+                return Err(invalid(
+                    o,
+                    key,
+                    format!("{v}: expected at most 0.5 (a larger move could skip a cell)"),
+                ));
+            }
         }
         self.vortices
             .validate()
@@ -651,6 +661,8 @@ mod tests {
                 "[skip]\nvoxel_move_fraction = 0.9",
                 "skip.voxel_move_fraction",
             ),
+            ("[skip]\ncut_move_fraction = 0.6", "skip.cut_move_fraction"),
+            ("[skip]\ncut_move_fraction = -0.1", "skip.cut_move_fraction"),
             ("anatomy_file = \"/does/not/exist.toml\"", "anatomy_file"),
         ];
         for (text, key) in cases {
