@@ -8,68 +8,94 @@ use hydrometra_ipc::status::{link_down_reason, link_state, scene_state};
 use hydrometra_ipc::{alarms, hydraulic_flags, Status};
 use serde_json::{json, Map, Value};
 
-/// `(name, offset, type)` of the status fields the page shows; an array field is named once
-/// with its element type.
+/// `(name, offset, type)` of the status fields the page shows, the offset and the type taken from
+/// the field itself; an array field is named once with its element type and length (`f64x3`).
 macro_rules! fields {
-    ($($name:ident: $ty:literal),* $(,)?) => {
-        [$((stringify!($name), offset_of!(Status, $name), $ty)),*]
+    ($($name:ident),* $(,)?) => {
+        [$((stringify!($name), offset_of!(Status, $name), wire_type(|s| &s.$name))),*]
     };
+}
+
+/// The page's name of a status field's wire type (the decoder's `switch` in `station.js`).
+trait WireType {
+    const NAME: &'static str;
+}
+
+macro_rules! wire_types {
+    ($($ty:ty => $name:literal),* $(,)?) => {
+        $(impl WireType for $ty {
+            const NAME: &'static str = $name;
+        })*
+    };
+}
+
+wire_types! {
+    u32 => "u32",
+    u64 => "u64",
+    f64 => "f64",
+    [f64; 3] => "f64x3",
+    [f64; 4] => "f64x4",
+}
+
+/// The wire type of the field `field` projects a status to.
+fn wire_type<T: WireType>(_field: fn(&Status) -> &T) -> &'static str {
+    T::NAME
 }
 
 /// The layout description served as `/layout.json`.
 pub fn layout() -> Value {
     let status_fields = fields![
-        sequence: "u64",
-        run_id: "u64",
-        sim_time_s: "f64",
-        publish_monotonic_ns: "u64",
-        link_frames: "u64",
-        link_crc_errors: "u64",
-        link_malformed: "u64",
-        link_sequence_gaps: "u64",
-        link_resyncs: "u64",
-        link_reconnects: "u64",
-        last_sample_age_s: "f64",
-        valve_in_opening: "f64",
-        valve_out_opening: "f64",
-        pump_set_pressure_pa: "f64",
-        rig_pump_set_pressure_pa: "f64",
-        scope_tip_position_m: "f64x3",
-        scope_view_direction: "f64x3",
-        scope_orientation_wxyz: "f64x4",
-        alarm_bits: "u64",
-        tick_rate_hz: "f64",
-        ticks: "u64",
-        deadline_misses: "u64",
-        tick_work_max_s: "f64",
-        latency_p50_s: "f64",
-        latency_p99_s: "f64",
-        latency_max_s: "f64",
-        link_state: "u32",
-        scope_pose_valid: "u32",
-        safe_state: "u32",
-        cavity_pressure_pa: "f64",
-        cavity_volume_m3: "f64",
-        inflow_m3_per_s: "f64",
-        outflow_m3_per_s: "f64",
-        leak_m3_per_s: "f64",
-        absorption_m3_per_s: "f64",
-        perforation_m3_per_s: "f64",
-        fluid_in_m3: "f64",
-        fluid_collected_m3: "f64",
-        deficit_m3: "f64",
-        deficit_rate_m3_per_s: "f64",
-        deficit_limit_m3: "f64",
-        procedure_id: "u64",
-        procedure_time_s: "f64",
-        deficit_warning_stage: "u64",
-        hydraulic_flags: "u64",
-        link_down_reason: "u32",
-        scene_state: "u64",
-        scene_frames: "u64",
-        scene_step_p99_s: "f64",
-        view_clarity: "f64",
-        cavity_surface_volume_m3: "f64",
+        sequence,
+        run_id,
+        sim_time_s,
+        publish_monotonic_ns,
+        link_frames,
+        link_crc_errors,
+        link_malformed,
+        link_sequence_gaps,
+        link_resyncs,
+        link_reconnects,
+        last_sample_age_s,
+        valve_in_opening,
+        valve_out_opening,
+        pump_set_pressure_pa,
+        rig_pump_set_pressure_pa,
+        scope_tip_position_m,
+        scope_view_direction,
+        scope_orientation_wxyz,
+        alarm_bits,
+        tick_rate_hz,
+        ticks,
+        deadline_misses,
+        tick_work_max_s,
+        latency_p50_s,
+        latency_p99_s,
+        latency_max_s,
+        link_state,
+        scope_pose_valid,
+        safe_state,
+        cavity_pressure_pa,
+        cavity_volume_m3,
+        inflow_m3_per_s,
+        outflow_m3_per_s,
+        leak_m3_per_s,
+        absorption_m3_per_s,
+        perforation_m3_per_s,
+        fluid_in_m3,
+        fluid_collected_m3,
+        deficit_m3,
+        deficit_rate_m3_per_s,
+        deficit_limit_m3,
+        procedure_id,
+        procedure_time_s,
+        deficit_warning_stage,
+        hydraulic_flags,
+        link_down_reason,
+        scene_state,
+        scene_frames,
+        scene_step_p99_s,
+        view_clarity,
+        cavity_surface_volume_m3,
     ];
     let mut fields = Map::new();
     for (name, offset, ty) in status_fields {
@@ -122,5 +148,28 @@ mod tests {
         assert_eq!(l["status_bytes"], 752);
         assert_eq!(l["alarms"][0]["name"], "rig-link-lost");
         assert_eq!(l["link_states"][2], "connected");
+        assert_eq!(l["status"]["scope_tip_position_m"]["type"], "f64x3");
+        assert_eq!(l["status"]["link_state"]["type"], "u32");
+    }
+
+    /// Every type the layout names is one the page's decoder reads, and every field lies inside
+    /// the status record.
+    #[test]
+    fn the_page_decodes_every_field_type() {
+        let page = include_str!("assets/station.js");
+        let l = layout();
+        let bytes = l["status_bytes"].as_u64().unwrap();
+        for (name, field) in l["status"].as_object().unwrap() {
+            let ty = field["type"].as_str().unwrap();
+            assert!(page.contains(&format!("case '{ty}':")), "{name}: {ty}");
+            let size = match ty {
+                "u32" => 4,
+                "u64" | "f64" => 8,
+                "f64x3" => 24,
+                "f64x4" => 32,
+                other => panic!("{name}: {other}"),
+            };
+            assert!(field["offset"].as_u64().unwrap() + size <= bytes, "{name}");
+        }
     }
 }
