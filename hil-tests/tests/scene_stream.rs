@@ -361,12 +361,35 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
             .map_or(f64::NAN, |s| s.tick_work_max_s * 1e3),
         host.summary()
     );
-    let misses_after = last.deadline_misses;
+    // The misses judged as the real-time test judges them: between consecutive statuses where
+    // the machine took nothing from the loop's CPU (a stall of the host, not of the daemon, makes
+    // a tick late whatever the daemon does); most of the run must be judged.
     let ticks = last.ticks - statuses.first().unwrap().ticks;
+    let (mut judged_ticks, mut judged_misses) = (0u64, 0u64);
+    for w in statuses
+        .windows(2)
+        .filter(|w| w[1].sequence == w[0].sequence + 1)
+    {
+        if !host.interfered_between(w[0].publish_monotonic_ns, w[1].publish_monotonic_ns) {
+            judged_ticks += w[1].ticks - w[0].ticks;
+            judged_misses += w[1].deadline_misses - w[0].deadline_misses;
+        }
+    }
+    eprintln!(
+        "deadline misses over the run {} in {ticks} ticks; judged {judged_misses} in \
+         {judged_ticks} ticks",
+        last.deadline_misses - misses_before
+    );
     assert!(
-        (misses_after - misses_before) * 100 <= ticks,
-        "deadline misses during the run: {} in {ticks} ticks:\n{}",
-        misses_after - misses_before,
+        judged_ticks * 2 >= ticks,
+        "the machine took the loop's CPU in all but {judged_ticks} of {ticks} ticks: {}",
+        host.summary()
+    );
+    assert!(
+        judged_misses * 100 <= judged_ticks,
+        "deadline misses where the machine took nothing: {judged_misses} in {judged_ticks} \
+         ticks ({}):\n{}",
+        host.summary(),
         daemon.log()
     );
 }
