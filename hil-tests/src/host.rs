@@ -60,6 +60,20 @@ const STEAL_TICK_S: f64 = 0.01;
 const STALL_CAPACITY: usize = 1 << 16;
 
 /// Watches the loop's CPU from now until dropped.
+/// What [`HostWatch::judge`] found.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct LoopRecord {
+    /// Pairs of consecutive statuses.
+    pub pairs: usize,
+    /// Longest time between two consecutive statuses, s.
+    pub gap_max_s: f64,
+    /// Ticks and deadline misses between the judged pairs.
+    pub judged_ticks: u64,
+    pub judged_misses: u64,
+    /// Longest time between two judged consecutive statuses, s.
+    pub judged_gap_max_s: f64,
+}
+
 pub struct HostWatch {
     cpu: Option<usize>,
     probe: Result<Probe, String>,
@@ -91,6 +105,32 @@ impl HostWatch {
             Ok(probe) => probe.stalled_between(from_ns, to_ns),
             Err(_) => self.steal.stolen_between(from_ns, to_ns),
         }
+    }
+
+    /// The 1 kHz loop's record over consecutive statuses (pairs whose sequences follow; a gap in
+    /// a subscriber's own reading is not the daemon's): all of it, and the part judged, where
+    /// the machine took nothing from the loop's CPU between the two statuses.
+    pub fn judge(&self, statuses: &[hydrometra_ipc::Status]) -> LoopRecord {
+        let mut r = LoopRecord::default();
+        for w in statuses
+            .windows(2)
+            .filter(|w| w[1].sequence == w[0].sequence + 1)
+        {
+            let (a, b) = (w[0].publish_monotonic_ns, w[1].publish_monotonic_ns);
+            let gap_s = b.saturating_sub(a) as f64 * 1e-9;
+            let (ticks, misses) = (
+                w[1].ticks - w[0].ticks,
+                w[1].deadline_misses - w[0].deadline_misses,
+            );
+            r.pairs += 1;
+            r.gap_max_s = r.gap_max_s.max(gap_s);
+            if !self.interfered_between(a, b) {
+                r.judged_ticks += ticks;
+                r.judged_misses += misses;
+                r.judged_gap_max_s = r.judged_gap_max_s.max(gap_s);
+            }
+        }
+        r
     }
 
     /// Seconds of steal on the loop's CPU since the start.

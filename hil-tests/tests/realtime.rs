@@ -59,25 +59,9 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
     // Each pair of consecutive statuses (where the subscriber has both: it reads every 2 ms into a
     // 64-deep buffer, a gap in its own reading is not the daemon's): its gap, ticks and misses,
     // judged where the machine took nothing from the loop's CPU.
-    let pairs: Vec<_> = statuses
-        .windows(2)
-        .filter(|w| w[1].sequence == w[0].sequence + 1)
-        .map(|w| {
-            let (a, b) = (w[0].publish_monotonic_ns, w[1].publish_monotonic_ns);
-            let gap_s = (b - a) as f64 * 1e-9;
-            let d = (
-                w[1].ticks - w[0].ticks,
-                w[1].deadline_misses - w[0].deadline_misses,
-            );
-            (gap_s, d, host.interfered_between(a, b))
-        })
-        .collect();
-    let judged: Vec<_> = pairs.iter().filter(|p| !p.2).collect();
-    let gap_max_s = judged.iter().map(|p| p.0).fold(0.0, f64::max);
-    let (judged_ticks, judged_misses) = judged
-        .iter()
-        .fold((0u64, 0u64), |acc, p| (acc.0 + p.1 .0, acc.1 + p.1 .1));
-    let gap_all_s = pairs.iter().map(|p| p.0).fold(0.0, f64::max);
+    let record = host.judge(&statuses);
+    let (judged_ticks, judged_misses) = (record.judged_ticks, record.judged_misses);
+    let (gap_max_s, gap_all_s) = (record.judged_gap_max_s, record.gap_max_s);
     let late = last.scene_frames_late - first.scene_frames_late;
     eprintln!(
         "{MEASURED_S} s under the `bleed` scene ({}): ticks {ticks}, deadline misses {misses} \
@@ -88,7 +72,7 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         realtime_mode::name(last.realtime_mode),
         100.0 * misses as f64 / ticks as f64,
         gap_all_s * 1e3,
-        pairs.len(),
+        record.pairs,
         statuses.len(),
         100.0 * judged_misses as f64 / judged_ticks.max(1) as f64,
         gap_max_s * 1e3,
@@ -98,9 +82,9 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         host.summary(),
     );
     assert!(
-        pairs.len() as f64 >= 0.95 * statuses.len() as f64,
+        record.pairs as f64 >= 0.95 * statuses.len() as f64,
         "the subscriber missed too many statuses to measure gaps: {} pairs of {}",
-        pairs.len(),
+        record.pairs,
         statuses.len()
     );
     assert!(

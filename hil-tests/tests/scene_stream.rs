@@ -365,16 +365,8 @@ fn renderer_gets_topology_once_positions_at_the_rate_and_mesh_and_flow_agree_wit
     // the machine took nothing from the loop's CPU (a stall of the host, not of the daemon, makes
     // a tick late whatever the daemon does); most of the run must be judged.
     let ticks = last.ticks - statuses.first().unwrap().ticks;
-    let (mut judged_ticks, mut judged_misses) = (0u64, 0u64);
-    for w in statuses
-        .windows(2)
-        .filter(|w| w[1].sequence == w[0].sequence + 1)
-    {
-        if !host.interfered_between(w[0].publish_monotonic_ns, w[1].publish_monotonic_ns) {
-            judged_ticks += w[1].ticks - w[0].ticks;
-            judged_misses += w[1].deadline_misses - w[0].deadline_misses;
-        }
-    }
+    let record = host.judge(&statuses);
+    let (judged_ticks, judged_misses) = (record.judged_ticks, record.judged_misses);
     eprintln!(
         "deadline misses over the run {} in {ticks} ticks; judged {judged_misses} in \
          {judged_ticks} ticks",
