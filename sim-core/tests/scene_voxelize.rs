@@ -381,9 +381,18 @@ fn slivers_and_degenerate_triangles_change_nothing() {
 }
 
 /// Random move sequences: after each, the incremental result equals a full voxelization of the
-/// positions the voxelizer holds.
+/// positions the voxelizer holds, with and without a lead.
 #[test]
 fn incremental_equals_full_after_random_moves() {
+    incremental_equals_full(0.0);
+}
+
+#[test]
+fn incremental_with_a_lead_equals_full_after_random_moves() {
+    incremental_equals_full(0.9e-4);
+}
+
+fn incremental_equals_full(lead_m: f64) {
     let base = transform(&unit_sphere(20), [0.015, 0.011, 0.008], 0.3, 0.5, [0.0; 3]);
     let cells = box_around(&base, 1.0e-3, 6);
     let mut rng = 0x2545_f491_4f6c_dd1du64;
@@ -425,7 +434,15 @@ fn incremental_equals_full_after_random_moves() {
                 }
             }
         }
-        inc.update(&pos, 1e-4);
+        inc.update_leading(&pos, 1e-4, lead_m);
+        // Every held position lies within the threshold of its vertex (plus f32 rounding).
+        for (p, q) in pos.iter().zip(inc.voxel_positions_m()) {
+            let d = (0..3).map(|a| (p[a] - q[a]).powi(2)).sum::<f32>().sqrt();
+            assert!(
+                d <= 1e-4 + 1e-8,
+                "held {d} m from its vertex after step {step}"
+            );
+        }
         let mut full = Voxelizer::new(cells, base.1.clone(), pos.len());
         full.full(inc.voxel_positions_m());
         assert!(
@@ -458,4 +475,49 @@ fn small_moves_are_skipped_and_nan_is_contained() {
     let st = v.update(&p, 1e-4);
     assert_eq!(st.moved_vertices, 1);
     assert!(v.states().contains(&state::INSIDE));
+}
+
+/// A vertex moving steadily is held `lead` beyond itself along the move: it is followed once per
+/// `threshold + lead` of travel (not once per threshold), the held position straddles it, and it
+/// always stays within the threshold.
+#[test]
+fn a_lead_straddles_a_steady_move_and_halves_the_updates() {
+    let s = transform(&unit_sphere(12), [0.01; 3], 0.0, 0.0, [0.0; 3]);
+    let cells = box_around(&s, 1e-3, 4);
+    let (threshold, step) = (1e-4, 1e-6f32);
+    let run = |lead: f64| {
+        let mut v = Voxelizer::new(cells, s.1.clone(), s.0.len());
+        v.update(&s.0, threshold);
+        let mut p = s.0.clone();
+        let (mut updates, mut ahead, mut behind) = (0, 0, 0);
+        for _ in 0..2000 {
+            p[0][0] += step;
+            if v.update_leading(&p, threshold, lead).moved_vertices > 0 {
+                updates += 1;
+            }
+            let d = v.voxel_positions_m()[0][0] - p[0][0];
+            assert!(d.abs() <= threshold as f32 + 1e-7, "held {d} m off");
+            if d > 0.0 {
+                ahead += 1;
+            } else if d < 0.0 {
+                behind += 1;
+            }
+        }
+        (updates, ahead, behind)
+    };
+    let (plain, ahead0, _) = run(0.0);
+    let (leading, ahead, behind) = run(0.9 * threshold);
+    // 2 mm of travel in 1 um steps: every 100 um without a lead, every 190 um with one.
+    assert!((19..=20).contains(&plain), "{plain} updates without a lead");
+    assert!(
+        (10..=11).contains(&leading),
+        "{leading} updates with a lead"
+    );
+    assert_eq!(ahead0, 0, "without a lead the held position never leads");
+    // With it, ahead about 90 of every 190 steps.
+    let share = ahead as f64 / (ahead + behind) as f64;
+    assert!(
+        (0.40..0.55).contains(&share),
+        "ahead in {share} of the steps"
+    );
 }

@@ -162,7 +162,9 @@ pub struct SkipSpec {
     /// With cut cells, the fractions (and the cell states) follow a surface vertex only once it
     /// moved more than this fraction of a voxel since they last did (0: every move). Every vertex
     /// of the surface they are computed from is then within this many voxels of the deformed
-    /// surface's, so their volume is within `cut_move_fraction h A` of its (A: its area).
+    /// surface's, so their volume is within `cut_move_fraction h A` of its (A: its area). A
+    /// moved vertex is held a little beyond its position along its move
+    /// ([`crate::scene::CUT_LEAD`]), so the held surface straddles the deformed one.
     pub cut_move_fraction: f64,
     /// The scope is re-rasterized only when its tip (or the far end of its part in the grid)
     /// moved more than this fraction of a voxel: its cells follow the centre rule, so a smaller

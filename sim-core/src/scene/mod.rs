@@ -92,6 +92,11 @@ use crate::hydraulics::{HydraulicModel, HydraulicState};
 use particles::{ParticleInputs, Particles};
 use vortices::Vortices;
 
+/// With cut cells, how far beyond a moved surface vertex (along its move, in units of the
+/// `skip.cut_move_fraction` threshold) the voxelizer holds it ([`Voxelizer::update_leading`]).
+/// Below 1, so every held position stays within the threshold of the surface.
+pub const CUT_LEAD: f64 = 0.9;
+
 /// The coupled pipeline: its stages in order, each owning its state.
 pub struct Scene {
     desc: SceneDesc,
@@ -226,9 +231,16 @@ impl Scene {
             None => self.desc.skip.voxel_move_fraction,
         };
         let threshold_m = move_fraction * self.voxelizer.cells().spacing_m;
+        // With cut cells a vertex's held position goes `CUT_LEAD` of the threshold beyond it
+        // along its move: the fractions then straddle the surface and follow it half as often.
+        let lead_m = match self.fractions {
+            Some(_) => CUT_LEAD * threshold_m,
+            None => 0.0,
+        };
         let changed_rows = self.voxelizer.step(
             deformed.then(|| surface.positions_m()),
             threshold_m,
+            lead_m,
             self.report.counters.get_mut(Stage::Voxelize),
         );
 

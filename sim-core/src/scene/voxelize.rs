@@ -18,7 +18,8 @@
 //!   band cells can sit within rounding of a crossing, and band cells are never inside.
 //!
 //! Incremental: the surface is held at its *voxel positions*; [`Voxelizer::update`] moves a vertex's
-//! voxel position only when the vertex moved more than a threshold since, and re-tests only the rows
+//! voxel position only when the vertex moved more than a threshold since (to its position, or a lead
+//! beyond it along the move: [`Voxelizer::update_leading`]), and re-tests only the rows
 //! of cells that the moved triangles' old and new boxes cover. Because every row is computed by the
 //! same function of the voxel positions, the result equals [`Voxelizer::full`] of those positions
 //! after any sequence of moves (tested). The rows of a call are re-tested in two halves of the box
@@ -356,6 +357,22 @@ impl Voxelizer {
     /// voxel position, and re-tests the rows the moved triangles touch (old and new positions).
     /// The first call voxelizes fully.
     pub fn update(&mut self, positions_m: &[[f32; 3]], threshold_m: f64) -> VoxelizeStats {
+        self.update_leading(positions_m, threshold_m, 0.0)
+    }
+
+    /// [`Voxelizer::update`], with each moved vertex's voxel position placed `lead_m` beyond its
+    /// position along its move since its last voxel position (`0 <= lead_m < threshold_m`). A
+    /// surface moving steadily then lies on both sides of its voxel positions, within
+    /// `threshold_m` of them as before, but the voxel positions move about every
+    /// `threshold_m + lead_m` of travel instead of every `threshold_m`, and the volume they
+    /// enclose lags the surface's by about nothing on average instead of half the threshold.
+    /// The result is still [`Voxelizer::full`] of the voxel positions.
+    pub fn update_leading(
+        &mut self,
+        positions_m: &[[f32; 3]],
+        threshold_m: f64,
+        lead_m: f64,
+    ) -> VoxelizeStats {
         if !self.initialised {
             return self.full(positions_m);
         }
@@ -388,10 +405,27 @@ impl Voxelizer {
                 self.mark_rows(old);
             }
         }
+        let lead_m = if lead_m > 0.0 && lead_m < threshold_m {
+            lead_m as f32
+        } else {
+            0.0
+        };
         for (v, p) in positions_m.iter().enumerate() {
             if self.moved[v] {
-                self.pos[v] = self.to_cells(*p);
-                self.pos_m[v] = *p;
+                let held = if lead_m > 0.0 {
+                    let q = self.pos_m[v];
+                    let d: [f32; 3] = std::array::from_fn(|a| p[a] - q[a]);
+                    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                    if len.is_finite() && len > 0.0 {
+                        std::array::from_fn(|a| p[a] + d[a] * (lead_m / len))
+                    } else {
+                        *p
+                    }
+                } else {
+                    *p
+                };
+                self.pos[v] = self.to_cells(held);
+                self.pos_m[v] = held;
             }
         }
         // A moved triangle whose range is as it was marks no new row, and one whose bins are as
@@ -429,7 +463,7 @@ impl Voxelizer {
         stats
     }
 
-    /// The voxelize stage of a scene step: [`Voxelizer::update`] with the surface's
+    /// The voxelize stage of a scene step: [`Voxelizer::update_leading`] with the surface's
     /// `positions_m` when it was deformed (`None`: no vertex can have moved since the last update,
     /// and the scan over every vertex is skipped, the scene at rest). Returns the rows whose cell
     /// states changed (empty when none did).
@@ -437,11 +471,12 @@ impl Voxelizer {
         &mut self,
         deformed: Option<&[[f32; 3]]>,
         threshold_m: f64,
+        lead_m: f64,
         counters: &mut StageCounters,
     ) -> &[u32] {
         let t = Instant::now();
         let stats = match deformed {
-            Some(positions_m) => self.update(positions_m, threshold_m),
+            Some(positions_m) => self.update_leading(positions_m, threshold_m, lead_m),
             None => VoxelizeStats::default(),
         };
         self.last = stats;
