@@ -72,6 +72,9 @@ pub struct LoopRecord {
     pub judged_misses: u64,
     /// Longest time between two judged consecutive statuses, s.
     pub judged_gap_max_s: f64,
+    /// Time between the judged pairs, s (publish stamps): the loop's tick rate where the machine
+    /// took nothing is `judged_ticks / judged_s`.
+    pub judged_s: f64,
 }
 
 pub struct HostWatch {
@@ -128,6 +131,7 @@ impl HostWatch {
                 r.judged_ticks += ticks;
                 r.judged_misses += misses;
                 r.judged_gap_max_s = r.judged_gap_max_s.max(gap_s);
+                r.judged_s += gap_s;
             }
         }
         r

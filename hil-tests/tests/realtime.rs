@@ -23,6 +23,13 @@ const MAX_GAP_S: f64 = 0.005;
 /// the loop's CPU (`hydrometra_hil_tests::host`); at least this share of the ticks must be left.
 const MIN_JUDGED_SHARE: f64 = 0.5;
 
+/// Where the machine took nothing, the loop ticks at 1 kHz: at least this share of the judged
+/// stretches' milliseconds are ticks (the publish stamps' jitter is microseconds a pair). Not
+/// over the whole run: the periods a stall of the machine spans are skipped, not replayed
+/// (docs/daemon.md, "skipped ticks are covered, not replayed"), so the raw count falls with the
+/// machine's stalls.
+const MIN_TICK_RATE_SHARE: f64 = 0.99;
+
 #[test]
 fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_republished() {
     let prefix = unique_prefix("rt-heavy");
@@ -67,13 +74,14 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         "{MEASURED_S} s under the `bleed` scene ({}): ticks {ticks}, deadline misses {misses} \
          ({:.4} %), longest gap between statuses {:.3} ms over {} consecutive pairs of {} \
          statuses; judged where the machine took nothing from the loop's CPU: {judged_ticks} \
-         ticks, {judged_misses} misses ({:.4} %), longest gap {:.3} ms; scene frames {}, late \
+         ticks in {:.3} s, {judged_misses} misses ({:.4} %), longest gap {:.3} ms; scene frames {}, late \
          {late}, degradation level {}, particles stage runs {}; {}",
         realtime_mode::name(last.realtime_mode),
         100.0 * misses as f64 / ticks as f64,
         gap_all_s * 1e3,
         record.pairs,
         statuses.len(),
+        record.judged_s,
         100.0 * judged_misses as f64 / judged_ticks.max(1) as f64,
         gap_max_s * 1e3,
         last.scene_frames - first.scene_frames,
@@ -88,8 +96,11 @@ fn the_loop_keeps_its_deadlines_under_the_heaviest_scene_and_frames_are_never_re
         statuses.len()
     );
     assert!(
-        ticks >= MEASURED_S * 1000 * 99 / 100,
-        "{ticks} ticks in {MEASURED_S} s"
+        judged_ticks as f64 >= MIN_TICK_RATE_SHARE * 1e3 * record.judged_s,
+        "{judged_ticks} ticks in the {:.3} s where the machine took nothing: the loop starved \
+         ({})",
+        record.judged_s,
+        host.summary()
     );
     assert!(
         judged_ticks as f64 >= MIN_JUDGED_SHARE * ticks as f64,

@@ -107,10 +107,12 @@ def main() -> int:
                        status_view_direction=view, status_inflow_port_velocity_m_per_s=port)
         if args.volume:
             fluid = field.fluid_volume_m3()
-            cavity = hs.enclosed_volume_m3(tris, meshes[field.scene_frame][1])
+            verts = meshes[field.scene_frame][1]
+            cavity = hs.enclosed_volume_m3(tris, verts)
             f = field.fractions
             out.update(scene_frame=field.scene_frame, spacing_m=field.spacing_m,
                        fluid_volume_m3=fluid, cavity_volume_m3=cavity,
+                       cavity_area_m2=hs.surface_area_m2(tris, verts),
                        fluid_cells=int((field.labels == 1).sum()),
                        scope_cells=int(((field.labels >= 2) & (field.labels <= 4)).sum()),
                        cut_cells=None if f is None else int(((f > 0) & (f < 1)).sum()))

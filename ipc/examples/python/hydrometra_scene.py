@@ -169,6 +169,12 @@ def enclosed_volume_m3(tris, verts):
     return -float(np.einsum("ij,ij->i", p0, np.cross(p1, p2)).sum()) / 6.0
 
 
+def surface_area_m2(tris, verts):
+    """Area of the cavity surface."""
+    p0, p1, p2 = verts[tris[:, 0]], verts[tris[:, 1]], verts[tris[:, 2]]
+    return 0.5 * float(np.linalg.norm(np.cross(p1 - p0, p2 - p0), axis=1).sum())
+
+
 class FlowField:
     """A flow field sample copied out of shared memory: labels, cell-centred velocities and fluid
     volume fractions (None when the payload has none: `fractions_offset_bytes` 0)."""
