@@ -13,8 +13,8 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use anyhow::{bail, Context, Result};
 use hydrometra_sim::harness::converge::{
-    band_start_z_m, in_fluid, mean_speed_above_m_s, probe_points_m, speed_at_m_s, FUNDAL_FROM,
-    JET_PROBE_MM,
+    band_start_z_m, in_fluid, jet_search_radius_m, mean_speed_above_m_s, peak_speed_on_disk_m_s,
+    probe_points_m, speed_at_m_s, FUNDAL_FROM, JET_PROBE_MM, JET_SEARCH_SPACING_M,
 };
 use hydrometra_sim::scene::{Scene, SceneDesc};
 
@@ -176,6 +176,7 @@ fn run_one(a: &ConvergeArgs, mut scene: Scene, key: RunKey) -> Result<RunRecord>
     let frames = (a.seconds * a.rate_hz).round() as usize;
     let window_frames = ((a.window_s * a.rate_hz).round() as usize).clamp(1, frames);
     let probe_m = JET_PROBE_MM.map(|d| d * 1e-3);
+    let channel_area_m2 = scene.desc().scope.inflow_channel_area_mm2 * 1e-6;
     let mut r = RunRecord {
         key,
         profile: if cfg!(debug_assertions) {
@@ -197,6 +198,7 @@ fn run_one(a: &ConvergeArgs, mut scene: Scene, key: RunKey) -> Result<RunRecord>
         min_fluid_cells: scene.desc().fluid.min_fluid_cells,
         window_time_s: Vec::with_capacity(window_frames),
         jet_m_s: vec![Vec::with_capacity(window_frames); probe_m.len()],
+        jet_on_line_m_s: vec![Vec::with_capacity(window_frames); probe_m.len()],
         jet_in_fluid: vec![Vec::with_capacity(window_frames); probe_m.len()],
         fundal_m_s: Vec::with_capacity(window_frames),
         clarity: Vec::with_capacity(frames),
@@ -230,9 +232,19 @@ fn run_one(a: &ConvergeArgs, mut scene: Scene, key: RunKey) -> Result<RunRecord>
                 .valid
                 .then(|| probe_points_m(pose.tip_position_m, pose.view_direction, &probe_m))
                 .flatten();
-            for (i, slot) in r.jet_m_s.iter_mut().enumerate() {
+            for (i, &d_m) in probe_m.iter().enumerate() {
                 let p = probes.as_ref().map(|p| p[i]);
-                slot.push(p.map(|p| speed_at_m_s(solver, p)));
+                let radius_m = jet_search_radius_m(channel_area_m2, d_m);
+                r.jet_m_s[i].push(p.and_then(|p| {
+                    peak_speed_on_disk_m_s(
+                        solver,
+                        p,
+                        pose.view_direction,
+                        radius_m,
+                        JET_SEARCH_SPACING_M,
+                    )
+                }));
+                r.jet_on_line_m_s[i].push(p.map(|p| speed_at_m_s(solver, p)));
                 r.jet_in_fluid[i].push(p.is_some_and(|p| in_fluid(solver, p)));
             }
             let z0 = band_start_z_m(scene.cavity_surface().positions_m(), FUNDAL_FROM);

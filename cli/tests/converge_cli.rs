@@ -96,6 +96,27 @@ fn converge_prints_a_table_of_finite_errors_and_orders_and_caches_the_reference(
         assert_eq!(o["successive"].as_array().unwrap().len(), 1);
     }
     assert!(out.join("run-0.900mm.json").exists());
+    // The jet's speed is the peak of a disk centred on the view line's point: never below it.
+    let run: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("run-1.200mm.json")).unwrap())
+            .unwrap();
+    for (peaks, on_line) in run["jet_m_s"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(run["jet_on_line_m_s"].as_array().unwrap())
+    {
+        for (p, l) in peaks
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(on_line.as_array().unwrap())
+        {
+            if let (Some(p), Some(l)) = (p.as_f64(), l.as_f64()) {
+                assert!(p >= l, "peak {p} below the line's {l}");
+            }
+        }
+    }
 
     // Again: the reference (and here the sizes) come from the cache, and the table is the same.
     let again = converge(&scene, &cache, &out, &args);

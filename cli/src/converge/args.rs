@@ -101,10 +101,12 @@ pub struct RunRecord {
     pub fluid_cells: Vec<usize>,
     /// The scene's `min_fluid_cells`: frames with fewer are not compared.
     pub min_fluid_cells: usize,
-    /// Per frame of the window: its time (s), the speed at each jet probe (m/s, None without a
-    /// scope pose), whether the probe lay in a fluid cell, and the fundal third's mean speed.
+    /// Per frame of the window: its time (s); at each jet probe's distance the jet's speed (the
+    /// peak `|u|` on the search disk, m/s, None without a scope pose) and the speed at the point
+    /// on the view line; whether that point lay in a fluid cell; the fundal third's mean speed.
     pub window_time_s: Vec<f64>,
     pub jet_m_s: Vec<Vec<Option<f64>>>,
+    pub jet_on_line_m_s: Vec<Vec<Option<f64>>>,
     pub jet_in_fluid: Vec<Vec<bool>>,
     pub fundal_m_s: Vec<Option<f64>>,
     /// The view's clarity every frame (None without particles or a scope pose).

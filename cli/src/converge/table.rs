@@ -4,7 +4,8 @@
 use std::fmt::Write as _;
 
 use hydrometra_sim::harness::converge::{
-    fitted_order, relative_error, successive_orders, window_mean, JET_PROBE_MM,
+    fitted_order, relative_error, successive_orders, window_mean, FUNDAL_FROM,
+    JET_CONE_HALF_ANGLE_DEG, JET_PROBE_MM, JET_SEARCH_SPACING_M,
 };
 use serde::Serialize;
 
@@ -135,10 +136,12 @@ impl Table {
              step ms: mean wall time of a scene step over the whole run. vol vs surface: the \
              grid's fluid volume against the cavity surface's, mean / worst over the frames with \
              at least `min_fluid_cells` fluid cells. vol vs ref: |fluid volume / the reference's \
-             - 1| at the same frames, mean / worst. jet: speed |u| by the solver's trilinear \
-             interpolation at 5, 10 and 20 mm ahead of the scope tip along its view direction, \
-             averaged over every frame of the last {} s (the same instants at every size); \
-             fundal: the volume-weighted mean speed of the fluid cells above 2/3 of the cavity \
+             - 1| at the same frames, mean / worst. jet: the peak speed |u| (the solver's \
+             trilinear interpolation, sampled every {} mm) on the disk normal to the scope's \
+             view direction {} mm ahead of its tip, of radius the inflow channel's plus the \
+             distance times tan {} deg, averaged over every frame of the last {} s (the same \
+             instants at every size); \
+             fundal: the volume-weighted mean speed of the fluid cells above {:.3} of the cavity \
              surface's extent along z, same window; err: |value / the reference's - 1|. clear: \
              time from the bleed's stop to a clarity at or above the scene's threshold (the \
              scene's clarity tracker, at frame resolution); err: |difference| s.\n",
@@ -150,7 +153,11 @@ impl Table {
             self.reference.voxel_mm,
             self.profile,
             self.rayon_threads,
+            JET_SEARCH_SPACING_M * 1e3,
+            JET_PROBE_MM.map(|d| d.to_string()).join(", "),
+            JET_CONE_HALF_ANGLE_DEG,
             self.window_s,
+            FUNDAL_FROM,
         );
         let jet_heads: Vec<String> = JET_PROBE_MM
             .iter()

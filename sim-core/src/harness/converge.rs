@@ -41,6 +41,72 @@ pub fn speed_at_m_s(solver: &FluidSolver, point_m: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
+/// Half-angle of the cone around the view direction in which the jet's peak is sought: a jet's
+/// axis bends with the cavity's cross-flow (the outflow's pull, the walls), and a fixed point on
+/// the view line then reads the jet's flank, more so the finer the grid keeps the jet narrow. The
+/// search disk at distance `d` has the radius `r_channel + d tan(JET_CONE_HALF_ANGLE_DEG)`.
+pub const JET_CONE_HALF_ANGLE_DEG: f64 = 15.0;
+
+/// Sample spacing of the search disk, m: a sixth of the finest size the accuracy table is run at
+/// (0.3 mm), so the trilinear field's peak (at most a face's spacing from a sample) is caught.
+pub const JET_SEARCH_SPACING_M: f64 = 5e-5;
+
+/// The radius (m) of the jet's search disk `distance_m` ahead of the tip for a channel of
+/// `channel_area_m2`: `sqrt(A / pi) + d tan(`[`JET_CONE_HALF_ANGLE_DEG`]`)`.
+pub fn jet_search_radius_m(channel_area_m2: f64, distance_m: f64) -> f64 {
+    (channel_area_m2 / std::f64::consts::PI).sqrt()
+        + distance_m * JET_CONE_HALF_ANGLE_DEG.to_radians().tan()
+}
+
+/// The jet's speed at a cross-section: the largest `|u|` (m/s) on the disk of `radius_m` centred on
+/// `centre_m` and normal to `dir`, sampled on a square lattice of `spacing_m` in the disk's plane
+/// by the solver's trilinear interpolation (the centreline of a jet is where its speed peaks, not
+/// the line the scope points along). `None` when `dir` has no direction or the spacing or radius
+/// is not positive.
+pub fn peak_speed_on_disk_m_s(
+    solver: &FluidSolver,
+    centre_m: [f64; 3],
+    dir: [f64; 3],
+    radius_m: f64,
+    spacing_m: f64,
+) -> Option<f64> {
+    let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+    if !(n.is_finite() && n > 0.0 && radius_m > 0.0 && spacing_m > 0.0) {
+        return None;
+    }
+    let d = dir.map(|x| x / n);
+    // Two unit vectors spanning the plane normal to `d`: `a` from the axis least along `d`.
+    let least = (0..3)
+        .min_by(|&i, &j| d[i].abs().total_cmp(&d[j].abs()))
+        .unwrap_or(0);
+    let mut e = [0.0; 3];
+    e[least] = 1.0;
+    let cross = |x: [f64; 3], y: [f64; 3]| {
+        [
+            x[1] * y[2] - x[2] * y[1],
+            x[2] * y[0] - x[0] * y[2],
+            x[0] * y[1] - x[1] * y[0],
+        ]
+    };
+    let a = cross(d, e);
+    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
+    let a = a.map(|x| x / na);
+    let b = cross(d, a);
+    let steps = (radius_m / spacing_m).floor() as i64;
+    let mut peak = speed_at_m_s(solver, centre_m);
+    for i in -steps..=steps {
+        for j in -steps..=steps {
+            let (s, t) = (i as f64 * spacing_m, j as f64 * spacing_m);
+            if s * s + t * t > radius_m * radius_m {
+                continue;
+            }
+            let p = std::array::from_fn(|k| centre_m[k] + s * a[k] + t * b[k]);
+            peak = peak.max(speed_at_m_s(solver, p));
+        }
+    }
+    Some(peak)
+}
+
 /// Whether `point_m` lies in a fluid cell of the solver's grid.
 pub fn in_fluid(solver: &FluidSolver, point_m: [f64; 3]) -> bool {
     let g = solver.grid();
@@ -212,6 +278,73 @@ mod tests {
         }
         assert!(probe_points_m([0.0; 3], [0.0; 3], &[1.0]).is_none());
         assert!(probe_points_m([0.0; 3], [f64::NAN, 0.0, 1.0], &[1.0]).is_none());
+    }
+
+    /// A Gaussian jet `U exp(-r^2 / w^2)` along a tilted direction, its axis offset from the
+    /// probe's line by less than the search radius: the disk's peak is `U` within the lattice's
+    /// and the trilinear interpolation's error, while the point on the line reads the flank; with
+    /// the axis outside the disk the peak is the flank's speed at the disk's rim.
+    #[test]
+    fn the_disk_finds_a_jet_whose_axis_is_off_the_view_line() {
+        let (n, h) = (48usize, 2.5e-4);
+        let big_u = 0.4;
+        let w = 1.2e-3;
+        let dir = [0.2f64, -0.3, 1.0];
+        let nd = (dir.iter().map(|x| x * x).sum::<f64>()).sqrt();
+        let d = dir.map(|x| x / nd);
+        let tip = [6e-3, 6e-3, 1e-3];
+        let dist = 5e-3;
+        let centre: [f64; 3] = std::array::from_fn(|k| tip[k] + dist * d[k]);
+        for offset_m in [0.0, 0.8e-3, 1.5e-3] {
+            // The jet's axis: through `centre + offset e_x'`, along `d` (e_x' normal to d).
+            let ex = [1.0, 0.0, -d[0] / d[2]];
+            let ne = (ex.iter().map(|x| x * x).sum::<f64>()).sqrt();
+            let ex = ex.map(|x| x / ne);
+            let axis_pt: [f64; 3] = std::array::from_fn(|k| centre[k] + offset_m * ex[k]);
+            let speed = move |p: [f64; 3]| {
+                let r: [f64; 3] = std::array::from_fn(|k| p[k] - axis_pt[k]);
+                let along = r[0] * d[0] + r[1] * d[1] + r[2] * d[2];
+                let r2 = r.iter().map(|x| x * x).sum::<f64>() - along * along;
+                big_u * (-r2 / (w * w)).exp()
+            };
+            let s = solver_with(n, h, [0.0; 3], [false; 3], |c, p| speed(p) * d[c]);
+            let radius = 1.2e-3;
+            let peak =
+                peak_speed_on_disk_m_s(&s, centre, dir, radius, JET_SEARCH_SPACING_M).unwrap();
+            let on_line = speed_at_m_s(&s, centre);
+            if offset_m < radius {
+                // Trilinear interpolation of a Gaussian of width 4.8 cells: about 1 % at its peak.
+                assert!(
+                    (peak / big_u - 1.0).abs() < 0.02,
+                    "offset {offset_m}: {peak}"
+                );
+                if offset_m > 0.0 {
+                    assert!(
+                        on_line < 0.9 * peak,
+                        "offset {offset_m}: {on_line} vs {peak}"
+                    );
+                }
+            } else {
+                // The nearest lattice point to the axis lies between the rim and a lattice
+                // diagonal inside it.
+                let flank = |r: f64| big_u * (-(r / w).powi(2)).exp();
+                let (near, far) = (
+                    offset_m - radius,
+                    offset_m - radius + 1.5 * JET_SEARCH_SPACING_M,
+                );
+                assert!(
+                    peak < 1.02 * flank(near) && peak > 0.98 * flank(far),
+                    "offset {offset_m}: {peak} vs {} .. {}",
+                    flank(far),
+                    flank(near)
+                );
+            }
+        }
+        let s = solver_with(8, h, [0.0; 3], [false; 3], |_, _| 0.0);
+        assert!(peak_speed_on_disk_m_s(&s, [1e-3; 3], [0.0; 3], 1e-3, 1e-4).is_none());
+        assert!(peak_speed_on_disk_m_s(&s, [1e-3; 3], [0.0, 0.0, 1.0], 0.0, 1e-4).is_none());
+        let r = jet_search_radius_m(2.8e-6, 1e-2);
+        assert!((r - ((2.8e-6 / std::f64::consts::PI).sqrt() + 1e-2 * 0.267_949)).abs() < 1e-8);
     }
 
     /// The fundal band's mean speed in a shear flow `u_x = a z`: the cells whose centres lie at
