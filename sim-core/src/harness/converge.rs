@@ -6,6 +6,7 @@
 //! command takes them every frame of a stated window, and these functions know nothing of sizes.
 
 use crate::fluid::{CellLabel, FluidSolver};
+use crate::mesh::{cross, dot};
 
 /// Distances ahead of the scope tip, along its view direction, of the jet's probes, mm.
 pub const JET_PROBE_MM: [f64; 3] = [5.0, 10.0, 20.0];
@@ -70,7 +71,7 @@ pub fn peak_speed_on_disk_m_s(
     radius_m: f64,
     spacing_m: f64,
 ) -> Option<f64> {
-    let n = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
+    let n = dot(dir, dir).sqrt();
     if !(n.is_finite() && n > 0.0 && radius_m > 0.0 && spacing_m > 0.0) {
         return None;
     }
@@ -81,16 +82,8 @@ pub fn peak_speed_on_disk_m_s(
         .unwrap_or(0);
     let mut e = [0.0; 3];
     e[least] = 1.0;
-    let cross = |x: [f64; 3], y: [f64; 3]| {
-        [
-            x[1] * y[2] - x[2] * y[1],
-            x[2] * y[0] - x[0] * y[2],
-            x[0] * y[1] - x[1] * y[0],
-        ]
-    };
     let a = cross(d, e);
-    let na = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    let a = a.map(|x| x / na);
+    let a = a.map(|x| x / dot(a, a).sqrt());
     let b = cross(d, a);
     let steps = (radius_m / spacing_m).floor() as i64;
     let mut peak = speed_at_m_s(solver, centre_m);
